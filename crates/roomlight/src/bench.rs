@@ -1,0 +1,226 @@
+//! `roomlight bench core`: every rule from the conventional start on synthetic rooms; captures
+//! to 1% and 0.1% excess over the exact optimum, final ΔE00, and compute cost. Timings are
+//! printed and compared, never asserted.
+
+use anyhow::{Context, Result};
+use comfy_table::{Table, presets::UTF8_FULL_CONDENSED};
+use peak_alloc::PeakAlloc;
+use roomlight_core::aggregator::ErrorAggregator;
+use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
+use roomlight_core::conventional::conventional_start;
+use roomlight_core::metrics::patch_delta_e;
+use roomlight_core::optimum::{global_step, optimum};
+use roomlight_core::rules::{NodeState, PAPER_EPSILON};
+use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
+use roomlight_core::{LinearRgb, Problem, StepRule};
+use serde::Serialize;
+use std::hint::black_box;
+use std::path::Path;
+use std::time::Instant;
+
+/// One row of the table and of `--json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    pub case: String,
+    pub rule: String,
+    pub captures_to_1pct: Option<usize>,
+    pub captures_to_0_1pct: Option<usize>,
+    pub final_excess: f64,
+    pub mean_de00: f64,
+    pub us_per_node_update: f64,
+    pub model_rounds: usize,
+    pub captures: usize,
+}
+
+/// The rules compared, by name.
+pub fn rules(problem: &Problem, budget: usize) -> Vec<(&'static str, LoopConfig)> {
+    let with = |rule, model_rounds| LoopConfig {
+        model_rounds,
+        ..LoopConfig::new(rule, budget)
+    };
+    vec![
+        ("paper", with(StepRule::paper(), 0)),
+        (
+            "global-oracle",
+            with(
+                StepRule::Fixed {
+                    epsilon: global_step(problem),
+                },
+                0,
+            ),
+        ),
+        ("safe", with(StepRule::Safe { theta: 1.0 }, 0)),
+        ("momentum", with(StepRule::Momentum { theta: 1.0 }, 0)),
+        ("model-5", with(StepRule::Momentum { theta: 1.0 }, 5)),
+        ("model-20", with(StepRule::Momentum { theta: 1.0 }, 20)),
+    ]
+}
+
+/// Median wall time per node update, in µs, over `repeats` timed rounds of every node.
+fn us_per_node_update(problem: &Problem, rule: StepRule, start: &[LinearRgb]) -> Result<f64> {
+    let s = problem.white_response();
+    let errors = problem.errors(start);
+    let mut nodes: Vec<NodeState> = problem
+        .columns()
+        .iter()
+        .enumerate()
+        .map(|(n, c)| {
+            NodeState::new(c.clone(), &problem.white_response_on_support(&s, n), rule, start[n])
+        })
+        .collect::<Result<_, _>>()?;
+    let local: Vec<Vec<LinearRgb>> = nodes
+        .iter()
+        .map(|node| {
+            node.column()
+                .support()
+                .iter()
+                .map(|&i| errors[i as usize])
+                .collect()
+        })
+        .collect();
+    let mut samples = Vec::new();
+    for _ in 0..9 {
+        let t0 = Instant::now();
+        let mut updates = 0usize;
+        while t0.elapsed().as_secs_f64() < 0.01 {
+            for (node, e) in nodes.iter_mut().zip(&local) {
+                black_box(node.update(black_box(e), false)?);
+                updates += 1;
+            }
+        }
+        samples.push(t0.elapsed().as_secs_f64() * 1e6 / updates as f64);
+    }
+    Ok(median(&mut samples))
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Wall time and heap of one full distributed round (every node gathers, updates and
+/// contributes), as the ms median of repeated rounds and the peak MB of the node states.
+fn full_round(problem: &Problem, start: &[LinearRgb], alloc: &PeakAlloc) -> Result<(f64, f64)> {
+    let s = problem.white_response();
+    let errors = problem.errors(start);
+    let before = alloc.current_usage();
+    alloc.reset_peak_usage();
+    let mut nodes: Vec<NodeState> = problem
+        .columns()
+        .iter()
+        .enumerate()
+        .map(|(n, c)| {
+            NodeState::new(
+                c.clone(),
+                &problem.white_response_on_support(&s, n),
+                StepRule::Momentum { theta: 1.0 },
+                start[n],
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    let mut aggregator = ErrorAggregator::new(problem.patches());
+    aggregator.measured(errors.clone())?;
+    let active = vec![true; nodes.len()];
+    let mut samples = Vec::new();
+    for _ in 0..15 {
+        let t0 = Instant::now();
+        closed_loop::distributed_round(&mut nodes, &active, &errors, false, &mut aggregator)?;
+        samples.push(t0.elapsed().as_secs_f64() * 1e3);
+    }
+    let peak_mb = alloc.peak_usage().saturating_sub(before) as f64 / 1e6;
+    drop(nodes);
+    Ok((median(&mut samples), peak_mb))
+}
+
+/// Runs the core benchmark and prints the table.
+pub fn core(quick: bool, json: Option<&Path>, seed: u64, alloc: &PeakAlloc) -> Result<()> {
+    let sizes: &[usize] = if quick { &[10, 100] } else { &[10, 100, 1000] };
+    let budget = if quick { 150 } else { 400 };
+    let mut rows = Vec::new();
+    for &nodes in sizes {
+        let room = synthetic_room(&SyntheticConfig::new(nodes, seed))
+            .with_context(|| format!("building the synthetic room of {nodes} nodes"))?;
+        let problem = &room.problem;
+        let t0 = Instant::now();
+        let best = optimum(problem).with_context(|| format!("optimum of {nodes} nodes"))?;
+        let t_opt = t0.elapsed().as_secs_f64();
+        let start = conventional_start(problem, &room.charts, LinearRgb::splat(0.5))?;
+        let kept: usize = problem.columns().iter().map(|c| c.len()).sum();
+        eprintln!(
+            "{nodes} nodes, {} patches: {kept} attenuation entries kept ({:.2}% of dense), G* = {:.4e} (KKT residual {:.1e}, {:.2} s), conventional excess {:.3}",
+            problem.patches(),
+            100.0 * kept as f64 / (nodes * problem.patches()) as f64,
+            best.objective,
+            best.kkt_residual,
+            t_opt,
+            best.excess(problem.objective(&start)),
+        );
+        for (name, mut config) in rules(problem, budget) {
+            config.stop_at_true_objective = Some(best.objective + 1e-6 * best.objective.max(1e-9 * best.objective_black));
+            let mut plant = Plant::new(problem.clone(), PlantConfig::default())?;
+            let trace = closed_loop::run(problem, &mut plant, &start, &config)?;
+            let last = trace.last().context("no capture recorded")?;
+            let to = |frac: f64| {
+                trace
+                    .records
+                    .iter()
+                    .find(|r| best.excess(r.true_objective) <= frac)
+                    .map(|r| r.capture)
+            };
+            let de = patch_delta_e(problem.target(), &plant.true_response(&trace.shown, last.capture))?;
+            rows.push(Row {
+                case: format!("synthetic-{nodes}"),
+                rule: name.to_string(),
+                captures_to_1pct: to(0.01),
+                captures_to_0_1pct: to(0.001),
+                final_excess: best.excess(last.true_objective),
+                mean_de00: de.mean,
+                us_per_node_update: us_per_node_update(problem, config.rule, &start)?,
+                model_rounds: last.model_rounds,
+                captures: last.capture,
+            });
+        }
+        let (round_ms, round_mb) = full_round(problem, &start, alloc)?;
+        let support: f64 = kept as f64 / nodes as f64;
+        eprintln!(
+            "  one distributed round of {nodes} nodes (mean support {support:.0} patches): {round_ms:.3} ms, node state {round_mb:.1} MB"
+        );
+    }
+    print_table(&rows);
+    if let Some(path) = json {
+        std::fs::write(path, serde_json::to_string_pretty(&rows)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let _ = PAPER_EPSILON;
+    Ok(())
+}
+
+fn print_table(rows: &[Row]) {
+    let mut table = Table::new();
+    table.load_preset(UTF8_FULL_CONDENSED).set_header(vec![
+        "case",
+        "rule",
+        "captures to 1%",
+        "captures to 0.1%",
+        "final excess",
+        "mean ΔE00",
+        "µs / node update",
+        "captures run",
+        "model rounds",
+    ]);
+    let opt = |v: Option<usize>| v.map_or("never".to_string(), |c| c.to_string());
+    for r in rows {
+        table.add_row(vec![
+            r.case.clone(),
+            r.rule.clone(),
+            opt(r.captures_to_1pct),
+            opt(r.captures_to_0_1pct),
+            format!("{:.2e}", r.final_excess),
+            format!("{:.3}", r.mean_de00),
+            format!("{:.3}", r.us_per_node_update),
+            r.captures.to_string(),
+            r.model_rounds.to_string(),
+        ]);
+    }
+    println!("{table}");
+}

@@ -1,0 +1,58 @@
+//! The `roomlight` command: a thin clap front over the crates.
+
+mod bench;
+mod demo;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use peak_alloc::PeakAlloc;
+use std::path::PathBuf;
+
+/// Counts heap use so that benchmarks can report memory.
+#[global_allocator]
+static ALLOCATOR: PeakAlloc = PeakAlloc;
+
+#[derive(Debug, Parser)]
+#[command(name = "roomlight", version, about = "Projection mapping in a lit room: projectors replace the room lights")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Runs the best end-to-end pipeline there is so far: a synthetic room lit by distributed
+    /// node updates from the conventional start, reported against the exact optimum.
+    Demo(demo::DemoArgs),
+    /// Benchmarks: speed against error.
+    Bench {
+        #[command(subcommand)]
+        which: BenchCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchCommand {
+    /// The optimisation core on synthetic rooms of 10, 100 and 1000 nodes.
+    Core {
+        /// Smaller rooms and budgets (seconds, for tests).
+        #[arg(long)]
+        quick: bool,
+        /// Write the table as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Seed of the synthetic rooms.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Demo(args) => demo::run(&args),
+        Command::Bench {
+            which: BenchCommand::Core { quick, json, seed },
+        } => bench::core(quick, json.as_deref(), seed, &ALLOCATOR),
+    }
+}
