@@ -154,7 +154,10 @@ pub struct LoopConfig {
     pub delay: usize,
     /// Capture budget, the conventional start's capture included.
     pub max_captures: usize,
-    /// Stop when no node moved by more than [`HALF_CODE_STEP`] in the last cycle (DESIGN §3.6).
+    /// Stop (DESIGN §3.6) when no node moved by more than [`HALF_CODE_STEP`] in the last
+    /// cycle, or when the measured `G` changed by less than its own noise (three standard
+    /// deviations, from the model's per-patch `σ`) in two captures running: with a real camera
+    /// the noise keeps every node moving a little, and the second test ends the flicker.
     pub stop_when_settled: bool,
     /// Benchmark oracle: stop once the plant's true `G` is at or below this value. A real
     /// camera does not know the true `G`; benchmarks use it to stop runs that are done.
@@ -197,6 +200,8 @@ pub enum StopReason {
     Budget,
     /// Every node moved less than half a code step.
     Settled,
+    /// `G` stopped changing by more than its measurement noise.
+    NoiseFloor,
     /// The benchmark oracle's objective was reached.
     Reached,
 }
@@ -236,7 +241,9 @@ pub enum LoopError {
     #[error(transparent)]
     Model(#[from] ModelError),
     /// Delay and model rounds together are not defined.
-    #[error("delay {delay} with {model_rounds} model rounds: stale errors and model rounds do not combine")]
+    #[error(
+        "delay {delay} with {model_rounds} model rounds: stale errors and model rounds do not combine"
+    )]
     DelayWithModelRounds { delay: usize, model_rounds: usize },
 }
 
@@ -247,6 +254,18 @@ pub fn run(
     plant: &mut Plant,
     start: &[LinearRgb],
     config: &LoopConfig,
+) -> Result<Trace, LoopError> {
+    run_observed(model, plant, start, config, |_, _, _| {})
+}
+
+/// [`run`], calling `observe(record, shown values, plant)` after every capture (live progress,
+/// per-capture metrics).
+pub fn run_observed(
+    model: &Problem,
+    plant: &mut Plant,
+    start: &[LinearRgb],
+    config: &LoopConfig,
+    mut observe: impl FnMut(&CaptureRecord, &[LinearRgb], &Plant),
 ) -> Result<Trace, LoopError> {
     check_len("start values", start.len(), model.nodes())?;
     check_len("plant nodes", plant.truth().nodes(), model.nodes())?;
@@ -278,6 +297,7 @@ pub fn run(
     let mut node_updates = 0;
     let mut max_step = 0.0;
     let mut stop = StopReason::Budget;
+    let mut quiet_captures = 0;
     for capture in 1..=config.max_captures {
         let shown: Vec<LinearRgb> = nodes.iter().map(NodeState::shown).collect();
         let measured = plant.capture(&shown, capture);
@@ -288,15 +308,19 @@ pub fn run(
             .map(|(&r, &y)| r - y)
             .collect();
         let summary = aggregator.measured(errors)?;
-        records.push(CaptureRecord {
+        let record = CaptureRecord {
             capture,
             model_rounds,
             measured_objective: summary.objective,
             true_objective: plant.true_objective(&shown, capture),
             max_step,
-        });
+        };
+        observe(&record, &shown, plant);
+        records.push(record);
         if let Some(goal) = config.stop_at_true_objective
-            && records.last().is_some_and(|r: &CaptureRecord| r.true_objective <= goal)
+            && records
+                .last()
+                .is_some_and(|r: &CaptureRecord| r.true_objective <= goal)
         {
             stop = StopReason::Reached;
             break;
@@ -305,6 +329,19 @@ pub fn run(
         if config.stop_when_settled && settled {
             stop = StopReason::Settled;
             break;
+        }
+        if let [.., before, now] = records.as_slice() {
+            let noise = objective_noise(aggregator.errors(), model.noise());
+            let change = (now.measured_objective - before.measured_objective).abs();
+            quiet_captures = if change <= 3.0 * std::f64::consts::SQRT_2 * noise {
+                quiet_captures + 1
+            } else {
+                0
+            };
+            if config.stop_when_settled && quiet_captures >= 2 {
+                stop = StopReason::NoiseFloor;
+                break;
+            }
         }
         if capture == config.max_captures {
             break;
@@ -326,7 +363,13 @@ pub fn run(
         for _ in 0..config.model_rounds {
             let summary = aggregator.predicted();
             let errors = aggregator.errors().to_vec();
-            let step = distributed_round(&mut nodes, &active, &errors, summary.restart, &mut aggregator)?;
+            let step = distributed_round(
+                &mut nodes,
+                &active,
+                &errors,
+                summary.restart,
+                &mut aggregator,
+            )?;
             max_step = f64::max(max_step, step);
             model_rounds += 1;
             node_updates += active.iter().filter(|&&a| a).count();
@@ -338,6 +381,17 @@ pub fn run(
         stop,
         node_updates,
     })
+}
+
+/// First-order standard deviation of a measured `G` from the patch noise:
+/// `sqrt(Σ_i Σ_c (e_ic σ_ic)²)`.
+pub fn objective_noise(errors: &[LinearRgb], noise: &[LinearRgb]) -> f64 {
+    errors
+        .iter()
+        .zip(noise)
+        .map(|(e, s)| e.hadamard(*s).norm_squared())
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// One round for every active node: gather its errors on its support, update, hand its

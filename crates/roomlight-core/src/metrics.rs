@@ -136,7 +136,11 @@ pub fn rms_contrast(luminance: &[f64]) -> Result<f64, MetricError> {
         return Err(MetricError::Empty { what: WHAT });
     }
     if let Some((index, &value)) = luminance.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(MetricError::NotFinite { what: WHAT, index, value });
+        return Err(MetricError::NotFinite {
+            what: WHAT,
+            index,
+            value,
+        });
     }
     let n = luminance.len() as f64;
     let mean = luminance.iter().sum::<f64>() / n;

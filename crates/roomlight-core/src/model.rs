@@ -177,7 +177,10 @@ impl AttenuationColumn {
 
     /// Iterates `(patch, p_{n,i})` over the support.
     pub fn iter(&self) -> impl Iterator<Item = (PatchId, LinearRgb)> + '_ {
-        self.support.iter().copied().zip(self.values.iter().copied())
+        self.support
+            .iter()
+            .copied()
+            .zip(self.values.iter().copied())
     }
 }
 

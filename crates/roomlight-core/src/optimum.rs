@@ -155,7 +155,7 @@ fn interior_point(
     // P (clarabel's name for the Hessian) as upper-triangular CSC.
     let mut entries: Vec<(usize, usize, f64)> =
         gram.iter().map(|(&(r, c), &v)| (r, c, v)).collect();
-    entries.sort_by(|a, b| (a.1, a.0).cmp(&(b.1, b.0)));
+    entries.sort_by_key(|&(r, c, _)| (c, r));
     let mut colptr = vec![0usize; n + 1];
     let mut rowval = Vec::with_capacity(entries.len());
     let mut nzval = Vec::with_capacity(entries.len());
@@ -168,10 +168,7 @@ fn interior_point(
         colptr[c + 1] += colptr[c];
     }
     let hessian = CscMatrix::new(n, n, colptr, rowval, nzval);
-    let q: Vec<f64> = ch
-        .gradient(&vec![0.0; n])
-        .into_iter()
-        .collect::<Vec<f64>>();
+    let q: Vec<f64> = ch.gradient(&vec![0.0; n]).into_iter().collect::<Vec<f64>>();
     // A = [I; −I], b = [1; 0]: x ≤ 1 and −x ≤ 0.
     let a = CscMatrix::new(
         2 * n,
@@ -202,7 +199,12 @@ fn interior_point(
     solver.solve();
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved | SolverStatus::MaxIterations => {
-            let x: Vec<f64> = solver.solution.x.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+            let x: Vec<f64> = solver
+                .solution
+                .x
+                .iter()
+                .map(|v| v.clamp(0.0, 1.0))
+                .collect();
             if x.iter().all(|v| v.is_finite()) {
                 Ok(x)
             } else {
@@ -248,7 +250,11 @@ fn solve_free(
         f,
         free.iter().map(|&j| {
             let (support, values) = &ch.cols[j];
-            support.iter().zip(values).map(|(&i, &p)| p * res[i]).sum::<f64>()
+            support
+                .iter()
+                .zip(values)
+                .map(|(&i, &p)| p * res[i])
+                .sum::<f64>()
         }),
     );
     let solution = match h.clone().cholesky() {

@@ -192,7 +192,10 @@ impl NodeState {
 
     /// The node's contribution change `δ_n = p_n Δx_n` on its support (DESIGN §3.4), as sent to
     /// the camera for model rounds.
-    pub fn contribution(&self, delta_shown: LinearRgb) -> impl Iterator<Item = (PatchId, LinearRgb)> + '_ {
+    pub fn contribution(
+        &self,
+        delta_shown: LinearRgb,
+    ) -> impl Iterator<Item = (PatchId, LinearRgb)> + '_ {
         self.column
             .iter()
             .map(move |(i, p)| (i, p.hadamard(delta_shown)))

@@ -101,7 +101,7 @@ pub fn synthetic_room(config: &SyntheticConfig) -> Result<SyntheticRoom, ModelEr
     // Inter-reflection couples every chart within a few metres with the room's mean albedo.
     let reach = 2.5;
     let mut columns = Vec::with_capacity(n);
-    for node in 0..n {
+    for (node, gain) in gains.iter().enumerate() {
         let (nx, ny) = position(node);
         let mut dense: Vec<(usize, LinearRgb)> = Vec::new();
         let lo_x = (nx - reach).floor().max(0.0) as usize;
@@ -122,7 +122,7 @@ pub fn synthetic_room(config: &SyntheticConfig) -> Result<SyntheticRoom, ModelEr
                 };
                 let indirect = 0.08 * config.interreflection * (-d / 0.6).exp();
                 for (j, r) in rho.iter().enumerate() {
-                    let p = r.hadamard(gains[node]) * (direct + indirect);
+                    let p = r.hadamard(*gain) * (direct + indirect);
                     dense.push((chart * PATCHES_PER_CHART + j, p));
                 }
             }
@@ -132,7 +132,10 @@ pub fn synthetic_room(config: &SyntheticConfig) -> Result<SyntheticRoom, ModelEr
         let mut values = Vec::with_capacity(dense.len());
         for (i, p) in dense {
             let sigma = noise_sigma(config.noise_floor, target_clean[i]);
-            let kept = p.zip(sigma, |v, s| if v > config.cutoff_sigmas * s { v } else { 0.0 });
+            let kept = p.zip(
+                sigma,
+                |v, s| if v > config.cutoff_sigmas * s { v } else { 0.0 },
+            );
             if kept.max_abs() > 0.0 {
                 support.push(patch_id(i)?);
                 values.push(kept);

@@ -10,7 +10,7 @@ use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
 use roomlight_core::conventional::conventional_start;
 use roomlight_core::metrics::patch_delta_e;
 use roomlight_core::optimum::{global_step, optimum};
-use roomlight_core::rules::{NodeState, PAPER_EPSILON};
+use roomlight_core::rules::NodeState;
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, Problem, StepRule};
 use serde::Serialize;
@@ -65,7 +65,12 @@ fn us_per_node_update(problem: &Problem, rule: StepRule, start: &[LinearRgb]) ->
         .iter()
         .enumerate()
         .map(|(n, c)| {
-            NodeState::new(c.clone(), &problem.white_response_on_support(&s, n), rule, start[n])
+            NodeState::new(
+                c.clone(),
+                &problem.white_response_on_support(&s, n),
+                rule,
+                start[n],
+            )
         })
         .collect::<Result<_, _>>()?;
     let local: Vec<Vec<LinearRgb>> = nodes
@@ -132,22 +137,58 @@ fn full_round(problem: &Problem, start: &[LinearRgb], alloc: &PeakAlloc) -> Resu
     Ok((median(&mut samples), peak_mb))
 }
 
+/// One synthetic room of the benchmark.
+struct Case {
+    name: String,
+    config: SyntheticConfig,
+    noise_scale: f64,
+}
+
+impl Case {
+    fn plain(nodes: usize, seed: u64) -> Self {
+        Self {
+            name: format!("synthetic-{nodes}"),
+            config: SyntheticConfig::new(nodes, seed),
+            noise_scale: 0.0,
+        }
+    }
+}
+
 /// Runs the core benchmark and prints the table.
 pub fn core(quick: bool, json: Option<&Path>, seed: u64, alloc: &PeakAlloc) -> Result<()> {
-    let sizes: &[usize] = if quick { &[10, 100] } else { &[10, 100, 1000] };
     let budget = if quick { 150 } else { 400 };
+    let mut cases: Vec<Case> = [10, 100, 1000]
+        .into_iter()
+        .filter(|&n| !quick || n <= 100)
+        .map(|n| Case::plain(n, seed))
+        .collect();
+    if !quick {
+        // A very reflective room (albedo ≈ 0.9: three times the inter-reflection) with many dim
+        // projectors, and the ordinary room seen by a camera with its real noise.
+        let mut reflective = Case::plain(100, seed);
+        reflective.name = "reflective-100".into();
+        reflective.config.interreflection = 3.0;
+        reflective.config.dim_share = 0.3;
+        cases.push(reflective);
+        let mut noisy = Case::plain(100, seed);
+        noisy.name = "noisy-100".into();
+        noisy.noise_scale = 1.0;
+        cases.push(noisy);
+    }
     let mut rows = Vec::new();
-    for &nodes in sizes {
-        let room = synthetic_room(&SyntheticConfig::new(nodes, seed))
-            .with_context(|| format!("building the synthetic room of {nodes} nodes"))?;
+    for case in &cases {
+        let nodes = case.config.nodes;
+        let room = synthetic_room(&case.config)
+            .with_context(|| format!("building the synthetic room {}", case.name))?;
         let problem = &room.problem;
         let t0 = Instant::now();
         let best = optimum(problem).with_context(|| format!("optimum of {nodes} nodes"))?;
         let t_opt = t0.elapsed().as_secs_f64();
         let start = conventional_start(problem, &room.charts, LinearRgb::splat(0.5))?;
         let kept: usize = problem.columns().iter().map(|c| c.len()).sum();
-        eprintln!(
-            "{nodes} nodes, {} patches: {kept} attenuation entries kept ({:.2}% of dense), G* = {:.4e} (KKT residual {:.1e}, {:.2} s), conventional excess {:.3}",
+        println!(
+            "{}: {nodes} nodes, {} patches: {kept} attenuation entries kept ({:.2}% of dense), G* = {:.4e} (KKT residual {:.1e}, {:.2} s), conventional excess {:.3}",
+            case.name,
             problem.patches(),
             100.0 * kept as f64 / (nodes * problem.patches()) as f64,
             best.objective,
@@ -156,8 +197,14 @@ pub fn core(quick: bool, json: Option<&Path>, seed: u64, alloc: &PeakAlloc) -> R
             best.excess(problem.objective(&start)),
         );
         for (name, mut config) in rules(problem, budget) {
-            config.stop_at_true_objective = Some(best.objective + 1e-6 * best.objective.max(1e-9 * best.objective_black));
-            let mut plant = Plant::new(problem.clone(), PlantConfig::default())?;
+            config.stop_at_true_objective =
+                Some(best.objective + 1e-6 * best.objective.max(1e-9 * best.objective_black));
+            let plant_config = PlantConfig {
+                noise_scale: case.noise_scale,
+                seed,
+                ..PlantConfig::default()
+            };
+            let mut plant = Plant::new(problem.clone(), plant_config)?;
             let trace = closed_loop::run(problem, &mut plant, &start, &config)?;
             let last = trace.last().context("no capture recorded")?;
             let to = |frac: f64| {
@@ -167,9 +214,12 @@ pub fn core(quick: bool, json: Option<&Path>, seed: u64, alloc: &PeakAlloc) -> R
                     .find(|r| best.excess(r.true_objective) <= frac)
                     .map(|r| r.capture)
             };
-            let de = patch_delta_e(problem.target(), &plant.true_response(&trace.shown, last.capture))?;
+            let de = patch_delta_e(
+                problem.target(),
+                &plant.true_response(&trace.shown, last.capture),
+            )?;
             rows.push(Row {
-                case: format!("synthetic-{nodes}"),
+                case: case.name.clone(),
                 rule: name.to_string(),
                 captures_to_1pct: to(0.01),
                 captures_to_0_1pct: to(0.001),
@@ -182,7 +232,7 @@ pub fn core(quick: bool, json: Option<&Path>, seed: u64, alloc: &PeakAlloc) -> R
         }
         let (round_ms, round_mb) = full_round(problem, &start, alloc)?;
         let support: f64 = kept as f64 / nodes as f64;
-        eprintln!(
+        println!(
             "  one distributed round of {nodes} nodes (mean support {support:.0} patches): {round_ms:.3} ms, node state {round_mb:.1} MB"
         );
     }
@@ -191,7 +241,6 @@ pub fn core(quick: bool, json: Option<&Path>, seed: u64, alloc: &PeakAlloc) -> R
         std::fs::write(path, serde_json::to_string_pretty(&rows)?)
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    let _ = PAPER_EPSILON;
     Ok(())
 }
 

@@ -13,7 +13,11 @@ use std::path::PathBuf;
 static ALLOCATOR: PeakAlloc = PeakAlloc;
 
 #[derive(Debug, Parser)]
-#[command(name = "roomlight", version, about = "Projection mapping in a lit room: projectors replace the room lights")]
+#[command(
+    name = "roomlight",
+    version,
+    about = "Projection mapping in a lit room: projectors replace the room lights"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
