@@ -1,0 +1,693 @@
+//! The simulated room: precomputed light transport from every projector and LED panel to the
+//! camera pixels, the chart patches and the radiosity elements; `render` turns projector frames
+//! and an LED preset into a linear camera capture.
+
+use crate::geometry::{EPS, Geometry, V3};
+use crate::optics::{Fisheye, Light, Projector};
+use crate::radiosity::Radiosity;
+use crate::scene::{Scene, SceneError};
+use parry3d::query::Ray;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use roomlight_core::LinearRgb;
+use std::path::Path;
+
+/// What a projector shows: code values in `[0, 1]` per channel (not linear light).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Frame {
+    /// Every pixel at code 0.
+    Black,
+    /// Every pixel at the same code (the fast path).
+    Uniform([f32; 3]),
+    /// A full image of the projector's resolution.
+    Image(ProjectorImage),
+}
+
+/// A projector image: row-major codes in `[0, 1]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProjectorImage {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width · height` RGB codes.
+    pub pixels: Vec<[f32; 3]>,
+}
+
+/// A camera capture: linear RGB values (f32), row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Capture {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear camera values.
+    pub pixels: Vec<[f32; 3]>,
+}
+
+/// How to write a capture as PNG.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PngEncoding {
+    /// 8-bit sRGB-encoded (for viewing).
+    Srgb8,
+    /// 16-bit sRGB-encoded.
+    Srgb16,
+    /// 16-bit linear (values as measured).
+    Linear16,
+}
+
+impl PngEncoding {
+    /// A file-name suffix that says the encoding.
+    pub fn suffix(self) -> &'static str {
+        match self {
+            Self::Srgb8 => "srgb8",
+            Self::Srgb16 => "srgb16",
+            Self::Linear16 => "linear16",
+        }
+    }
+}
+
+fn srgb_encode(v: f32) -> f32 {
+    if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+impl Capture {
+    /// Writes the capture, values divided by `white` (so `white` maps to full scale), clipped.
+    pub fn save_png(&self, path: &Path, encoding: PngEncoding, white: f32) -> Result<(), SimError> {
+        let scale = if white > 0.0 { 1.0 / white } else { 1.0 };
+        let io = |e: image::ImageError| SimError::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        };
+        let encode = |v: f32| {
+            let v = (v * scale).clamp(0.0, 1.0);
+            match encoding {
+                PngEncoding::Linear16 => v,
+                _ => srgb_encode(v),
+            }
+        };
+        match encoding {
+            PngEncoding::Srgb8 => {
+                let data: Vec<u8> = self
+                    .pixels
+                    .iter()
+                    .flat_map(|p| p.map(|v| (encode(v) * 255.0).round() as u8))
+                    .collect();
+                image::RgbImage::from_raw(self.width, self.height, data)
+                    .ok_or_else(|| SimError::Io {
+                        path: path.display().to_string(),
+                        message: "buffer size".into(),
+                    })?
+                    .save(path)
+                    .map_err(io)
+            }
+            PngEncoding::Srgb16 | PngEncoding::Linear16 => {
+                let data: Vec<u16> = self
+                    .pixels
+                    .iter()
+                    .flat_map(|p| p.map(|v| (encode(v) * 65535.0).round() as u16))
+                    .collect();
+                image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_raw(
+                    self.width,
+                    self.height,
+                    data,
+                )
+                .ok_or_else(|| SimError::Io {
+                    path: path.display().to_string(),
+                    message: "buffer size".into(),
+                })?
+                .save(path)
+                .map_err(io)
+            }
+        }
+    }
+
+    /// Luminance of every pixel.
+    pub fn luminance(&self) -> Vec<f32> {
+        self.pixels
+            .iter()
+            .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
+            .collect()
+    }
+}
+
+/// Errors of the simulator.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// The scene is wrong.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// Frames do not match the projectors.
+    #[error("frame for projector {projector}: {problem}")]
+    Frame { projector: String, problem: String },
+    /// An unknown preset or projector name.
+    #[error("no {kind} named {name:?} in this scene")]
+    Unknown { kind: &'static str, name: String },
+    /// A file could not be written.
+    #[error("writing {path}: {message}")]
+    Io { path: String, message: String },
+}
+
+/// Light transport from one projector to a set of probes.
+#[derive(Debug, Clone, Default)]
+struct ProjectorMap {
+    /// `(probe, projector pixel, factor)`: irradiance at the probe per unit pixel light.
+    entries: Vec<(u32, u32, f32)>,
+    /// Sum of the factors per probe: the uniform-frame fast path.
+    white: Vec<f32>,
+}
+
+/// Points where irradiance is needed (camera pixels, elements, chart patches), each the mean of
+/// one or more surface samples.
+#[derive(Debug, Clone, Default)]
+struct Probes {
+    albedo: Vec<LinearRgb>,
+    /// Bilinear weights into the elements, for indirect light.
+    interp: Vec<[(u32, f32); 4]>,
+    projectors: Vec<ProjectorMap>,
+    /// Per light, the geometric factor per probe (visibility included).
+    lights: Vec<Vec<f32>>,
+}
+
+/// One surface sample of a probe: `(probe, point, normal, weight)`.
+type Sample = (u32, V3, V3, f32);
+
+/// What a camera pixel sees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelInfo {
+    /// The world point, if the pixel sees one.
+    pub point: Option<[f32; 3]>,
+    /// The face it lies on.
+    pub face: Option<usize>,
+    /// True on the projection-mapping target.
+    pub target: bool,
+    /// `(chart, patch)` where the pixel sees a chart patch (patch `None` on the chart's frame).
+    pub chart: Option<(usize, Option<usize>)>,
+}
+
+/// The simulated room, with all its precomputation.
+#[derive(Debug)]
+pub struct Room {
+    scene: Scene,
+    geometry: Geometry,
+    projectors: Vec<Projector>,
+    lights: Vec<Light>,
+    camera: Fisheye,
+    radiosity: Option<Radiosity>,
+    pixels: Vec<PixelInfo>,
+    camera_probes: Probes,
+    element_probes: Probes,
+    patch_probes: Probes,
+}
+
+/// Light-panel samples per side, and visibility rays per light and probe sample.
+const LIGHT_GRID: usize = 4;
+
+impl Room {
+    /// Builds and precomputes a room from a validated scene.
+    pub fn build(scene: Scene) -> Result<Self, SimError> {
+        scene.validate_fields()?;
+        let geometry = Geometry::build(&scene)?;
+        let projectors: Vec<Projector> = scene.projectors.iter().map(Projector::new).collect();
+        let lights: Vec<Light> = scene
+            .lights
+            .iter()
+            .map(|l| Light::new(l, LIGHT_GRID))
+            .collect();
+        let camera = Fisheye::new(&scene.camera);
+        let radiosity = scene
+            .room
+            .interreflection
+            .then(|| Radiosity::build(&geometry, true));
+        // Camera pixels.
+        let (w, h) = (camera.width, camera.height);
+        let mut pixels = Vec::with_capacity((w * h) as usize);
+        let mut camera_samples: Vec<Sample> = Vec::new();
+        let mut camera_albedo = Vec::with_capacity((w * h) as usize);
+        let mut camera_interp = Vec::with_capacity((w * h) as usize);
+        for v in 0..h {
+            for u in 0..w {
+                let index = v * w + u;
+                let hit = camera
+                    .ray(u as f32 + 0.5, v as f32 + 0.5)
+                    .and_then(|d| geometry.cast(&Ray::new(camera.position, d), 100.0));
+                match hit {
+                    Some(hit) => {
+                        let (chart, albedo) = geometry.albedo_at(hit.face, hit.point);
+                        pixels.push(PixelInfo {
+                            point: Some(hit.point.to_array()),
+                            face: Some(hit.face),
+                            target: geometry.faces[hit.face].target,
+                            chart,
+                        });
+                        camera_albedo.push(albedo);
+                        camera_interp.push(geometry.element_weights(hit.face, hit.point));
+                        camera_samples.push((index, hit.point, hit.normal, 1.0));
+                    }
+                    None => {
+                        pixels.push(PixelInfo {
+                            point: None,
+                            face: None,
+                            target: false,
+                            chart: None,
+                        });
+                        camera_albedo.push(LinearRgb::ZERO);
+                        camera_interp.push([(0, 0.0); 4]);
+                    }
+                }
+            }
+        }
+        let mut room = Self {
+            scene,
+            geometry,
+            projectors,
+            lights,
+            camera,
+            radiosity,
+            pixels,
+            camera_probes: Probes::default(),
+            element_probes: Probes::default(),
+            patch_probes: Probes::default(),
+        };
+        room.camera_probes = room.probes(camera_albedo, camera_interp, &camera_samples);
+        // Elements: 3×3 samples each.
+        let mut samples = Vec::new();
+        for (e, el) in room.geometry.elements.iter().enumerate() {
+            let face = &room.geometry.faces[el.face];
+            let (ns, nt) = face.grid;
+            let (i, j) = ((e - face.first_element) % ns, (e - face.first_element) / ns);
+            for b in 0..3 {
+                for a in 0..3 {
+                    let s = (i as f32 + (a as f32 + 0.5) / 3.0) / ns as f32;
+                    let t = (j as f32 + (b as f32 + 0.5) / 3.0) / nt as f32;
+                    let (p, n) = face.geom.point(s, t);
+                    samples.push((e as u32, p, n, 1.0 / 9.0));
+                }
+            }
+        }
+        let albedo: Vec<LinearRgb> = room.geometry.elements.iter().map(|e| e.albedo).collect();
+        let interp = vec![[(0, 0.0); 4]; albedo.len()];
+        room.element_probes = room.probes(albedo, interp, &samples);
+        // Chart patches: 3×3 samples over the inner half of each patch.
+        let mut samples = Vec::new();
+        let mut albedo = Vec::new();
+        let mut interp = Vec::new();
+        for (m, chart) in room.geometry.charts.iter().enumerate() {
+            for k in 0..24 {
+                let id = (m * 24 + k) as u32;
+                let center = chart.patch_center(k);
+                let face = room
+                    .geometry
+                    .cast(&Ray::new(center + chart.normal * 0.02, -chart.normal), 0.05)
+                    .map_or(0, |h| h.face);
+                albedo.push(roomlight_core::colorchecker::reflectance(k));
+                interp.push(room.geometry.element_weights(face, center));
+                let half = 0.25 * chart.patch_side();
+                for b in [-1.0f32, 0.0, 1.0] {
+                    for a in [-1.0f32, 0.0, 1.0] {
+                        samples.push((
+                            id,
+                            center + chart.right * (a * half * 0.67) + chart.up * (b * half * 0.67),
+                            chart.normal,
+                            1.0 / 9.0,
+                        ));
+                    }
+                }
+            }
+        }
+        room.patch_probes = room.probes(albedo, interp, &samples);
+        Ok(room)
+    }
+
+    /// Transport from every projector and light to a set of probes.
+    fn probes(
+        &self,
+        albedo: Vec<LinearRgb>,
+        interp: Vec<[(u32, f32); 4]>,
+        samples: &[Sample],
+    ) -> Probes {
+        let count = albedo.len();
+        let mut projectors = Vec::with_capacity(self.projectors.len());
+        for projector in &self.projectors {
+            let mut map = ProjectorMap {
+                entries: Vec::new(),
+                white: vec![0.0; count],
+            };
+            for &(probe, p, n, weight) in samples {
+                let lifted = p + n * EPS;
+                projector.footprint(p, n, |lens, px, factor| {
+                    if self.geometry.visible(lens, lifted) {
+                        map.entries.push((probe, px, factor * weight));
+                        map.white[probe as usize] += factor * weight;
+                    }
+                });
+            }
+            projectors.push(map);
+        }
+        let mut lights = Vec::with_capacity(self.lights.len());
+        for light in &self.lights {
+            let mut factor = vec![0.0f32; count];
+            for &(probe, p, n, weight) in samples {
+                let lifted = p + n * EPS;
+                let mut sum = 0.0;
+                light.samples_to(p, n, |q, f| {
+                    if self.geometry.visible(q + light.normal * EPS, lifted) {
+                        sum += f;
+                    }
+                });
+                factor[probe as usize] += sum * weight;
+            }
+            lights.push(factor);
+        }
+        Probes {
+            albedo,
+            interp,
+            projectors,
+            lights,
+        }
+    }
+
+    /// The scene this room was built from.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The geometry (faces, elements, charts).
+    pub fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+
+    /// The projectors' optics, in scene order.
+    pub fn projectors(&self) -> &[Projector] {
+        &self.projectors
+    }
+
+    /// The camera model.
+    pub fn camera(&self) -> &Fisheye {
+        &self.camera
+    }
+
+    /// The radiosity solver (`None` with inter-reflection off).
+    pub fn radiosity(&self) -> Option<&Radiosity> {
+        self.radiosity.as_ref()
+    }
+
+    /// What each camera pixel sees.
+    pub fn pixels(&self) -> &[PixelInfo] {
+        &self.pixels
+    }
+
+    /// Number of chart patches (24 per chart, chart-major).
+    pub fn patches(&self) -> usize {
+        self.geometry.charts.len() * 24
+    }
+
+    /// Index of a preset by name.
+    pub fn preset(&self, name: &str) -> Result<usize, SimError> {
+        self.scene
+            .presets
+            .iter()
+            .position(|p| p.name == name)
+            .ok_or_else(|| SimError::Unknown {
+                kind: "preset",
+                name: name.to_string(),
+            })
+    }
+
+    /// Index of a projector by name.
+    pub fn projector(&self, name: &str) -> Result<usize, SimError> {
+        self.projectors
+            .iter()
+            .position(|p| p.name == name)
+            .ok_or_else(|| SimError::Unknown {
+                kind: "projector",
+                name: name.to_string(),
+            })
+    }
+
+    fn check_frames(&self, frames: &[Frame]) -> Result<(), SimError> {
+        if frames.len() != self.projectors.len() {
+            return Err(SimError::Frame {
+                projector: "(all)".into(),
+                problem: format!(
+                    "{} frames for {} projectors",
+                    frames.len(),
+                    self.projectors.len()
+                ),
+            });
+        }
+        for (frame, p) in frames.iter().zip(&self.projectors) {
+            let bad = |problem: String| SimError::Frame {
+                projector: p.name.clone(),
+                problem,
+            };
+            match frame {
+                Frame::Black => {}
+                Frame::Uniform(code) => {
+                    if code.iter().any(|v| !v.is_finite()) {
+                        return Err(bad(format!("code {code:?} is not finite")));
+                    }
+                }
+                Frame::Image(img) => {
+                    if img.width != p.pinhole.width || img.height != p.pinhole.height {
+                        return Err(bad(format!(
+                            "image is {}x{}, the projector is {}x{}",
+                            img.width, img.height, p.pinhole.width, p.pinhole.height
+                        )));
+                    }
+                    if img.pixels.len() != (img.width * img.height) as usize {
+                        return Err(bad(format!(
+                            "{} pixels for {}x{}",
+                            img.pixels.len(),
+                            img.width,
+                            img.height
+                        )));
+                    }
+                    if img.pixels.iter().flatten().any(|v| !v.is_finite()) {
+                        return Err(bad("a pixel code is not finite".into()));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Direct irradiance on every probe of a set.
+    fn direct(&self, probes: &Probes, frames: &[Frame], preset: Option<usize>) -> Vec<LinearRgb> {
+        let mut e = vec![LinearRgb::ZERO; probes.albedo.len()];
+        for ((frame, projector), map) in frames.iter().zip(&self.projectors).zip(&probes.projectors)
+        {
+            match frame {
+                Frame::Black | Frame::Uniform(_) => {
+                    let code = match frame {
+                        Frame::Uniform(c) => *c,
+                        _ => [0.0; 3],
+                    };
+                    let light = projector.light(code);
+                    for (ei, &w) in e.iter_mut().zip(&map.white) {
+                        if w > 0.0 {
+                            *ei += light * f64::from(w);
+                        }
+                    }
+                }
+                Frame::Image(img) => {
+                    for &(probe, px, f) in &map.entries {
+                        e[probe as usize] +=
+                            projector.light(img.pixels[px as usize]) * f64::from(f);
+                    }
+                }
+            }
+        }
+        if let Some(p) = preset {
+            let spec = &self.scene.presets[p];
+            for name in &spec.lights {
+                let Some(l) = self.lights.iter().position(|l| &l.name == name) else {
+                    continue;
+                };
+                let light = &self.lights[l];
+                let rgb = spec
+                    .cct_k
+                    .map_or(light.rgb, crate::optics::cct_to_linear_rgb)
+                    * light.intensity;
+                for (ei, &g) in e.iter_mut().zip(&probes.lights[l]) {
+                    if g > 0.0 {
+                        *ei += rgb * f64::from(g);
+                    }
+                }
+            }
+        }
+        e
+    }
+
+    /// Indirect irradiance on the elements (zero with inter-reflection off).
+    fn indirect(&self, frames: &[Frame], preset: Option<usize>) -> Vec<LinearRgb> {
+        match &self.radiosity {
+            Some(r) => {
+                r.solve(&self.direct(&self.element_probes, frames, preset), 1e-4)
+                    .indirect
+            }
+            None => vec![LinearRgb::ZERO; self.geometry.elements.len()],
+        }
+    }
+
+    /// Camera value of each probe: `exposure · ρ/π · (E_direct + H)`.
+    fn values(
+        &self,
+        probes: &Probes,
+        frames: &[Frame],
+        preset: Option<usize>,
+        indirect: &[LinearRgb],
+    ) -> Vec<LinearRgb> {
+        let k = self.scene.camera.exposure / std::f64::consts::PI;
+        let direct = self.direct(probes, frames, preset);
+        direct
+            .iter()
+            .zip(&probes.albedo)
+            .zip(&probes.interp)
+            .map(|((&e, &rho), weights)| {
+                let mut total = e;
+                for &(el, w) in weights {
+                    if w > 0.0 {
+                        total += indirect[el as usize] * f64::from(w);
+                    }
+                }
+                rho.hadamard(total) * k
+            })
+            .collect()
+    }
+
+    /// The noiseless capture for these frames (one per projector) and LED preset.
+    pub fn render(&self, frames: &[Frame], preset: Option<usize>) -> Result<Capture, SimError> {
+        self.check_frames(frames)?;
+        let indirect = self.indirect(frames, preset);
+        let values = self.values(&self.camera_probes, frames, preset, &indirect);
+        Ok(Capture {
+            width: self.camera.width,
+            height: self.camera.height,
+            pixels: values
+                .into_iter()
+                .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32])
+                .collect(),
+        })
+    }
+
+    /// Ground truth: the noiseless camera value of every chart patch (chart-major, 24 each),
+    /// averaged over the inner half of the patch.
+    pub fn patch_values(
+        &self,
+        frames: &[Frame],
+        preset: Option<usize>,
+    ) -> Result<Vec<LinearRgb>, SimError> {
+        self.check_frames(frames)?;
+        let indirect = self.indirect(frames, preset);
+        Ok(self.values(&self.patch_probes, frames, preset, &indirect))
+    }
+
+    /// Ground truth: the projector pixel each camera pixel sees through the projector's lens
+    /// centre (the true correspondence), where it is lit directly.
+    pub fn true_correspondence(&self, projector: usize) -> Vec<Option<u32>> {
+        let p = &self.projectors[projector];
+        self.pixels
+            .iter()
+            .map(|info| {
+                let point = V3::from_array(info.point?);
+                let uv = p.pinhole.project(point)?;
+                let px = p.pinhole.pixel(uv)?;
+                let to_lens = (p.pinhole.position - point).normalize_or_zero();
+                self.geometry
+                    .visible(p.pinhole.position, point + to_lens * EPS)
+                    .then_some(px)
+            })
+            .collect()
+    }
+
+    /// Ground truth: the mean direct irradiance on the target's visible surface from one
+    /// projector showing `frame` (all others black, no LEDs, no inter-reflection).
+    pub fn target_irradiance(
+        &self,
+        projector: usize,
+        frame: &Frame,
+    ) -> Result<LinearRgb, SimError> {
+        let mut frames = vec![Frame::Black; self.projectors.len()];
+        frames[projector] = frame.clone();
+        self.check_frames(&frames)?;
+        let direct = self.direct_from(&self.camera_probes, projector, frame);
+        let (mut sum, mut n) = (LinearRgb::ZERO, 0usize);
+        for (info, e) in self.pixels.iter().zip(direct) {
+            if info.target {
+                sum += e;
+                n += 1;
+            }
+        }
+        // No target pixel in view: the mean is undefined; report zero light.
+        Ok(if n > 0 {
+            sum * (1.0 / n as f64)
+        } else {
+            LinearRgb::ZERO
+        })
+    }
+
+    fn direct_from(&self, probes: &Probes, projector: usize, frame: &Frame) -> Vec<LinearRgb> {
+        let mut frames = vec![Frame::Black; self.projectors.len()];
+        frames[projector] = frame.clone();
+        let mut e = self.direct(probes, &frames, None);
+        // Remove the other projectors' native black.
+        for (k, p) in self.projectors.iter().enumerate() {
+            if k != projector {
+                let light = p.light([0.0; 3]);
+                for (ei, &w) in e.iter_mut().zip(&probes.projectors[k].white) {
+                    *ei -= light * f64::from(w);
+                }
+            }
+        }
+        e
+    }
+}
+
+/// Camera noise: shot noise growing with √value, read noise, and saturation (DESIGN §7).
+#[derive(Debug, Clone)]
+pub struct CameraNoise {
+    rng: ChaCha8Rng,
+    read: f64,
+    shot: f64,
+    saturation: f64,
+}
+
+impl CameraNoise {
+    /// The noise of a scene's camera, from its seed.
+    pub fn new(room: &Room) -> Self {
+        let c = &room.scene.camera;
+        Self {
+            rng: ChaCha8Rng::seed_from_u64(c.seed),
+            read: c.read_noise,
+            shot: c.shot_noise,
+            saturation: c.saturation,
+        }
+    }
+
+    /// Adds noise to a noiseless capture and clips at zero and saturation.
+    pub fn expose(&mut self, capture: &Capture) -> Capture {
+        let pixels = capture
+            .pixels
+            .iter()
+            .map(|p| {
+                p.map(|v| {
+                    let v = f64::from(v.max(0.0));
+                    let sigma = (self.shot * self.shot * v + self.read * self.read).sqrt();
+                    let z: f64 = StandardNormal.sample(&mut self.rng);
+                    (v + sigma * z).clamp(0.0, self.saturation) as f32
+                })
+            })
+            .collect();
+        Capture {
+            width: capture.width,
+            height: capture.height,
+            pixels,
+        }
+    }
+}
