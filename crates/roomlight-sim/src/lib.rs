@@ -18,5 +18,7 @@ pub mod room;
 pub mod scene;
 pub mod scenes;
 
-pub use room::{CameraNoise, Capture, Frame, ProjectorImage, Room, SimError};
+pub use room::{
+    CameraNoise, Capture, Frame, NodeBasis, NodeRegion, ProjectorImage, Room, SimError,
+};
 pub use scene::Scene;

@@ -158,16 +158,29 @@ impl Projector {
     /// The light a pixel emits for a code value per channel: native black, response curve,
     /// primaries mixing, peak. In irradiance at 1 m on the axis.
     pub fn light(&self, code: [f32; 3]) -> LinearRgb {
+        let linear =
+            std::array::from_fn(|c| f64::from(code[c]).clamp(0.0, 1.0).powf(self.gamma[c]) as f32);
+        self.light_linear(linear)
+    }
+
+    /// The light of a perfectly linearised pixel: `share` of the way from native black to white
+    /// per channel, then mixing and peak.
+    pub fn light_linear(&self, share: [f32; 3]) -> LinearRgb {
         let mut lin = [0.0f64; 3];
         for c in 0..3 {
-            let v = f64::from(code[c]).clamp(0.0, 1.0);
-            lin[c] = self.black_level + (1.0 - self.black_level) * v.powf(self.gamma[c]);
+            lin[c] =
+                self.black_level + (1.0 - self.black_level) * f64::from(share[c]).clamp(0.0, 1.0);
         }
         let mixed = match self.mixing {
             None => lin,
             Some(m) => std::array::from_fn(|r| (0..3).map(|c| m[r][c] * lin[c]).sum()),
         };
         LinearRgb(mixed).hadamard(self.peak)
+    }
+
+    /// True when the projector mixes its primaries (a channel's light reaches other channels).
+    pub fn mixes(&self) -> bool {
+        self.mixing.is_some()
     }
 
     /// For a surface point `p` with normal `n`, the projector pixels that light it and the

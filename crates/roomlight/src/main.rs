@@ -1,6 +1,7 @@
 //! The `roomlight` command: a thin clap front over the crates.
 
 mod bench;
+mod bench_sim;
 mod demo;
 
 use anyhow::Result;
@@ -49,6 +50,15 @@ enum BenchCommand {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+    /// The simulator on the embedded lab: precomputation, capture times, memory.
+    Sim {
+        /// The small test room instead of the lab.
+        #[arg(long)]
+        quick: bool,
+        /// Also write the captures as PNG (sRGB, 8-bit) to this folder.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 fn main() -> Result<()> {
@@ -58,5 +68,8 @@ fn main() -> Result<()> {
         Command::Bench {
             which: BenchCommand::Core { quick, json, seed },
         } => bench::core(quick, json.as_deref(), seed, &ALLOCATOR),
+        Command::Bench {
+            which: BenchCommand::Sim { quick, out },
+        } => bench_sim::run(quick, out.as_deref(), &ALLOCATOR),
     }
 }
