@@ -3,6 +3,7 @@
 mod bench;
 mod bench_sim;
 mod demo;
+mod graycode_cmd;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -29,6 +30,11 @@ enum Command {
     /// Runs the best end-to-end pipeline there is so far: a synthetic room lit by distributed
     /// node updates from the conventional start, reported against the exact optimum.
     Demo(demo::DemoArgs),
+    /// Gray-code structured light for real photographs.
+    Graycode {
+        #[command(subcommand)]
+        which: graycode_cmd::GraycodeCommand,
+    },
     /// Benchmarks: speed against error.
     Bench {
         #[command(subcommand)]
@@ -65,6 +71,7 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Demo(args) => demo::run(&args),
+        Command::Graycode { which } => graycode_cmd::run(which),
         Command::Bench {
             which: BenchCommand::Core { quick, json, seed },
         } => bench::core(quick, json.as_deref(), seed, &ALLOCATOR),

@@ -91,3 +91,141 @@ fn bad_arguments_are_refused_with_a_message() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--seed"));
 }
+
+fn roomlight_err(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_roomlight"))
+        .args(args)
+        .output()
+        .expect("run roomlight");
+    assert!(
+        !out.status.success(),
+        "roomlight {args:?} should have failed"
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Generates patterns for a 40×24 projector and "photographs" them with a camera that sees the
+/// projector image one to one (the files themselves), then decodes: the map is the identity.
+#[test]
+fn graycode_generate_then_decode_identity_and_refuse_bad_folders() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let pat = dir.path().join("patterns");
+    let p = pat.to_str().expect("utf-8");
+    roomlight(&[
+        "graycode", "generate", "--width", "40", "--height", "24", "--out", p,
+    ]);
+    let json = pat.join("patterns.json");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("valid");
+    assert_eq!(
+        manifest["patterns"].as_array().expect("list").len(),
+        2 + 2 * (6 + 5)
+    );
+    let map = dir.path().join("map.png");
+    let stdout = roomlight(&[
+        "graycode",
+        "decode",
+        "--patterns",
+        json.to_str().expect("utf-8"),
+        "--captures",
+        p,
+        "--out",
+        map.to_str().expect("utf-8"),
+        "--depth",
+        "8",
+    ]);
+    assert!(stdout.contains("decoded 100.0%"), "{stdout}");
+    let img = image::open(&map).expect("map").to_rgb16();
+    for (x, y, px) in img.enumerate_pixels() {
+        assert_eq!((px[0], px[1]), (x as u16 + 1, y as u16 + 1));
+        assert!(px[2] > 60_000, "confidence {}", px[2]);
+    }
+    let jp = json.to_str().expect("utf-8");
+    let mp = map.to_str().expect("utf-8");
+    // 16 bits promised, 8 delivered.
+    let err = roomlight_err(&[
+        "graycode",
+        "decode",
+        "--patterns",
+        jp,
+        "--captures",
+        p,
+        "--out",
+        mp,
+        "--depth",
+        "16",
+    ]);
+    assert!(
+        err.contains("white.png") && err.contains("16 bits"),
+        "{err}"
+    );
+    // An extra file.
+    std::fs::copy(pat.join("white.png"), pat.join("stray.png")).expect("copy");
+    let err = roomlight_err(&[
+        "graycode",
+        "decode",
+        "--patterns",
+        jp,
+        "--captures",
+        p,
+        "--out",
+        mp,
+    ]);
+    assert!(err.contains("extra file stray.png"), "{err}");
+    std::fs::remove_file(pat.join("stray.png")).expect("remove");
+    // A missing file.
+    std::fs::rename(pat.join("col-03.png"), dir.path().join("aside.png")).expect("move");
+    let err = roomlight_err(&[
+        "graycode",
+        "decode",
+        "--patterns",
+        jp,
+        "--captures",
+        p,
+        "--out",
+        mp,
+    ]);
+    assert!(err.contains("missing capture col-03.png"), "{err}");
+    std::fs::rename(dir.path().join("aside.png"), pat.join("col-03.png")).expect("move back");
+    // A capture of the wrong size.
+    image::RgbImage::new(10, 10)
+        .save(pat.join("row-01.png"))
+        .expect("png");
+    let err = roomlight_err(&[
+        "graycode",
+        "decode",
+        "--patterns",
+        jp,
+        "--captures",
+        p,
+        "--out",
+        mp,
+    ]);
+    assert!(
+        err.contains("row-01.png") && err.contains("expected 40x24"),
+        "{err}"
+    );
+    // A manifest that does not match its resolution.
+    let bad = dir.path().join("bad.json");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(&json)
+            .expect("json")
+            .replace("\"width\": 40", "\"width\": 400"),
+    )
+    .expect("write");
+    let err = roomlight_err(&[
+        "graycode",
+        "decode",
+        "--patterns",
+        bad.to_str().expect("utf-8"),
+        "--captures",
+        p,
+        "--out",
+        mp,
+    ]);
+    assert!(
+        err.contains("bad.json") && err.contains("column_bits"),
+        "{err}"
+    );
+}

@@ -1,0 +1,22 @@
+//! roomlight-calib: what the real system does to captures (DESIGN §4, §5). Everything here takes
+//! images and configs, never simulator internals, so it works on real photographs.
+//!
+//! - [`image_io`]: linear images, PNG input with the encodings cameras deliver.
+//! - [`graycode`]: Gray-code patterns and robust decoding.
+
+pub mod graycode;
+pub mod image_io;
+
+/// What went wrong, naming the file or field and what was expected.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalibError {
+    /// A file is missing, unreadable, or not what was promised.
+    #[error("{file}: {problem}")]
+    File { file: String, problem: String },
+    /// A parameter or configuration field is out of range.
+    #[error("{field}: {problem}")]
+    Invalid {
+        field: &'static str,
+        problem: String,
+    },
+}

@@ -1,0 +1,142 @@
+//! Gray-code decoding against the simulator's true correspondence.
+
+use roomlight_calib::graycode::{
+    DecodeConfig, Manifest, bits_for, decode, gray, gray_inverse, group_disjoint,
+};
+use roomlight_calib::image_io::LinearImage;
+use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room, scenes};
+
+fn to_image(c: &Capture) -> LinearImage {
+    LinearImage {
+        width: c.width,
+        height: c.height,
+        pixels: c.pixels.clone(),
+    }
+}
+
+/// Renders every pattern of `manifest` on projector `k` (others black) with camera noise.
+fn captures(room: &Room, k: usize, manifest: &Manifest, preset: Option<usize>) -> Vec<LinearImage> {
+    let mut noise = CameraNoise::new(room);
+    manifest
+        .patterns
+        .iter()
+        .map(|p| {
+            let mut frames = vec![Frame::Black; room.projectors().len()];
+            let img = manifest.pattern_image(p.pattern);
+            frames[k] = Frame::Image(ProjectorImage {
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels,
+            });
+            to_image(&noise.expose(&room.render(&frames, preset).expect("render")))
+        })
+        .collect()
+}
+
+#[test]
+fn gray_code_round_trips_and_neighbours_differ_in_one_bit() {
+    for v in 0..5000u32 {
+        assert_eq!(gray_inverse(gray(v)), v);
+        assert_eq!((gray(v) ^ gray(v + 1)).count_ones(), 1);
+    }
+    assert_eq!(
+        (
+            bits_for(1),
+            bits_for(2),
+            bits_for(1024),
+            bits_for(1025),
+            bits_for(768)
+        ),
+        (1, 1, 10, 11, 10)
+    );
+    let m = Manifest::new(100, 30).expect("manifest");
+    assert_eq!(m.patterns.len(), 2 + 2 * (7 + 5));
+    // Each column's bits, read back from the patterns, give its Gray code.
+    for x in [0u32, 1, 37, 99] {
+        let mut code = 0;
+        for bit in 0..m.column_bits {
+            let v = m.pattern_values(roomlight_calib::graycode::Pattern::Bit {
+                axis: roomlight_calib::graycode::Axis::Column,
+                bit,
+                inverse: false,
+            });
+            code = (code << 1) | v[(5 * 100 + x) as usize] as u32;
+        }
+        assert_eq!(gray_inverse(code), x);
+    }
+}
+
+/// (share of reached pixels decoded within ±1, share of decoded pixels off by more than 2).
+fn accuracy(
+    room: &Room,
+    k: usize,
+    decoded: &roomlight_calib::graycode::Correspondence,
+) -> (f64, f64, usize) {
+    let truth = room.true_correspondence(k);
+    let pw = room.projectors()[k].pinhole.width;
+    let (mut reached, mut close, mut decoded_n, mut far) = (0usize, 0usize, 0usize, 0usize);
+    for (t, d) in truth.iter().zip(&decoded.map) {
+        let off = |t: u32, (x, y): (u32, u32)| {
+            (i64::from(x) - i64::from(t % pw))
+                .abs()
+                .max((i64::from(y) - i64::from(t / pw)).abs())
+        };
+        if let Some(t) = t {
+            reached += 1;
+            if d.is_some_and(|d| off(*t, d) <= 1) {
+                close += 1;
+            }
+        }
+        if let Some(d) = d {
+            decoded_n += 1;
+            if t.is_none_or(|t| off(t, *d) > 2) {
+                far += 1;
+            }
+        }
+    }
+    (
+        close as f64 / reached.max(1) as f64,
+        far as f64 / decoded_n.max(1) as f64,
+        reached,
+    )
+}
+
+#[test]
+fn standard_projectors_decode_within_a_pixel_under_interreflection_noise_and_ambient_light() {
+    let room = Room::build(scenes::small().expect("scene")).expect("room");
+    let ambient = Some(room.preset("on").expect("preset"));
+    for k in [0, 1] {
+        let p = &room.projectors()[k].pinhole;
+        let manifest = Manifest::new(p.width, p.height).expect("manifest");
+        let caps = captures(&room, k, &manifest, ambient);
+        let decoded = decode(&manifest, &DecodeConfig::default(), |f| {
+            let i = manifest
+                .patterns
+                .iter()
+                .position(|p| p.file == f.file)
+                .expect("pattern");
+            Ok(&caps[i])
+        })
+        .expect("decode");
+        let (close, far, reached) = accuracy(&room, k, &decoded);
+        assert!(reached > 1000, "projector {k} reaches {reached} pixels");
+        assert!(
+            close >= 0.98,
+            "projector {k}: {:.2}% within ±1",
+            100.0 * close
+        );
+        assert!(
+            far <= 0.001,
+            "projector {k}: {:.3}% off by more than 2",
+            100.0 * far
+        );
+    }
+}
+
+#[test]
+fn disjoint_footprints_share_captures() {
+    let a = vec![true, true, false, false];
+    let b = vec![false, false, true, false];
+    let c = vec![false, true, false, true];
+    assert_eq!(group_disjoint(&[a, b, c]), vec![vec![0, 1], vec![2]]);
+}
