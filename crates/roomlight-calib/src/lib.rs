@@ -3,7 +3,9 @@
 //!
 //! - [`image_io`]: linear images, PNG input with the encodings cameras deliver.
 //! - [`graycode`]: Gray-code patterns and robust decoding.
+//! - [`charts`]: homography, patch sampling with noise and saturation.
 
+pub mod charts;
 pub mod graycode;
 pub mod image_io;
 
