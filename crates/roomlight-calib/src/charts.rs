@@ -37,6 +37,34 @@ pub enum PatchStatus {
     OutOfImage,
     /// Fewer than four pixels in the sample box.
     TooFewPixels,
+    /// The two halves of the sample box differ by more than noise allows: an edge (a shadow, a
+    /// frustum or node boundary) crosses the patch, so its mean depends on where one samples.
+    NonUniform,
+}
+
+/// How to sample patches.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SampleConfig {
+    /// Values at or above this are saturated.
+    pub saturation: f32,
+    /// The camera's noise at black (standard deviation of one pixel).
+    pub read_noise: f32,
+    /// The camera's shot noise at value 1 (it grows with √value).
+    pub shot_noise: f32,
+    /// Largest difference between the halves of a sample box, as a share of the mean, beyond
+    /// the noise, before the patch is called non-uniform.
+    pub max_nonuniformity: f64,
+}
+
+impl Default for SampleConfig {
+    fn default() -> Self {
+        Self {
+            saturation: 0.98,
+            read_noise: 0.001,
+            shot_noise: 0.004,
+            max_nonuniformity: 0.03,
+        }
+    }
 }
 
 /// One patch's measurement.
@@ -59,17 +87,28 @@ pub struct Homography(Matrix3<f64>);
 impl Homography {
     /// From the four corners (DLT, exact for four points).
     pub fn from_corners(corners: &[[f64; 2]; 4]) -> Option<Self> {
-        let src = [[0.0, 0.0], [COLUMNS as f64, 0.0], [COLUMNS as f64, ROWS as f64], [0.0, ROWS as f64]];
+        let src = [
+            [0.0, 0.0],
+            [COLUMNS as f64, 0.0],
+            [COLUMNS as f64, ROWS as f64],
+            [0.0, ROWS as f64],
+        ];
         let mut a = DMatrix::<f64>::zeros(8, 9);
         for k in 0..4 {
             let ([x, y], [u, v]) = (src[k], corners[k]);
-            a.row_mut(2 * k).copy_from_slice(&[x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, -u]);
-            a.row_mut(2 * k + 1).copy_from_slice(&[0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, -v]);
+            a.row_mut(2 * k)
+                .copy_from_slice(&[x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, -u]);
+            a.row_mut(2 * k + 1)
+                .copy_from_slice(&[0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, -v]);
         }
         // The null vector of A: the right singular vector of the smallest singular value.
         let svd = a.transpose() * &a;
         let eig = svd.symmetric_eigen();
-        let (k, _) = eig.eigenvalues.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
+        let (k, _) = eig
+            .eigenvalues
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))?;
         let h = eig.eigenvectors.column(k);
         let m = Matrix3::from_row_slice(h.as_slice());
         if !m.iter().all(|v| v.is_finite()) || m.determinant().abs() < 1e-300 {
@@ -91,20 +130,14 @@ impl Homography {
 
 /// Whether `p` lies inside the convex quadrilateral `q` (either winding).
 fn inside(q: &[[f64; 2]; 4], p: [f64; 2]) -> bool {
-    let mut sign = 0.0;
+    let (mut positive, mut negative) = (false, false);
     for k in 0..4 {
         let (a, b) = (q[k], q[(k + 1) % 4]);
         let cross = (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
-        if cross.abs() < 1e-12 {
-            continue;
-        }
-        if sign == 0.0 {
-            sign = cross.signum();
-        } else if cross.signum() != sign {
-            return false;
-        }
+        positive |= cross > 1e-12;
+        negative |= cross < -1e-12;
     }
-    true
+    !(positive && negative)
 }
 
 /// Per-channel trimmed mean (the top and bottom 10% dropped) and its standard error.
@@ -120,7 +153,11 @@ fn trimmed(values: &mut [[f32; 3]]) -> (LinearRgb, LinearRgb, usize) {
         let part = &ch[cut..n - cut];
         let m = part.iter().sum::<f64>() / kept as f64;
         // One pixel: no spread to estimate; the standard error is unknown and reported as 0.
-        let var = if kept > 1 { part.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (kept - 1) as f64 } else { 0.0 };
+        let var = if kept > 1 {
+            part.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (kept - 1) as f64
+        } else {
+            0.0
+        };
         mean[c] = m;
         se[c] = (var / kept as f64).sqrt();
     }
@@ -129,13 +166,27 @@ fn trimmed(values: &mut [[f32; 3]]) -> (LinearRgb, LinearRgb, usize) {
 
 /// Samples the 24 patches of a chart in a capture. Corners outside the image are an error; a
 /// patch whose box leaves the image or touches `saturation` is reported and left out.
-pub fn sample_chart(image: &LinearImage, chart: &ChartCorners, saturation: f32) -> Result<Vec<PatchSample>, CalibError> {
+pub fn sample_chart(
+    image: &LinearImage,
+    chart: &ChartCorners,
+    config: &SampleConfig,
+) -> Result<Vec<PatchSample>, CalibError> {
+    let saturation = config.saturation;
     let (w, h) = (f64::from(image.width), f64::from(image.height));
     for c in &chart.corners {
-        if !(c[0].is_finite() && c[1].is_finite() && c[0] >= 0.0 && c[1] >= 0.0 && c[0] <= w && c[1] <= h) {
+        if !(c[0].is_finite()
+            && c[1].is_finite()
+            && c[0] >= 0.0
+            && c[1] >= 0.0
+            && c[0] <= w
+            && c[1] <= h)
+        {
             return Err(CalibError::Invalid {
                 field: "chart corners",
-                problem: format!("chart {}: corner {c:?} is outside the {}x{} image", chart.name, image.width, image.height),
+                problem: format!(
+                    "chart {}: corner {c:?} is outside the {}x{} image",
+                    chart.name, image.width, image.height
+                ),
             });
         }
     }
@@ -146,39 +197,82 @@ pub fn sample_chart(image: &LinearImage, chart: &ChartCorners, saturation: f32) 
             (b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0])
         })
         .collect();
-    let area = 0.5 * (0..4).map(|k| q[k][0] * q[(k + 1) % 4][1] - q[(k + 1) % 4][0] * q[k][1]).sum::<f64>().abs();
+    let area = 0.5
+        * (0..4)
+            .map(|k| q[k][0] * q[(k + 1) % 4][1] - q[(k + 1) % 4][0] * q[k][1])
+            .sum::<f64>()
+            .abs();
     let convex = crosses.iter().all(|&c| c > 0.0) || crosses.iter().all(|&c| c < 0.0);
     if !convex || area < 16.0 {
         return Err(CalibError::Invalid {
             field: "chart corners",
-            problem: format!("chart {}: the corners {:?} do not form a convex quadrilateral of at least 16 pixels", chart.name, chart.corners),
+            problem: format!(
+                "chart {}: the corners {:?} do not form a convex quadrilateral of at least 16 pixels",
+                chart.name, chart.corners
+            ),
         });
     }
     let hom = Homography::from_corners(&chart.corners).ok_or_else(|| CalibError::Invalid {
         field: "chart corners",
-        problem: format!("chart {}: the corners {:?} do not form a quadrilateral", chart.name, chart.corners),
+        problem: format!(
+            "chart {}: the corners {:?} do not form a quadrilateral",
+            chart.name, chart.corners
+        ),
     })?;
     let mut out = Vec::with_capacity(COLUMNS * ROWS);
     for k in 0..COLUMNS * ROWS {
         let (col, row) = ((k % COLUMNS) as f64, (k / COLUMNS) as f64);
         let half = 0.25 * PATCH_SIDE; // the inner half of the patch square
         let (cu, cv) = (col + 0.5, row + 0.5);
-        let quad = [hom.apply(cu - half, cv - half), hom.apply(cu + half, cv - half), hom.apply(cu + half, cv + half), hom.apply(cu - half, cv + half)];
-        let out_of_image = quad.iter().any(|p| !(p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w && p[1] <= h));
+        let quad = [
+            hom.apply(cu - half, cv - half),
+            hom.apply(cu + half, cv - half),
+            hom.apply(cu + half, cv + half),
+            hom.apply(cu - half, cv + half),
+        ];
+        let out_of_image = quad
+            .iter()
+            .any(|p| !(p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w && p[1] <= h));
         if out_of_image {
-            out.push(PatchSample { mean: LinearRgb::ZERO, std_error: LinearRgb::ZERO, pixels: 0, status: PatchStatus::OutOfImage });
+            out.push(PatchSample {
+                mean: LinearRgb::ZERO,
+                std_error: LinearRgb::ZERO,
+                pixels: 0,
+                status: PatchStatus::OutOfImage,
+            });
             continue;
         }
-        let (x0, x1) = (quad.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min), quad.iter().map(|p| p[0]).fold(0.0, f64::max));
-        let (y0, y1) = (quad.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min), quad.iter().map(|p| p[1]).fold(0.0, f64::max));
+        let (x0, x1) = (
+            quad.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min),
+            quad.iter().map(|p| p[0]).fold(0.0, f64::max),
+        );
+        let (y0, y1) = (
+            quad.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min),
+            quad.iter().map(|p| p[1]).fold(0.0, f64::max),
+        );
         let mut values = Vec::new();
+        let mut side = Vec::new();
         let mut saturated = false;
+        let centre = hom.apply(cu, cv);
+        let (axis_u, axis_v) = (hom.apply(cu + 1.0, cv), hom.apply(cu, cv + 1.0));
+        let (du, dv) = (
+            [axis_u[0] - centre[0], axis_u[1] - centre[1]],
+            [axis_v[0] - centre[0], axis_v[1] - centre[1]],
+        );
         for y in (y0.floor() as u32)..(y1.ceil() as u32).min(image.height) {
             for x in (x0.floor() as u32)..(x1.ceil() as u32).min(image.width) {
                 if inside(&quad, [f64::from(x) + 0.5, f64::from(y) + 0.5]) {
                     let v = image.pixels[(y * image.width + x) as usize];
                     saturated |= v.iter().any(|&c| c >= saturation || !c.is_finite());
                     values.push(v);
+                    let (px, py) = (
+                        f64::from(x) + 0.5 - centre[0],
+                        f64::from(y) + 0.5 - centre[1],
+                    );
+                    side.push((
+                        px * du[0] + py * du[1] >= 0.0,
+                        px * dv[0] + py * dv[1] >= 0.0,
+                    ));
                 }
             }
         }
@@ -186,24 +280,95 @@ pub fn sample_chart(image: &LinearImage, chart: &ChartCorners, saturation: f32) 
             PatchStatus::Saturated
         } else if values.len() < 4 {
             PatchStatus::TooFewPixels
+        } else if nonuniform(&values, &side, config) {
+            PatchStatus::NonUniform
         } else {
             PatchStatus::Ok
         };
         if status == PatchStatus::Ok {
-            let (mean, std_error, pixels) = trimmed(&mut values);
-            out.push(PatchSample { mean, std_error, pixels, status });
+            let (mean, sample_se, pixels) = trimmed(&mut values);
+            // With a handful of pixels the sample spread is itself noisy: never report less than
+            // the camera's noise model gives for this many pixels.
+            let std_error = LinearRgb(std::array::from_fn(|c| {
+                let model = ((f64::from(config.read_noise).powi(2)
+                    + f64::from(config.shot_noise).powi(2) * mean[c].max(0.0))
+                    / pixels as f64)
+                    .sqrt();
+                sample_se[c].max(model)
+            }));
+            out.push(PatchSample {
+                mean,
+                std_error,
+                pixels,
+                status,
+            });
         } else {
-            out.push(PatchSample { mean: LinearRgb::ZERO, std_error: LinearRgb::ZERO, pixels: values.len(), status });
+            out.push(PatchSample {
+                mean: LinearRgb::ZERO,
+                std_error: LinearRgb::ZERO,
+                pixels: values.len(),
+                status,
+            });
         }
     }
     Ok(out)
 }
 
+/// True when the two halves of the box (along the chart's u or v axis) differ by more than
+/// `max_nonuniformity` of the mean plus four standard deviations of the noise.
+fn nonuniform(values: &[[f32; 3]], side: &[(bool, bool)], config: &SampleConfig) -> bool {
+    let var = |m: f64, n: usize| {
+        (f64::from(config.read_noise).powi(2) + f64::from(config.shot_noise).powi(2) * m.max(0.0))
+            / n as f64
+    };
+    // The spread of the box against the camera's noise: an edge inside the box shows as a
+    // spread far above noise (a χ² test with 3σ), beyond what a smooth gradient gives.
+    let n = values.len();
+    for c in 0..3 {
+        let m = values.iter().map(|v| f64::from(v[c])).sum::<f64>() / n as f64;
+        let sd = (values
+            .iter()
+            .map(|v| (f64::from(v[c]) - m).powi(2))
+            .sum::<f64>()
+            / (n - 1).max(1) as f64)
+            .sqrt();
+        if sd > (3.0 * var(m, 1).sqrt()).max(config.max_nonuniformity * m) {
+            return true;
+        }
+    }
+    for split in [0, 1] {
+        let mut sums = [[0.0f64; 3]; 2];
+        let mut counts = [0usize; 2];
+        for (v, s) in values.iter().zip(side) {
+            let k = usize::from(if split == 0 { s.0 } else { s.1 });
+            counts[k] += 1;
+            for c in 0..3 {
+                sums[k][c] += f64::from(v[c]);
+            }
+        }
+        if counts[0] == 0 || counts[1] == 0 {
+            continue;
+        }
+        for (sa, sb) in sums[0].iter().zip(&sums[1]) {
+            let (a, b) = (sa / counts[0] as f64, sb / counts[1] as f64);
+            let noise = (var(a, counts[0]) + var(b, counts[1])).sqrt();
+            if (a - b).abs() > config.max_nonuniformity * 0.5 * (a + b) + 4.0 * noise {
+                return true;
+            }
+        }
+    }
+    false
+}
+
 /// Samples every chart; patches are numbered chart-major (chart `m`, patch `k` → `24 m + k`).
-pub fn sample_charts(image: &LinearImage, charts: &[ChartCorners], saturation: f32) -> Result<Vec<PatchSample>, CalibError> {
+pub fn sample_charts(
+    image: &LinearImage,
+    charts: &[ChartCorners],
+    config: &SampleConfig,
+) -> Result<Vec<PatchSample>, CalibError> {
     let mut all = Vec::with_capacity(charts.len() * 24);
     for chart in charts {
-        all.extend(sample_chart(image, chart, saturation)?);
+        all.extend(sample_chart(image, chart, config)?);
     }
     Ok(all)
 }

@@ -4,10 +4,14 @@
 //! - [`image_io`]: linear images, PNG input with the encodings cameras deliver.
 //! - [`graycode`]: Gray-code patterns and robust decoding.
 //! - [`charts`]: homography, patch sampling with noise and saturation.
+//! - [`response`]: gray-ramp response fit and its inverse.
+//! - [`attenuation`]: black offset, attenuation (one at a time, Hadamard), `s`, hot calibration.
 
+pub mod attenuation;
 pub mod charts;
 pub mod graycode;
 pub mod image_io;
+pub mod response;
 
 /// What went wrong, naming the file or field and what was expected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -211,6 +211,9 @@ pub struct Room {
 /// Radiosity stops when no element's radiosity changes by more than this share of the largest.
 pub const RADIOSITY_TOLERANCE: f64 = 1e-5;
 
+/// Probes per chart patch (a 4×4 grid over its inner half).
+const PATCH_SAMPLES: usize = 16;
+
 /// Light-panel samples per side, and visibility rays per light and probe sample.
 const LIGHT_GRID: usize = 4;
 
@@ -299,29 +302,28 @@ impl Room {
         let albedo: Vec<LinearRgb> = room.geometry.elements.iter().map(|e| e.albedo).collect();
         let interp = vec![[(0, 0.0); 4]; albedo.len()];
         room.element_probes = room.probes(albedo, interp, &samples);
-        // Chart patches: 3×3 samples over the inner half of each patch.
+        // Chart patches: 4×4 samples over the inner half of each patch.
         let mut samples = Vec::new();
         let mut albedo = Vec::new();
         let mut interp = Vec::new();
         for (m, chart) in room.geometry.charts.iter().enumerate() {
             for k in 0..24 {
-                let id = (m * 24 + k) as u32;
                 let center = chart.patch_center(k);
                 let face = room
                     .geometry
                     .cast(&Ray::new(center + chart.normal * 0.02, -chart.normal), 0.05)
                     .map_or(0, |h| h.face);
-                albedo.push(roomlight_core::colorchecker::reflectance(k));
-                interp.push(room.geometry.element_weights(face, center));
                 let half = 0.25 * chart.patch_side();
-                for b in [-1.0f32, 0.0, 1.0] {
-                    for a in [-1.0f32, 0.0, 1.0] {
-                        samples.push((
-                            id,
-                            center + chart.right * (a * half * 0.67) + chart.up * (b * half * 0.67),
-                            chart.normal,
-                            1.0 / 9.0,
-                        ));
+                // A 4×4 grid of cell centres over the inner half of the patch (the area a
+                // camera's sample box averages), one probe each.
+                for b in [-0.75f32, -0.25, 0.25, 0.75] {
+                    for a in [-0.75f32, -0.25, 0.25, 0.75] {
+                        let id =
+                            ((m * 24 + k) * PATCH_SAMPLES + samples.len() % PATCH_SAMPLES) as u32;
+                        let p = center + chart.right * (a * half) + chart.up * (b * half);
+                        albedo.push(roomlight_core::colorchecker::reflectance(k));
+                        interp.push(room.geometry.element_weights(face, p));
+                        samples.push((id, p, chart.normal, 1.0));
                     }
                 }
             }
@@ -591,7 +593,7 @@ impl Room {
             .collect();
         Ok((
             capture,
-            self.values(&self.patch_probes, frames, preset, &indirect),
+            Self::aggregate_patches(&self.values(&self.patch_probes, frames, preset, &indirect)).0,
         ))
     }
 
@@ -617,9 +619,45 @@ impl Room {
         frames: &[Frame],
         preset: Option<usize>,
     ) -> Result<Vec<LinearRgb>, SimError> {
+        Ok(self.patch_values_and_spread(frames, preset)?.0)
+    }
+
+    /// Ground truth: each patch's mean and the spread of the light over its inner half,
+    /// `(max − min)/mean` per channel (0 where the mean is 0). A large spread means an edge
+    /// (shadow, frustum or node boundary) crosses the patch, where "the patch value" depends on
+    /// where one looks.
+    pub fn patch_values_and_spread(
+        &self,
+        frames: &[Frame],
+        preset: Option<usize>,
+    ) -> Result<(Vec<LinearRgb>, Vec<LinearRgb>), SimError> {
         self.check_frames(frames)?;
         let indirect = self.indirect(frames, preset);
-        Ok(self.values(&self.patch_probes, frames, preset, &indirect))
+        let samples = self.values(&self.patch_probes, frames, preset, &indirect);
+        Ok(Self::aggregate_patches(&samples))
+    }
+
+    fn aggregate_patches(samples: &[LinearRgb]) -> (Vec<LinearRgb>, Vec<LinearRgb>) {
+        samples
+            .chunks(PATCH_SAMPLES)
+            .map(|chunk| {
+                let mean = chunk.iter().fold(LinearRgb::ZERO, |a, v| a + *v)
+                    * (1.0 / PATCH_SAMPLES as f64);
+                let spread = LinearRgb(std::array::from_fn(|c| {
+                    let (lo, hi) = chunk
+                        .iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                            (lo.min(v[c]), hi.max(v[c]))
+                        });
+                    if mean[c] > 0.0 {
+                        (hi - lo) / mean[c]
+                    } else {
+                        0.0
+                    }
+                }));
+                (mean, spread)
+            })
+            .unzip()
     }
 
     /// Ground truth: the projector pixel each camera pixel sees through the projector's lens
@@ -740,6 +778,14 @@ impl CameraNoise {
             read: c.read_noise,
             shot: c.shot_noise,
             saturation: c.saturation,
+        }
+    }
+
+    /// The noise of a scene's camera with another seed (repeated experiments).
+    pub fn with_seed(room: &Room, seed: u64) -> Self {
+        Self {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            ..Self::new(room)
         }
     }
 

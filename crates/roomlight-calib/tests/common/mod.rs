@@ -14,7 +14,11 @@ pub fn small_scene() -> Scene {
 }
 
 pub fn to_image(c: &Capture) -> LinearImage {
-    LinearImage { width: c.width, height: c.height, pixels: c.pixels.clone() }
+    LinearImage {
+        width: c.width,
+        height: c.height,
+        pixels: c.pixels.clone(),
+    }
 }
 
 /// The chart corners in camera pixels, as a person would click them once (here: from the room
@@ -27,12 +31,20 @@ pub fn chart_corners(room: &Room) -> Vec<ChartCorners> {
         .zip(&room.scene().charts)
         .map(|(c, spec)| {
             let (hw, hh) = (0.5 * c.width, 0.5 * c.height);
-            let pts = [c.center - c.right * hw + c.up * hh, c.center + c.right * hw + c.up * hh, c.center + c.right * hw - c.up * hh, c.center - c.right * hw - c.up * hh];
+            let pts = [
+                c.center - c.right * hw + c.up * hh,
+                c.center + c.right * hw + c.up * hh,
+                c.center + c.right * hw - c.up * hh,
+                c.center - c.right * hw - c.up * hh,
+            ];
             let corners = pts.map(|p| {
                 let (u, v) = cam.project(p).expect("chart in view");
                 [f64::from(u), f64::from(v)]
             });
-            ChartCorners { name: spec.name.clone(), corners }
+            ChartCorners {
+                name: spec.name.clone(),
+                corners,
+            }
         })
         .collect()
 }

@@ -1,0 +1,137 @@
+//! Projector response (DESIGN §2): a gray ramp on a white patch, fitted per channel with a power
+//! law and inverted, so that node values are linear light.
+
+use crate::CalibError;
+use roomlight_core::LinearRgb;
+use serde::{Deserialize, Serialize};
+
+/// Fewest ramp levels accepted.
+pub const MIN_LEVELS: usize = 9;
+
+/// The codes of a ramp of `levels` steps from 0 to 1.
+pub fn ramp_codes(levels: usize) -> Result<Vec<f64>, CalibError> {
+    if levels < MIN_LEVELS {
+        return Err(CalibError::Invalid {
+            field: "ramp levels",
+            problem: format!("{levels}, expected at least {MIN_LEVELS}"),
+        });
+    }
+    Ok((0..levels)
+        .map(|j| j as f64 / (levels - 1) as f64)
+        .collect())
+}
+
+/// A projector's measured response: light share `= code^γ` per channel, black removed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Response {
+    /// Exponent per channel.
+    pub gamma: [f64; 3],
+    /// Largest deviation of a measured level from the fitted curve (share of full range).
+    pub max_residual: [f64; 3],
+}
+
+impl Response {
+    /// A linear projector (already linearised).
+    pub fn linear() -> Self {
+        Self {
+            gamma: [1.0; 3],
+            max_residual: [0.0; 3],
+        }
+    }
+
+    /// The code that gives linear light `share` (clipped to `[0, 1]`) on each channel.
+    pub fn to_code(&self, share: LinearRgb) -> [f32; 3] {
+        std::array::from_fn(|c| share[c].clamp(0.0, 1.0).powf(1.0 / self.gamma[c]) as f32)
+    }
+
+    /// The light share of a code.
+    pub fn to_share(&self, code: [f32; 3]) -> LinearRgb {
+        LinearRgb(std::array::from_fn(|c| {
+            f64::from(code[c]).clamp(0.0, 1.0).powf(self.gamma[c])
+        }))
+    }
+}
+
+/// Fits the response from a ramp: `measured[j]` is the patch value (with its standard error
+/// `noise[j]`) at `codes[j]`; `codes` start at 0 and end at 1.
+///
+/// Each channel is normalised to `(y − y₀)/(y_max − y₀)` and `log share = γ log code` is fitted
+/// by least squares over the levels whose share stands clear of the noise (share > 2%).
+pub fn fit_response(
+    codes: &[f64],
+    measured: &[LinearRgb],
+    noise: &[LinearRgb],
+) -> Result<Response, CalibError> {
+    if codes.len() != measured.len() || codes.len() != noise.len() {
+        return Err(CalibError::Invalid {
+            field: "ramp",
+            problem: format!(
+                "{} codes, {} measurements, {} noise values",
+                codes.len(),
+                measured.len(),
+                noise.len()
+            ),
+        });
+    }
+    if codes.len() < MIN_LEVELS
+        || codes.first() != Some(&0.0)
+        || codes.last() != Some(&1.0)
+        || codes.windows(2).any(|w| w[1] <= w[0])
+    {
+        return Err(CalibError::Invalid {
+            field: "ramp codes",
+            problem: format!("expected at least {MIN_LEVELS} increasing codes from 0 to 1"),
+        });
+    }
+    let last = codes.len() - 1;
+    let mut gamma = [0.0; 3];
+    let mut max_residual = [0.0; 3];
+    for c in 0..3 {
+        let range = measured[last][c] - measured[0][c];
+        let sigma = (noise[last][c].powi(2) + noise[0][c].powi(2)).sqrt();
+        if !(range > 10.0 * sigma && range > 0.0) {
+            return Err(CalibError::Invalid {
+                field: "ramp",
+                problem: format!(
+                    "channel {c}: white − black is {range:.3e} against noise {sigma:.3e}; the patch is not lit by this projector"
+                ),
+            });
+        }
+        let (mut sxx, mut sxy) = (0.0, 0.0);
+        let mut used = 0;
+        for j in 1..last {
+            let share = (measured[j][c] - measured[0][c]) / range;
+            if share > 0.02 && codes[j] > 0.0 {
+                let (x, y) = (codes[j].ln(), share.ln());
+                sxx += x * x;
+                sxy += x * y;
+                used += 1;
+            }
+        }
+        if used < 3 || sxx <= 0.0 {
+            return Err(CalibError::Invalid {
+                field: "ramp",
+                problem: format!(
+                    "channel {c}: only {used} levels above the noise, expected at least 3"
+                ),
+            });
+        }
+        gamma[c] = sxy / sxx;
+        if !(gamma[c].is_finite() && (0.2..=5.0).contains(&gamma[c])) {
+            return Err(CalibError::Invalid {
+                field: "ramp",
+                problem: format!(
+                    "channel {c}: fitted gamma {:.3} is not a projector response",
+                    gamma[c]
+                ),
+            });
+        }
+        max_residual[c] = (0..=last)
+            .map(|j| ((measured[j][c] - measured[0][c]) / range - codes[j].powf(gamma[c])).abs())
+            .fold(0.0, f64::max);
+    }
+    Ok(Response {
+        gamma,
+        max_residual,
+    })
+}
