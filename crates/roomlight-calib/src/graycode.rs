@@ -50,6 +50,19 @@ pub struct PatternFile {
     pub pattern: Pattern,
 }
 
+/// How the bits are turned into patterns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Coding {
+    /// Plain Gray code: the coarse bits are wide stripes, which inter-reflection can flip.
+    Gray,
+    /// Gray code XOR-ed with its 4-pixel-stripe bit (Gupta et al. 2012, "XOR-04"): every
+    /// pattern is high-frequency, so global light is the same under a pattern and its inverse
+    /// and cancels in their difference. Decoding XORs the base bit back out.
+    #[default]
+    Xor04,
+}
+
 /// The pattern set of one projector resolution: what `patterns.json` holds.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Manifest {
@@ -57,12 +70,19 @@ pub struct Manifest {
     pub width: u32,
     /// Projector height.
     pub height: u32,
+    /// How bits become patterns (files without it are plain Gray code).
+    #[serde(default = "gray_coding")]
+    pub coding: Coding,
     /// Bits for the columns.
     pub column_bits: u32,
     /// Bits for the rows.
     pub row_bits: u32,
     /// Every pattern, in display order.
     pub patterns: Vec<PatternFile>,
+}
+
+fn gray_coding() -> Coding {
+    Coding::Gray
 }
 
 /// Bits needed to code `n` positions (at least 1).
@@ -90,6 +110,11 @@ impl Manifest {
     /// The pattern set for a `width × height` projector: white, black, then each column bit and
     /// its inverse from the most significant, then the rows.
     pub fn new(width: u32, height: u32) -> Result<Self, CalibError> {
+        Self::with_coding(width, height, Coding::default())
+    }
+
+    /// The pattern set with a chosen coding.
+    pub fn with_coding(width: u32, height: u32, coding: Coding) -> Result<Self, CalibError> {
         if width == 0 || height == 0 || width > 65_535 || height > 65_535 {
             return Err(CalibError::Invalid {
                 field: "projector resolution",
@@ -124,6 +149,7 @@ impl Manifest {
         Ok(Self {
             width,
             height,
+            coding,
             column_bits,
             row_bits,
             patterns,
@@ -132,9 +158,11 @@ impl Manifest {
 
     /// Checks a manifest read from a file: sizes, bit counts and a complete, unique pattern set.
     pub fn validate(&self, file: &str) -> Result<(), CalibError> {
-        let expected = Self::new(self.width, self.height).map_err(|e| CalibError::File {
-            file: file.into(),
-            problem: e.to_string(),
+        let expected = Self::with_coding(self.width, self.height, self.coding).map_err(|e| {
+            CalibError::File {
+                file: file.into(),
+                problem: e.to_string(),
+            }
         })?;
         if self.column_bits != expected.column_bits || self.row_bits != expected.row_bits {
             return Err(CalibError::File {
@@ -201,12 +229,25 @@ impl Manifest {
                             Axis::Column => (i % w, self.column_bits),
                             Axis::Row => (i / w, self.row_bits),
                         };
-                        ((gray(v) >> (bits - 1 - bit)) & 1 == 1) != inverse
+                        let g = |b: u32| (gray(v) >> (bits - 1 - b)) & 1 == 1;
+                        let encoded = match self.base_bit(bits) {
+                            Some(base) if base != bit => g(bit) != g(base),
+                            _ => g(bit),
+                        };
+                        encoded != inverse
                     }
                 };
                 f32::from(u8::from(on))
             })
             .collect()
+    }
+
+    /// The bit every other bit is XOR-ed with, for an axis of `bits` bits.
+    pub fn base_bit(&self, bits: u32) -> Option<u32> {
+        match self.coding {
+            Coding::Xor04 if bits >= 3 => Some(bits - 2),
+            _ => None,
+        }
     }
 
     /// The pattern as an image (white where on).
@@ -235,6 +276,20 @@ pub struct DecodeConfig {
     pub min_direct_share: f32,
     /// A bit is trusted when pattern and inverse differ by at least this share of `Ld`.
     pub min_margin_share: f32,
+    /// How many untrusted bits a pixel may have and still be decoded (0 or 1).
+    pub max_uncertain_bits: usize,
+}
+
+impl DecodeConfig {
+    /// For defocused projectors (the large aperture): every bit must be clearly decided, so
+    /// that a blurred stripe edge gives "unknown" rather than a position off by the blur.
+    pub fn strict() -> Self {
+        Self {
+            min_margin_share: 0.5,
+            max_uncertain_bits: 0,
+            ..Self::default()
+        }
+    }
 }
 
 impl Default for DecodeConfig {
@@ -243,7 +298,8 @@ impl Default for DecodeConfig {
             noise_floor: 0.002,
             shot_noise: 0.007,
             min_direct_share: 0.005,
-            min_margin_share: 0.2,
+            min_margin_share: 0.4,
+            max_uncertain_bits: 1,
         }
     }
 }
@@ -346,6 +402,8 @@ pub fn decode<'a>(
     }
     // Direct and global light from the two finest patterns of each axis (Nayar et al.): with
     // half the pixels on, max = Ld + Lg/2 and min = Lg/2.
+    // With XOR coding every pattern is high-frequency, so every pair can be used.
+    let xor = manifest.coding == Coding::Xor04;
     let fine: Vec<&(Axis, u32, Vec<f32>, Vec<f32>)> = pairs
         .iter()
         .filter(|(axis, bit, _, _)| {
@@ -354,7 +412,7 @@ pub fn decode<'a>(
             } else {
                 manifest.row_bits
             };
-            bit + 2 >= bits
+            xor || bit + 2 >= bits
         })
         .collect();
     let mut direct = vec![0.0f32; n];
@@ -381,8 +439,8 @@ pub fn decode<'a>(
         if ld.is_nan() || ld < reach || white[i] - black[i] < reach {
             continue;
         }
-        let mut codes = [0u32; 2];
-        let mut uncertain = 0;
+        // (value, trusted) of every encoded bit, per axis, most significant first.
+        let mut read: [Vec<(bool, bool)>; 2] = [Vec::new(), Vec::new()];
         let mut worst = f32::INFINITY;
         for (axis, _, p, q) in &pairs {
             let (a, b) = (p[i], q[i]);
@@ -394,36 +452,46 @@ pub fn decode<'a>(
                     + config.shot_noise * config.shot_noise * level))
                 .sqrt();
             let margin = (config.min_margin_share * ld).max(3.0 * sigma);
-            let bit = if d.abs() >= margin && ld > lg {
+            let trusted = if d.abs() < margin {
+                None
+            } else if xor || ld > lg {
+                // High-frequency pairs see the same global light: the sign is the direct part's.
                 Some(d > 0.0)
-            } else if d.abs() >= margin {
-                // Global light dominates: trust only what the direct part alone can explain.
-                if a < ld && b > lg {
-                    Some(false)
-                } else if a > lg && b < ld {
-                    Some(true)
-                } else {
-                    None
-                }
+            } else if a < ld && b > lg {
+                // Global light dominates a coarse stripe: trust only what direct light explains.
+                Some(false)
+            } else if a > lg && b < ld {
+                Some(true)
             } else {
                 None
             };
-            let k = usize::from(*axis == Axis::Row);
-            let value = match bit {
-                Some(v) => {
-                    worst = worst.min(d.abs() / ld);
-                    v
-                }
-                None => {
-                    uncertain += 1;
-                    d > 0.0
-                }
-            };
-            codes[k] = (codes[k] << 1) | u32::from(value);
+            if trusted.is_some() {
+                worst = worst.min(d.abs() / ld);
+            }
+            read[usize::from(*axis == Axis::Row)]
+                .push((trusted.unwrap_or(d > 0.0), trusted.is_some()));
+        }
+        // Undo the XOR with the base bit; a bit is trusted only if its base is too.
+        let mut codes = [0u32; 2];
+        let mut uncertain = 0;
+        for (k, bits) in read.iter().enumerate() {
+            let base = manifest
+                .base_bit(bits.len() as u32)
+                .map(|b| bits[b as usize]);
+            for (b, &(value, trusted)) in bits.iter().enumerate() {
+                let (value, trusted) = match base {
+                    Some((bv, bt)) if Some(b as u32) != manifest.base_bit(bits.len() as u32) => {
+                        (value != bv, trusted && bt)
+                    }
+                    _ => (value, trusted),
+                };
+                uncertain += usize::from(!trusted);
+                codes[k] = (codes[k] << 1) | u32::from(value);
+            }
         }
         // One untrusted bit lies on that bit's stripe edge, where both readings are neighbours:
         // at most one pixel off. More than one: unknown rather than wrong.
-        if uncertain > 1 {
+        if uncertain > config.max_uncertain_bits.min(1) {
             continue;
         }
         let (x, y) = (gray_inverse(codes[0]), gray_inverse(codes[1]));

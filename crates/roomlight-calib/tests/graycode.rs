@@ -35,6 +35,7 @@ fn captures(room: &Room, k: usize, manifest: &Manifest, preset: Option<usize>) -
 
 #[test]
 fn gray_code_round_trips_and_neighbours_differ_in_one_bit() {
+    use roomlight_calib::graycode::{Axis, Coding, Pattern};
     for v in 0..5000u32 {
         assert_eq!(gray_inverse(gray(v)), v);
         assert_eq!((gray(v) ^ gray(v + 1)).count_ones(), 1);
@@ -49,20 +50,46 @@ fn gray_code_round_trips_and_neighbours_differ_in_one_bit() {
         ),
         (1, 1, 10, 11, 10)
     );
-    let m = Manifest::new(100, 30).expect("manifest");
-    assert_eq!(m.patterns.len(), 2 + 2 * (7 + 5));
-    // Each column's bits, read back from the patterns, give its Gray code.
-    for x in [0u32, 1, 37, 99] {
-        let mut code = 0;
-        for bit in 0..m.column_bits {
-            let v = m.pattern_values(roomlight_calib::graycode::Pattern::Bit {
-                axis: roomlight_calib::graycode::Axis::Column,
-                bit,
-                inverse: false,
-            });
-            code = (code << 1) | v[(5 * 100 + x) as usize] as u32;
+    for coding in [Coding::Gray, Coding::Xor04] {
+        let m = Manifest::with_coding(100, 30, coding).expect("manifest");
+        assert_eq!(m.patterns.len(), 2 + 2 * (7 + 5));
+        // Each column's bits, read back from the patterns (and XOR-ed with the base bit when the
+        // coding says so), give its Gray code; every inverse is the complement.
+        let base = m.base_bit(m.column_bits);
+        for x in [0u32, 1, 37, 99] {
+            let read = |bit: u32, inverse: bool| {
+                m.pattern_values(Pattern::Bit {
+                    axis: Axis::Column,
+                    bit,
+                    inverse,
+                })[(5 * 100 + x) as usize] as u32
+            };
+            let mut code = 0;
+            for bit in 0..m.column_bits {
+                let v = match base {
+                    Some(b) if b != bit => read(bit, false) ^ read(b, false),
+                    _ => read(bit, false),
+                };
+                code = (code << 1) | v;
+                assert_eq!(read(bit, true), 1 - read(bit, false));
+            }
+            assert_eq!(gray_inverse(code), x, "{coding:?}");
         }
-        assert_eq!(gray_inverse(code), x);
+    }
+    // XOR-04 patterns are all high-frequency: no stripe wider than 4 pixels.
+    let m = Manifest::new(256, 4).expect("manifest");
+    for bit in 0..m.column_bits {
+        let v = m.pattern_values(Pattern::Bit {
+            axis: Axis::Column,
+            bit,
+            inverse: false,
+        });
+        let longest = v[..256]
+            .chunk_by(|a, b| (a > &0.5) == (b > &0.5))
+            .map(<[f32]>::len)
+            .max()
+            .unwrap_or(0);
+        assert!(longest <= 4, "bit {bit}: a stripe of {longest} pixels");
     }
 }
 
@@ -105,9 +132,10 @@ fn accuracy(
 fn standard_projectors_decode_within_a_pixel_under_interreflection_noise_and_ambient_light() {
     let room = Room::build(scenes::small().expect("scene")).expect("room");
     let ambient = Some(room.preset("on").expect("preset"));
-    for k in [0, 1] {
+    use roomlight_calib::graycode::Coding;
+    for (k, coding) in [(0, Coding::Xor04), (1, Coding::Xor04), (0, Coding::Gray)] {
         let p = &room.projectors()[k].pinhole;
-        let manifest = Manifest::new(p.width, p.height).expect("manifest");
+        let manifest = Manifest::with_coding(p.width, p.height, coding).expect("manifest");
         let caps = captures(&room, k, &manifest, ambient);
         let decoded = decode(&manifest, &DecodeConfig::default(), |f| {
             let i = manifest

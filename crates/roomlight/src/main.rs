@@ -1,6 +1,7 @@
 //! The `roomlight` command: a thin clap front over the crates.
 
 mod bench;
+mod bench_calib;
 mod bench_sim;
 mod demo;
 mod graycode_cmd;
@@ -56,6 +57,13 @@ enum BenchCommand {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+    /// Calibration on the embedded lab: structured-light accuracy against the simulator's truth,
+    /// captures with and without simultaneous coding, decode speed.
+    Calib {
+        /// The small test room instead of the lab.
+        #[arg(long)]
+        quick: bool,
+    },
     /// The simulator on the embedded lab: precomputation, capture times, memory.
     Sim {
         /// The small test room instead of the lab.
@@ -75,6 +83,9 @@ fn main() -> Result<()> {
         Command::Bench {
             which: BenchCommand::Core { quick, json, seed },
         } => bench::core(quick, json.as_deref(), seed, &ALLOCATOR),
+        Command::Bench {
+            which: BenchCommand::Calib { quick },
+        } => bench_calib::run(quick),
         Command::Bench {
             which: BenchCommand::Sim { quick, out },
         } => bench_sim::run(quick, out.as_deref(), &ALLOCATOR),

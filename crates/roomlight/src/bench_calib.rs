@@ -1,0 +1,259 @@
+//! `roomlight bench calib`: structured light on the simulated lab, measured against the
+//! simulator's true correspondence, and the cost of decoding. Timings are printed, not asserted.
+
+use anyhow::{Context, Result};
+use roomlight_calib::graycode::{
+    Coding, Correspondence, DecodeConfig, Manifest, decode, group_disjoint,
+};
+use roomlight_calib::image_io::LinearImage;
+use roomlight_sim::scene::ProjectorKind;
+use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room, scenes};
+use std::time::Instant;
+
+fn image(c: &Capture) -> LinearImage {
+    LinearImage {
+        width: c.width,
+        height: c.height,
+        pixels: c.pixels.clone(),
+    }
+}
+
+/// Accuracy of one decoded projector: (camera pixels it reaches, share within ±1, share of the
+/// decoded pixels off by more than 2).
+fn accuracy(truth: &[Option<u32>], decoded: &Correspondence, width: u32) -> (usize, f64, f64) {
+    let off = |t: u32, (x, y): (u32, u32)| {
+        (i64::from(x) - i64::from(t % width))
+            .abs()
+            .max((i64::from(y) - i64::from(t / width)).abs())
+    };
+    let (mut reached, mut close, mut n, mut far) = (0usize, 0usize, 0usize, 0usize);
+    for (t, d) in truth.iter().zip(&decoded.map) {
+        if let Some(t) = t {
+            reached += 1;
+            close += usize::from(d.is_some_and(|d| off(*t, d) <= 1));
+        }
+        if let Some(d) = d {
+            n += 1;
+            far += usize::from(t.is_none_or(|t| off(t, *d) > 2));
+        }
+    }
+    (
+        reached,
+        close as f64 / reached.max(1) as f64,
+        far as f64 / n.max(1) as f64,
+    )
+}
+
+pub fn run(quick: bool) -> Result<()> {
+    let scene = if quick {
+        scenes::small()?
+    } else {
+        scenes::lab()?
+    };
+    let t0 = Instant::now();
+    let room = Room::build(scene).context("building the room")?;
+    println!(
+        "{}: room built in {:.1} s",
+        room.scene().name,
+        t0.elapsed().as_secs_f64()
+    );
+    let n = room.projectors().len();
+    let mut noise = CameraNoise::new(&room);
+    let mut shoot = |frames: &[Frame]| -> Result<LinearImage> {
+        Ok(image(&noise.expose(&room.render(frames, None)?)))
+    };
+    // Footprints: one white capture per projector and one black (N + 1 captures).
+    let black = shoot(&vec![Frame::Black; n])?.intensity();
+    let mut footprints = Vec::with_capacity(n);
+    for k in 0..n {
+        let mut frames = vec![Frame::Black; n];
+        frames[k] = Frame::Uniform([1.0; 3]);
+        let white = shoot(&frames)?.intensity();
+        let peak = white
+            .iter()
+            .zip(&black)
+            .map(|(w, b)| w - b)
+            .fold(0.0f32, f32::max);
+        footprints.push(
+            white
+                .iter()
+                .zip(&black)
+                .map(|(w, b)| w - b > 0.02 * peak)
+                .collect::<Vec<bool>>(),
+        );
+    }
+    let groups = group_disjoint(&footprints);
+    // Defocused projectors blur the fine XOR stripes away: they get plain Gray code.
+    let manifests: Vec<Manifest> = room
+        .projectors()
+        .iter()
+        .map(|p| {
+            let coding = if p.kind == ProjectorKind::LargeAperture {
+                Coding::Gray
+            } else {
+                Coding::Xor04
+            };
+            Manifest::with_coding(p.pinhole.width, p.pinhole.height, coding)
+        })
+        .collect::<Result<_, _>>()?;
+    let alone: usize = manifests.iter().map(|m| m.patterns.len()).sum();
+    let grouped: usize = n
+        + 1
+        + groups
+            .iter()
+            .map(|g| {
+                g.iter()
+                    .map(|&k| manifests[k].patterns.len())
+                    .max()
+                    .unwrap_or(0)
+            })
+            .sum::<usize>();
+    println!(
+        "structured light: {alone} captures one projector at a time; {grouped} with simultaneous coding of non-overlapping projectors ({} groups: {:?}, including {} footprint captures)",
+        groups.len(),
+        groups
+            .iter()
+            .map(|g| g
+                .iter()
+                .map(|&k| room.projectors()[k].name.as_str())
+                .collect::<Vec<_>>())
+            .collect::<Vec<_>>(),
+        n + 1
+    );
+    println!(
+        "{:<14} {:>9} {:>12} {:>14} {:>10}",
+        "projector", "reached", "within ±1", "off by > 2", "decoded"
+    );
+    let config = DecodeConfig::default();
+    let mut decode_secs = Vec::new();
+    for group in &groups {
+        let longest = group
+            .iter()
+            .map(|&k| manifests[k].patterns.len())
+            .max()
+            .unwrap_or(0);
+        // Slot j of the group: every member shows its own pattern j (black once it has no more).
+        let mut captures = Vec::with_capacity(longest);
+        for j in 0..longest {
+            let frames: Vec<Frame> = (0..n)
+                .map(
+                    |k| match (group.contains(&k), manifests[k].patterns.get(j)) {
+                        (true, Some(p)) => {
+                            let img = manifests[k].pattern_image(p.pattern);
+                            Frame::Image(ProjectorImage {
+                                width: img.width,
+                                height: img.height,
+                                pixels: img.pixels,
+                            })
+                        }
+                        _ => Frame::Black,
+                    },
+                )
+                .collect();
+            captures.push(shoot(&frames)?);
+        }
+        for &k in group {
+            let m = &manifests[k];
+            let t = Instant::now();
+            let cfg = if room.projectors()[k].kind == ProjectorKind::LargeAperture {
+                DecodeConfig::strict()
+            } else {
+                config
+            };
+            let mut decoded = decode(m, &cfg, |f| {
+                let j = m
+                    .patterns
+                    .iter()
+                    .position(|p| p.file == f.file)
+                    .unwrap_or(0);
+                Ok(&captures[j])
+            })?;
+            decode_secs.push(t.elapsed().as_secs_f64());
+            // Pixels lit by another member of the group belong to that member.
+            for (d, &mine) in decoded.map.iter_mut().zip(&footprints[k]) {
+                if !mine {
+                    *d = None;
+                }
+            }
+            let truth = room.true_correspondence(k);
+            let (reached, close, far) = accuracy(&truth, &decoded, m.width);
+            if std::env::var_os("ROOMLIGHT_DIAG").is_some() {
+                let unknown: Vec<usize> = (0..truth.len())
+                    .filter(|&i| truth[i].is_some() && decoded.map[i].is_none())
+                    .collect();
+                let global_dominates = unknown
+                    .iter()
+                    .filter(|&&i| decoded.direct[i] < decoded.global[i])
+                    .count();
+                let mut ld: Vec<f32> = unknown.iter().map(|&i| decoded.direct[i]).collect();
+                ld.sort_by(f32::total_cmp);
+                let mut ok: Vec<f32> = (0..truth.len())
+                    .filter(|&i| decoded.map[i].is_some())
+                    .map(|i| decoded.direct[i])
+                    .collect();
+                ok.sort_by(f32::total_cmp);
+                println!(
+                    "  unknown {} ({} with Lg > Ld), median Ld unknown {:.4}, median Ld decoded {:.4}",
+                    unknown.len(),
+                    global_dominates,
+                    ld.get(ld.len() / 2).copied().unwrap_or(0.0),
+                    ok.get(ok.len() / 2).copied().unwrap_or(0.0)
+                );
+            }
+            let p = &room.projectors()[k];
+            let kind = if p.kind == ProjectorKind::LargeAperture {
+                " (large aperture: defocused)"
+            } else {
+                ""
+            };
+            println!(
+                "{:<14} {:>9} {:>11.2}% {:>13.3}% {:>9.1}%{kind}",
+                p.name,
+                reached,
+                100.0 * close,
+                100.0 * far,
+                100.0 * decoded.decoded_share()
+            );
+        }
+    }
+    let mut d = decode_secs.clone();
+    d.sort_by(f64::total_cmp);
+    println!(
+        "decode per projector: median {:.2} s",
+        d.get(d.len() / 2).copied().unwrap_or(0.0)
+    );
+    // Decode speed at the reference size: a 1920×1080 projector from 1280×960 captures.
+    let big = Manifest::new(1920, 1080)?;
+    let caps: Vec<LinearImage> = big
+        .patterns
+        .iter()
+        .map(|p| {
+            let src = big.pattern_values(p.pattern);
+            LinearImage {
+                width: 1280,
+                height: 960,
+                pixels: (0..1280 * 960u32)
+                    .map(|i| {
+                        let (x, y) = (i % 1280 * 1920 / 1280, i / 1280 * 1080 / 960);
+                        [0.05 + 0.8 * src[(y * 1920 + x) as usize]; 3]
+                    })
+                    .collect(),
+            }
+        })
+        .collect();
+    let t = Instant::now();
+    let decoded = decode(&big, &config, |f| {
+        Ok(&caps[big
+            .patterns
+            .iter()
+            .position(|p| p.file == f.file)
+            .unwrap_or(0)])
+    })?;
+    println!(
+        "decode of a 1920x1080 pattern set ({} captures of 1280x960): {:.2} s, {:.1}% decoded",
+        big.patterns.len(),
+        t.elapsed().as_secs_f64(),
+        100.0 * decoded.decoded_share()
+    );
+    Ok(())
+}
