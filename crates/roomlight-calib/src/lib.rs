@@ -6,11 +6,13 @@
 //! - [`charts`]: homography, patch sampling with noise and saturation.
 //! - [`response`]: gray-ramp response fit and its inverse.
 //! - [`attenuation`]: black offset, attenuation (one at a time, Hadamard), `s`, hot calibration.
+//! - [`nodes`]: nodes per chart region, feathering, target exclusion.
 
 pub mod attenuation;
 pub mod charts;
 pub mod graycode;
 pub mod image_io;
+pub mod nodes;
 pub mod response;
 
 /// What went wrong, naming the file or field and what was expected.
