@@ -7,9 +7,11 @@
 //! - [`response`]: gray-ramp response fit and its inverse.
 //! - [`attenuation`]: black offset, attenuation (one at a time, Hadamard), `s`, hot calibration.
 //! - [`nodes`]: nodes per chart region, feathering, target exclusion.
+//! - [`cone`]: the large aperture's cone mask and the ring handed to the texture projector.
 
 pub mod attenuation;
 pub mod charts;
+pub mod cone;
 pub mod graycode;
 pub mod image_io;
 pub mod nodes;

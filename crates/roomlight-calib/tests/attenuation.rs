@@ -13,10 +13,12 @@ use roomlight_sim::{CameraNoise, Frame, ProjectorImage, Room};
 /// the charts, as the nearest-chart segmentation places it), and the large-aperture projector.
 const NODES: usize = 5;
 
-fn node_of(k: usize, i: u32, w: u32, h: u32) -> usize {
+/// The node of pixel `i` of projector `k`; the texture projector (3) is no luminaire.
+fn node_of(k: usize, i: u32, w: u32, h: u32) -> Option<usize> {
     match k {
-        0 | 1 => 2 * k + usize::from(i / w >= h / 2),
-        _ => 4,
+        0 | 1 => Some(2 * k + usize::from(i / w >= h / 2)),
+        2 => Some(4),
+        _ => None,
     }
 }
 
@@ -28,7 +30,7 @@ fn node_frames(room: &Room, on: &[bool], level: f32) -> Vec<Frame> {
             let (w, h) = (p.pinhole.width, p.pinhole.height);
             let pixels = (0..w * h)
                 .map(|i| {
-                    if on[node_of(k, i, w, h)] {
+                    if node_of(k, i, w, h).is_some_and(|n| on[n]) {
                         [level; 3]
                     } else {
                         [0.0; 3]
@@ -231,7 +233,7 @@ fn hot_calibration_measures_one_node_while_the_others_stay_lit() {
                 let (w, h) = (p.pinhole.width, p.pinhole.height);
                 let pixels = (0..w * h)
                     .map(|i| {
-                        [if node_of(k, i, w, h) == n {
+                        [if node_of(k, i, w, h) == Some(n) {
                             level_n
                         } else {
                             0.7
