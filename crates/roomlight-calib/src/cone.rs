@@ -92,12 +92,15 @@ pub fn cone_mask(
         unit(cross(forward, lens.up)).ok_or_else(|| bad("up is parallel to the optical axis"))?;
     let down = cross(forward, right);
     let [w, h] = lens.resolution;
-    if w == 0
-        || h == 0
-        || !(lens.fov_deg > 0.0 && lens.fov_deg < 180.0)
-        || !(lens.aperture_mm >= 0.0)
-        || !(lens.focus_mm > 0.0)
-    {
+    let valid = w > 0
+        && h > 0
+        && lens.fov_deg > 0.0
+        && lens.fov_deg < 180.0
+        && lens.aperture_mm >= 0.0
+        && lens.aperture_mm.is_finite()
+        && lens.focus_mm > 0.0
+        && lens.focus_mm.is_finite();
+    if !valid {
         return Err(bad(
             "needs a resolution, a field of view in (0, 180), an aperture >= 0 and a focus distance > 0",
         ));
@@ -166,12 +169,12 @@ pub fn ring_node(
     );
     let mut ring = vec![false; tw * th];
     let mut count = 0usize;
-    for i in 0..large.map.len() {
-        let Some((x, y)) = large.map[i] else { continue };
-        if target[i] || !mask[(y * large.projector_width + x) as usize] {
+    for ((m, &on_target), t) in large.map.iter().zip(target).zip(&texture.map) {
+        let Some((x, y)) = *m else { continue };
+        if on_target || !mask[(y * large.projector_width + x) as usize] {
             continue;
         }
-        if let Some((tx, ty)) = texture.map[i] {
+        if let Some((tx, ty)) = *t {
             ring[ty as usize * tw + tx as usize] = true;
             count += 1;
         }
