@@ -410,6 +410,31 @@ impl Room {
         &self.pixels
     }
 
+    /// Each chart's outer corners in camera pixels (top-left, top-right, bottom-right,
+    /// bottom-left), as a person would click them once in the camera image; `None` for a chart
+    /// whose corner lies outside the camera's view.
+    pub fn chart_corners_px(&self) -> Vec<Option<[[f64; 2]; 4]>> {
+        self.geometry
+            .charts
+            .iter()
+            .map(|c| {
+                let (hw, hh) = (0.5 * c.width, 0.5 * c.height);
+                let pts = [
+                    c.center - c.right * hw + c.up * hh,
+                    c.center + c.right * hw + c.up * hh,
+                    c.center + c.right * hw - c.up * hh,
+                    c.center - c.right * hw - c.up * hh,
+                ];
+                let mut out = [[0.0; 2]; 4];
+                for (o, p) in out.iter_mut().zip(pts) {
+                    let (u, v) = self.camera.project(p)?;
+                    *o = [f64::from(u), f64::from(v)];
+                }
+                Some(out)
+            })
+            .collect()
+    }
+
     /// Number of chart patches (24 per chart, chart-major).
     pub fn patches(&self) -> usize {
         self.geometry.charts.len() * 24

@@ -2,13 +2,22 @@
 //! simulator's true correspondence, and the cost of decoding. Timings are printed, not asserted.
 
 use anyhow::{Context, Result};
+use roomlight_calib::charts::{ChartCorners, PatchStatus, SampleConfig, sample_charts};
 use roomlight_calib::graycode::{
     Coding, Correspondence, DecodeConfig, Manifest, decode, group_disjoint,
 };
 use roomlight_calib::image_io::LinearImage;
-use roomlight_sim::scene::ProjectorKind;
+use roomlight_calib::nodes::{NodeConfig, segment};
+use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room, scenes};
 use std::time::Instant;
+
+fn shoot_preset(room: &Room, preset: Option<usize>) -> Result<LinearImage> {
+    let frames = vec![Frame::Black; room.projectors().len()];
+    Ok(image(
+        &CameraNoise::with_seed(room, 99).expose(&room.render(&frames, preset)?),
+    ))
+}
 
 fn image(c: &Capture) -> LinearImage {
     LinearImage {
@@ -126,6 +135,7 @@ pub fn run(quick: bool) -> Result<()> {
     );
     let config = DecodeConfig::default();
     let mut decode_secs = Vec::new();
+    let mut decoded_all: Vec<Option<Correspondence>> = vec![None; n];
     for group in &groups {
         let longest = group
             .iter()
@@ -214,7 +224,84 @@ pub fn run(quick: bool) -> Result<()> {
                 100.0 * far,
                 100.0 * decoded.decoded_share()
             );
+            decoded_all[k] = Some(decoded);
         }
+    }
+    // Charts and nodes on the same room.
+    let charts: Vec<ChartCorners> = room
+        .chart_corners_px()
+        .into_iter()
+        .zip(&room.scene().charts)
+        .filter_map(|(c, spec)| {
+            c.map(|corners| ChartCorners {
+                name: spec.name.clone(),
+                corners,
+            })
+        })
+        .collect();
+    let preset = room
+        .scene()
+        .presets
+        .first()
+        .map(|p| room.preset(&p.name))
+        .transpose()?;
+    let lit = shoot_preset(&room, preset)?;
+    let t = Instant::now();
+    let samples = sample_charts(&lit, &charts, &SampleConfig::default())?;
+    let ok = samples
+        .iter()
+        .filter(|s| s.status == PatchStatus::Ok)
+        .count();
+    println!(
+        "chart sampling: {} charts, {ok} of {} patches usable, {:.1} ms",
+        charts.len(),
+        samples.len(),
+        t.elapsed().as_secs_f64() * 1e3
+    );
+    let luminaires: Vec<usize> = (0..n)
+        .filter(|&k| {
+            room.scene().projectors[k].role == ProjectorRole::Luminaire
+                && room.projectors()[k].kind == ProjectorKind::Standard
+        })
+        .collect();
+    let corr: Vec<Correspondence> = luminaires
+        .iter()
+        .filter_map(|&k| decoded_all[k].clone())
+        .collect();
+    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let t = Instant::now();
+    let seg = segment(&corr, &charts, Some(&mask), &NodeConfig::default())?;
+    println!(
+        "segmentation and feathering of {} standard luminaires: {} nodes in {:.2} s",
+        corr.len(),
+        seg.nodes.len(),
+        t.elapsed().as_secs_f64()
+    );
+    // Luminaire light on the target against a patch on the desk beside it.
+    let desk = room.scene().charts.iter().position(|c| c.name == "desk");
+    if let Some(desk) = desk {
+        let centre = room.geometry().charts[desk].center.to_array();
+        let (mut on_target, mut on_desk) = (0.0, 0.0);
+        for (slot, &k) in luminaires.iter().enumerate() {
+            let p = &room.projectors()[k].pinhole;
+            let mut pixels = vec![[0.0f32; 3]; (p.width * p.height) as usize];
+            for node in seg.nodes.iter().filter(|nd| nd.projector == slot) {
+                for (px, w) in pixels.iter_mut().zip(&node.weights) {
+                    px.iter_mut().for_each(|c| *c += w);
+                }
+            }
+            let frame = Frame::Linear(ProjectorImage {
+                width: p.width,
+                height: p.height,
+                pixels,
+            });
+            on_target += room.target_irradiance(k, &frame)?[1];
+            on_desk += room.direct_irradiance_at(k, &frame, centre, [0.0, 0.0, 1.0])?[1];
+        }
+        println!(
+            "standard luminaires at full white: direct light on the target is {:.2}% of the desk chart's",
+            100.0 * on_target / on_desk.max(1e-12)
+        );
     }
     let mut d = decode_secs.clone();
     d.sort_by(f64::total_cmp);

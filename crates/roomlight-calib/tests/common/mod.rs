@@ -24,27 +24,12 @@ pub fn to_image(c: &Capture) -> LinearImage {
 /// The chart corners in camera pixels, as a person would click them once (here: from the room
 /// config through the camera model).
 pub fn chart_corners(room: &Room) -> Vec<ChartCorners> {
-    let cam = room.camera();
-    room.geometry()
-        .charts
-        .iter()
+    room.chart_corners_px()
+        .into_iter()
         .zip(&room.scene().charts)
-        .map(|(c, spec)| {
-            let (hw, hh) = (0.5 * c.width, 0.5 * c.height);
-            let pts = [
-                c.center - c.right * hw + c.up * hh,
-                c.center + c.right * hw + c.up * hh,
-                c.center + c.right * hw - c.up * hh,
-                c.center - c.right * hw - c.up * hh,
-            ];
-            let corners = pts.map(|p| {
-                let (u, v) = cam.project(p).expect("chart in view");
-                [f64::from(u), f64::from(v)]
-            });
-            ChartCorners {
-                name: spec.name.clone(),
-                corners,
-            }
+        .map(|(corners, spec)| ChartCorners {
+            name: spec.name.clone(),
+            corners: corners.expect("chart in view"),
         })
         .collect()
 }
