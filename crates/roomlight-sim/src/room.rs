@@ -703,6 +703,18 @@ impl Room {
             .collect()
     }
 
+    /// Ground truth: per camera pixel, the direct irradiance from one projector per unit pixel
+    /// light (its geometric factor: cosine, distance, visibility, lens samples). Zero where the
+    /// projector does not light the surface the pixel sees.
+    pub fn direct_factor(&self, projector: usize) -> &[f32] {
+        &self.camera_probes.projectors[projector].white
+    }
+
+    /// Ground truth: the albedo of the surface each camera pixel sees (chart patches included).
+    pub fn pixel_albedo(&self) -> &[LinearRgb] {
+        &self.camera_probes.albedo
+    }
+
     /// Ground truth: the mean direct irradiance on the target's visible surface from one
     /// projector showing `frame` (all others black, no LEDs, no inter-reflection).
     pub fn target_irradiance(

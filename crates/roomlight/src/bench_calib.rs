@@ -12,6 +12,10 @@ use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room, scenes};
 use std::time::Instant;
 
+/// A camera pixel belongs to a projector's footprint when that projector at white raises it by
+/// this share of its brightest pixel. Inter-reflected light stays below it in the lab.
+const FOOTPRINT_SHARE: f32 = 0.1;
+
 fn shoot_preset(room: &Room, preset: Option<usize>) -> Result<LinearImage> {
     let frames = vec![Frame::Black; room.projectors().len()];
     Ok(image(
@@ -30,14 +34,26 @@ fn image(c: &Capture) -> LinearImage {
 /// Accuracy of one decoded projector: (camera pixels it reaches, share within ±1, share of the
 /// decoded pixels off by more than 2).
 fn accuracy(truth: &[Option<u32>], decoded: &Correspondence, width: u32) -> (usize, f64, f64) {
+    accuracy_where(truth, decoded, width, |_| true)
+}
+
+/// [`accuracy`] over the reached pixels that `count` accepts.
+fn accuracy_where(
+    truth: &[Option<u32>],
+    decoded: &Correspondence,
+    width: u32,
+    count: impl Fn(usize) -> bool,
+) -> (usize, f64, f64) {
     let off = |t: u32, (x, y): (u32, u32)| {
         (i64::from(x) - i64::from(t % width))
             .abs()
             .max((i64::from(y) - i64::from(t / width)).abs())
     };
     let (mut reached, mut close, mut n, mut far) = (0usize, 0usize, 0usize, 0usize);
-    for (t, d) in truth.iter().zip(&decoded.map) {
-        if let Some(t) = t {
+    for (i, (t, d)) in truth.iter().zip(&decoded.map).enumerate() {
+        if let Some(t) = t
+            && count(i)
+        {
             reached += 1;
             close += usize::from(d.is_some_and(|d| off(*t, d) <= 1));
         }
@@ -74,10 +90,12 @@ pub fn run(quick: bool) -> Result<()> {
     // Footprints: one white capture per projector and one black (N + 1 captures).
     let black = shoot(&vec![Frame::Black; n])?.intensity();
     let mut footprints = Vec::with_capacity(n);
+    let mut gains: Vec<Vec<f32>> = Vec::with_capacity(n);
     for k in 0..n {
         let mut frames = vec![Frame::Black; n];
         frames[k] = Frame::Uniform([1.0; 3]);
         let white = shoot(&frames)?.intensity();
+        gains.push(white.iter().zip(&black).map(|(w, b)| w - b).collect());
         let peak = white
             .iter()
             .zip(&black)
@@ -87,7 +105,7 @@ pub fn run(quick: bool) -> Result<()> {
             white
                 .iter()
                 .zip(&black)
-                .map(|(w, b)| w - b > 0.02 * peak)
+                .map(|(w, b)| w - b > FOOTPRINT_SHARE * peak)
                 .collect::<Vec<bool>>(),
         );
     }
@@ -179,15 +197,47 @@ pub fn run(quick: bool) -> Result<()> {
                 Ok(&captures[j])
             })?;
             decode_secs.push(t.elapsed().as_secs_f64());
-            // Pixels lit by another member of the group belong to that member.
-            for (d, &mine) in decoded.map.iter_mut().zip(&footprints[k]) {
-                if !mine {
-                    *d = None;
+            // In a group, a pixel belongs to the member whose white light raises it most.
+            if group.len() > 1 {
+                for (i, d) in decoded.map.iter_mut().enumerate() {
+                    if group.iter().any(|&o| o != k && gains[o][i] > gains[k][i]) {
+                        *d = None;
+                    }
                 }
             }
             let truth = room.true_correspondence(k);
             let (reached, close, far) = accuracy(&truth, &decoded, m.width);
-            if std::env::var_os("ROOMLIGHT_DIAG").is_some() {
+            // The same, leaving out pixels where the projector's direct signal (light × albedo:
+            // grazing surfaces, black chart frames) is under 2% of its typical (99th percentile)
+            // level: there the direct light cannot be told from noise and global light, and
+            // unknown is the right answer.
+            let albedo = room.pixel_albedo();
+            let factor: Vec<f32> = room
+                .direct_factor(k)
+                .iter()
+                .zip(albedo)
+                .map(|(f, a)| f * (a[0] + a[1] + a[2]) as f32 / 3.0)
+                .collect();
+            let mut lit: Vec<f32> = factor.iter().copied().filter(|f| *f > 0.0).collect();
+            lit.sort_by(f32::total_cmp);
+            let typical = lit.get(lit.len() * 99 / 100).copied().unwrap_or(0.0);
+            let (reached_lit, close_lit, _) =
+                accuracy_where(&truth, &decoded, m.width, |i| factor[i] >= 0.02 * typical);
+            if let Some(dir) = std::env::var_os("ROOMLIGHT_DIAG") {
+                let dir = std::path::PathBuf::from(dir);
+                std::fs::create_dir_all(&dir)?;
+                let w = decoded.width;
+                let data: Vec<u8> = (0..truth.len())
+                    .flat_map(|i| match (truth[i], decoded.map[i]) {
+                        (Some(_), None) => [255u8, 0, 0],
+                        (Some(_), Some(_)) => [0, 160, 0],
+                        (None, Some(_)) => [0, 0, 255],
+                        (None, None) => [(decoded.global[i] * 100.0).min(255.0) as u8; 3],
+                    })
+                    .collect();
+                if let Some(img) = image::RgbImage::from_raw(w, decoded.height, data) {
+                    img.save(dir.join(format!("decode-{}.png", room.projectors()[k].name)))?;
+                }
                 let unknown: Vec<usize> = (0..truth.len())
                     .filter(|&i| truth[i].is_some() && decoded.map[i].is_none())
                     .collect();
@@ -217,12 +267,14 @@ pub fn run(quick: bool) -> Result<()> {
                 ""
             };
             println!(
-                "{:<14} {:>9} {:>11.2}% {:>13.3}% {:>9.1}%{kind}",
+                "{:<14} {:>9} {:>11.2}% {:>13.3}% {:>9.1}% {:>12.2}% of {:>7}{kind}",
                 p.name,
                 reached,
                 100.0 * close,
                 100.0 * far,
-                100.0 * decoded.decoded_share()
+                100.0 * decoded.decoded_share(),
+                100.0 * close_lit,
+                reached_lit
             );
             decoded_all[k] = Some(decoded);
         }
