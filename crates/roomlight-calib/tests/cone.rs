@@ -3,38 +3,10 @@
 
 mod common;
 
-use common::{small_scene, to_image};
+use common::{decode_projector, small_scene};
 use roomlight_calib::cone::{Sphere, ThinLens, cone_mask, ring_node};
-use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig, Manifest, decode};
-use roomlight_sim::{CameraNoise, Frame, ProjectorImage, Room};
-
-fn correspondence(room: &Room, k: usize, coding: Coding, config: &DecodeConfig) -> Correspondence {
-    let p = &room.projectors()[k].pinhole;
-    let manifest = Manifest::with_coding(p.width, p.height, coding).expect("manifest");
-    let mut noise = CameraNoise::with_seed(room, 70 + k as u64);
-    let caps: Vec<_> = manifest
-        .patterns
-        .iter()
-        .map(|pat| {
-            let mut frames = vec![Frame::Black; room.projectors().len()];
-            let img = manifest.pattern_image(pat.pattern);
-            frames[k] = Frame::Image(ProjectorImage {
-                width: img.width,
-                height: img.height,
-                pixels: img.pixels,
-            });
-            to_image(&noise.expose(&room.render(&frames, None).expect("render")))
-        })
-        .collect();
-    decode(&manifest, config, |f| {
-        Ok(&caps[manifest
-            .patterns
-            .iter()
-            .position(|p| p.file == f.file)
-            .expect("pattern")])
-    })
-    .expect("decode")
-}
+use roomlight_calib::graycode::{Coding, DecodeConfig};
+use roomlight_sim::{Frame, ProjectorImage, Room};
 
 #[test]
 fn the_cone_mask_keeps_the_target_dark_and_the_ring_goes_to_the_texture_projector() {
@@ -113,8 +85,8 @@ fn the_cone_mask_keeps_the_target_dark_and_the_ring_goes_to_the_texture_projecto
         "the chief-ray mask should leak more than the cone mask"
     );
     // The ring: camera pixels the area projector lights through masked pixels, off the target.
-    let large = correspondence(&room, area, Coding::Gray, &DecodeConfig::strict());
-    let tex = correspondence(&room, texture, Coding::Xor04, &DecodeConfig::default());
+    let large = decode_projector(&room, area, Coding::Gray, &DecodeConfig::strict(), 70);
+    let tex = decode_projector(&room, texture, Coding::Xor04, &DecodeConfig::default(), 71);
     let target: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
     let node = ring_node(&large, &mask, &target, &tex, texture, 0, 2).expect("ring node");
     let truth = room.true_correspondence(texture);

@@ -1,37 +1,13 @@
 //! Gray-code decoding against the simulator's true correspondence.
 
+mod common;
+
+use common::pattern_captures;
+
 use roomlight_calib::graycode::{
     DecodeConfig, Manifest, bits_for, decode, gray, gray_inverse, group_disjoint,
 };
-use roomlight_calib::image_io::LinearImage;
-use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room, scenes};
-
-fn to_image(c: &Capture) -> LinearImage {
-    LinearImage {
-        width: c.width,
-        height: c.height,
-        pixels: c.pixels.clone(),
-    }
-}
-
-/// Renders every pattern of `manifest` on projector `k` (others black) with camera noise.
-fn captures(room: &Room, k: usize, manifest: &Manifest, preset: Option<usize>) -> Vec<LinearImage> {
-    let mut noise = CameraNoise::new(room);
-    manifest
-        .patterns
-        .iter()
-        .map(|p| {
-            let mut frames = vec![Frame::Black; room.projectors().len()];
-            let img = manifest.pattern_image(p.pattern);
-            frames[k] = Frame::Image(ProjectorImage {
-                width: img.width,
-                height: img.height,
-                pixels: img.pixels,
-            });
-            to_image(&noise.expose(&room.render(&frames, preset).expect("render")))
-        })
-        .collect()
-}
+use roomlight_sim::{Room, scenes};
 
 #[test]
 fn gray_code_round_trips_and_neighbours_differ_in_one_bit() {
@@ -136,7 +112,7 @@ fn standard_projectors_decode_within_a_pixel_under_interreflection_noise_and_amb
     for (k, coding) in [(0, Coding::Xor04), (1, Coding::Xor04), (0, Coding::Gray)] {
         let p = &room.projectors()[k].pinhole;
         let manifest = Manifest::with_coding(p.width, p.height, coding).expect("manifest");
-        let caps = captures(&room, k, &manifest, ambient);
+        let caps = pattern_captures(&room, k, &manifest, ambient, 1);
         let decoded = decode(&manifest, &DecodeConfig::default(), |f| {
             let i = manifest
                 .patterns

@@ -2,38 +2,10 @@
 
 mod common;
 
-use common::{chart_corners, small_scene, to_image};
-use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig, Manifest, decode};
+use common::{chart_corners, decode_projector, small_scene};
+use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig};
 use roomlight_calib::nodes::{Node, NodeConfig, segment};
-use roomlight_sim::{CameraNoise, Frame, ProjectorImage, Room};
-
-fn correspondence(room: &Room, k: usize) -> Correspondence {
-    let p = &room.projectors()[k].pinhole;
-    let manifest = Manifest::with_coding(p.width, p.height, Coding::Xor04).expect("manifest");
-    let mut noise = CameraNoise::with_seed(room, 40 + k as u64);
-    let caps: Vec<_> = manifest
-        .patterns
-        .iter()
-        .map(|pat| {
-            let mut frames = vec![Frame::Black; room.projectors().len()];
-            let img = manifest.pattern_image(pat.pattern);
-            frames[k] = Frame::Image(ProjectorImage {
-                width: img.width,
-                height: img.height,
-                pixels: img.pixels,
-            });
-            to_image(&noise.expose(&room.render(&frames, None).expect("render")))
-        })
-        .collect();
-    decode(&manifest, &DecodeConfig::default(), |f| {
-        Ok(&caps[manifest
-            .patterns
-            .iter()
-            .position(|p| p.file == f.file)
-            .expect("pattern")])
-    })
-    .expect("decode")
-}
+use roomlight_sim::{Frame, ProjectorImage, Room};
 
 /// The projector images that show every node at full light.
 fn full_frames(room: &Room, nodes: &[Node]) -> Vec<Frame> {
@@ -64,7 +36,17 @@ fn nodes_partition_the_light_feather_smoothly_and_keep_the_target_dark() {
     let room = Room::build(small_scene()).expect("room");
     let charts = chart_corners(&room);
     // The two standard luminaires (the large aperture is handled by its cone mask).
-    let corr: Vec<Correspondence> = (0..2).map(|k| correspondence(&room, k)).collect();
+    let corr: Vec<Correspondence> = (0..2)
+        .map(|k| {
+            decode_projector(
+                &room,
+                k,
+                Coding::Xor04,
+                &DecodeConfig::default(),
+                40 + k as u64,
+            )
+        })
+        .collect();
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
     let config = NodeConfig::default();
     let seg = segment(&corr, &charts, Some(&mask), &config).expect("nodes");
@@ -183,7 +165,7 @@ fn nodes_partition_the_light_feather_smoothly_and_keep_the_target_dark() {
 #[test]
 fn a_projector_that_lights_no_chart_is_refused() {
     let room = Room::build(small_scene()).expect("room");
-    let mut c = correspondence(&room, 0);
+    let mut c = decode_projector(&room, 0, Coding::Xor04, &DecodeConfig::default(), 40);
     c.map.iter_mut().for_each(|m| *m = None);
     let err =
         segment(&[c], &chart_corners(&room), None, &NodeConfig::default()).expect_err("no chart");

@@ -276,20 +276,7 @@ pub fn run_observed(
             model_rounds: config.model_rounds,
         });
     }
-    let s = model.white_response();
-    let mut nodes = model
-        .columns()
-        .iter()
-        .enumerate()
-        .map(|(n, column)| {
-            NodeState::new(
-                column.clone(),
-                &model.white_response_on_support(&s, n),
-                config.rule,
-                start[n],
-            )
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+    let mut nodes = build_nodes(model, config.rule, start)?;
     let mut aggregator = ErrorAggregator::new(model.patches());
     let mut stale: VecDeque<(Vec<LinearRgb>, bool)> = VecDeque::new();
     let mut records = Vec::new();
@@ -381,6 +368,29 @@ pub fn run_observed(
         stop,
         node_updates,
     })
+}
+
+/// One node state per column of `model`, each given `s` on its own support and its start value.
+pub fn build_nodes(
+    model: &Problem,
+    rule: StepRule,
+    start: &[LinearRgb],
+) -> Result<Vec<NodeState>, ModelError> {
+    check_len("start values", start.len(), model.nodes())?;
+    let s = model.white_response();
+    model
+        .columns()
+        .iter()
+        .enumerate()
+        .map(|(n, column)| {
+            NodeState::new(
+                column.clone(),
+                &model.white_response_on_support(&s, n),
+                rule,
+                start[n],
+            )
+        })
+        .collect()
 }
 
 /// First-order standard deviation of a measured `G` from the patch noise:

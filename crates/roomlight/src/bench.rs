@@ -58,21 +58,8 @@ pub fn rules(problem: &Problem, budget: usize) -> Vec<(&'static str, LoopConfig)
 
 /// Median wall time per node update, in µs, over `repeats` timed rounds of every node.
 fn us_per_node_update(problem: &Problem, rule: StepRule, start: &[LinearRgb]) -> Result<f64> {
-    let s = problem.white_response();
     let errors = problem.errors(start);
-    let mut nodes: Vec<NodeState> = problem
-        .columns()
-        .iter()
-        .enumerate()
-        .map(|(n, c)| {
-            NodeState::new(
-                c.clone(),
-                &problem.white_response_on_support(&s, n),
-                rule,
-                start[n],
-            )
-        })
-        .collect::<Result<_, _>>()?;
+    let mut nodes: Vec<NodeState> = closed_loop::build_nodes(problem, rule, start)?;
     let local: Vec<Vec<LinearRgb>> = nodes
         .iter()
         .map(|node| {
@@ -106,23 +93,11 @@ fn median(v: &mut [f64]) -> f64 {
 /// Wall time and heap of one full distributed round (every node gathers, updates and
 /// contributes), as the ms median of repeated rounds and the peak MB of the node states.
 fn full_round(problem: &Problem, start: &[LinearRgb], alloc: &PeakAlloc) -> Result<(f64, f64)> {
-    let s = problem.white_response();
     let errors = problem.errors(start);
     let before = alloc.current_usage();
     alloc.reset_peak_usage();
-    let mut nodes: Vec<NodeState> = problem
-        .columns()
-        .iter()
-        .enumerate()
-        .map(|(n, c)| {
-            NodeState::new(
-                c.clone(),
-                &problem.white_response_on_support(&s, n),
-                StepRule::Momentum { theta: 1.0 },
-                start[n],
-            )
-        })
-        .collect::<Result<_, _>>()?;
+    let mut nodes: Vec<NodeState> =
+        closed_loop::build_nodes(problem, StepRule::Momentum { theta: 1.0 }, start)?;
     let mut aggregator = ErrorAggregator::new(problem.patches());
     aggregator.measured(errors.clone())?;
     let active = vec![true; nodes.len()];
