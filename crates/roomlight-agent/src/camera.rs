@@ -1,0 +1,504 @@
+//! The camera agent (DESIGN §6): serves `Room.Attach`, admits node agents that present the right
+//! room, token and protocol version, sends each its attenuation and `s` on its support, and runs
+//! rounds: wait until every live projector has shown the last frame (or a deadline passes: late
+//! ones are logged and left out of the round), capture, send each node the errors on its support,
+//! collect contributions, and run model rounds between captures.
+
+use crate::hardware::Camera;
+use roomlight_core::aggregator::{ErrorAggregator, ErrorKind, RoundSummary};
+use roomlight_core::{LinearRgb, Problem};
+use roomlight_proto::convert::{from_sparse, to_sparse};
+use roomlight_proto::{PROTOCOL_VERSION, v1};
+use std::collections::HashMap;
+use std::pin::Pin;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+use subtle::ConstantTimeEq;
+use tokio::sync::{Notify, mpsc, watch};
+use tokio_stream::wrappers::{ReceiverStream, TcpListenerStream};
+use tokio_stream::{Stream, StreamExt};
+use tokio_util::sync::CancellationToken;
+use tonic::{Request, Response, Status, Streaming};
+
+/// How the camera agent runs.
+#[derive(Debug, Clone)]
+pub struct CameraConfig {
+    /// The room's name; node agents must name it.
+    pub room: String,
+    /// The pre-shared room token.
+    pub token: String,
+    /// How often nodes send heartbeats; three missed ones and the node has left.
+    pub heartbeat: Duration,
+    /// How long a round waits for acknowledgements and contributions.
+    pub deadline: Duration,
+    /// Model rounds after each measured round.
+    pub model_rounds: usize,
+    /// Calibration epoch (a node's persisted state is accepted only for the same epoch).
+    pub calibration_epoch: u64,
+}
+
+/// The calibrated room the camera agent holds: every node's attenuation, and which projector
+/// owns which nodes.
+#[derive(Debug, Clone)]
+pub struct RoomModel {
+    /// Columns, targets, black offsets, noise.
+    pub problem: Problem,
+    /// Projector id → its node ids (indices of `problem`'s columns).
+    pub owners: HashMap<String, Vec<u32>>,
+}
+
+/// What the round loop has done so far (for tests, logs and the demo).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RoomStatus {
+    /// Rounds run (measured and model).
+    pub round: u64,
+    /// Captures taken.
+    pub captures: u64,
+    /// `G` of the last measured round.
+    pub measured_objective: f64,
+    /// Projectors attached now.
+    pub live_projectors: usize,
+}
+
+#[derive(Debug)]
+struct Peer {
+    connection: u64,
+    tx: mpsc::Sender<Result<v1::RoomMessage, Status>>,
+    nodes: Vec<u32>,
+    /// The last round whose errors this projector has applied and shows (`Some(0)`: its start).
+    shown: Option<u64>,
+    /// The last round sent to it.
+    awaiting: Option<u64>,
+}
+
+#[derive(Debug, Default)]
+struct Registry {
+    peers: HashMap<String, Peer>,
+    next_connection: u64,
+}
+
+#[derive(Debug)]
+struct Contribution {
+    round: u64,
+    node: u32,
+    delta: Vec<(u32, LinearRgb)>,
+}
+
+struct Shared {
+    config: CameraConfig,
+    model: RoomModel,
+    white: Vec<LinearRgb>,
+    registry: Mutex<Registry>,
+    changed: Notify,
+    contributions: mpsc::Sender<Contribution>,
+}
+
+impl Shared {
+    fn registry(&self) -> std::sync::MutexGuard<'_, Registry> {
+        self.registry.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// The gRPC service.
+#[derive(Clone)]
+struct Service(Arc<Shared>);
+
+type AttachStream = Pin<Box<dyn Stream<Item = Result<v1::RoomMessage, Status>> + Send>>;
+
+fn room_message(body: v1::room_message::Body) -> Result<v1::RoomMessage, Status> {
+    Ok(v1::RoomMessage { body: Some(body) })
+}
+
+#[tonic::async_trait]
+impl v1::room_server::Room for Service {
+    type AttachStream = AttachStream;
+
+    async fn attach(
+        &self,
+        request: Request<Streaming<v1::NodeMessage>>,
+    ) -> Result<Response<AttachStream>, Status> {
+        let shared = self.0.clone();
+        let mut inbound = request.into_inner();
+        let first = tokio::time::timeout(
+            shared.config.deadline.max(Duration::from_secs(1)),
+            inbound.next(),
+        )
+        .await
+        .map_err(|_| Status::deadline_exceeded("no Hello within the deadline"))?
+        .ok_or_else(|| Status::invalid_argument("the stream ended before Hello"))??;
+        let Some(v1::node_message::Body::Hello(hello)) = first.body else {
+            return Err(Status::invalid_argument("the first message must be Hello"));
+        };
+        if hello.protocol_version != PROTOCOL_VERSION {
+            tracing::warn!(projector = %hello.projector_id, version = hello.protocol_version, "refused: protocol version");
+            return Err(Status::failed_precondition(format!(
+                "protocol version {}, this camera agent speaks {PROTOCOL_VERSION}",
+                hello.protocol_version
+            )));
+        }
+        if hello.room != shared.config.room {
+            tracing::warn!(projector = %hello.projector_id, room = %hello.room, "refused: another room");
+            return Err(Status::failed_precondition(format!(
+                "room {:?}, this is room {:?}",
+                hello.room, shared.config.room
+            )));
+        }
+        if !bool::from(hello.token.as_bytes().ct_eq(shared.config.token.as_bytes())) {
+            tracing::warn!(projector = %hello.projector_id, "refused: wrong room token");
+            return Err(Status::unauthenticated("wrong room token"));
+        }
+        let Some(nodes) = shared.model.owners.get(&hello.projector_id).cloned() else {
+            return Err(Status::not_found(format!(
+                "projector {:?} is not calibrated in room {:?}",
+                hello.projector_id, shared.config.room
+            )));
+        };
+        let (tx, rx) = mpsc::channel(256);
+        // Welcome, the node list, then each node's column and s on its support.
+        let mut hello_msgs = vec![
+            room_message(v1::room_message::Body::Welcome(v1::Welcome {
+                protocol_version: PROTOCOL_VERSION,
+                room: shared.config.room.clone(),
+                calibration_epoch: shared.config.calibration_epoch,
+                heartbeat_ms: u32::try_from(shared.config.heartbeat.as_millis())
+                    .unwrap_or(u32::MAX),
+                state_accepted: false,
+            })),
+            room_message(v1::room_message::Body::Assign(v1::Assign {
+                nodes: nodes
+                    .iter()
+                    .map(|&n| v1::NodeAssignment { node: n, chart: n })
+                    .collect(),
+            })),
+        ];
+        for &n in &nodes {
+            let column = &shared.model.problem.columns()[n as usize];
+            let s = shared
+                .model
+                .problem
+                .white_response_on_support(&shared.white, n as usize);
+            hello_msgs.push(room_message(v1::room_message::Body::Attenuation(
+                v1::Attenuation {
+                    node: n,
+                    p: Some(to_sparse(column.support(), column.values())),
+                    s: Some(to_sparse(column.support(), &s)),
+                },
+            )));
+        }
+        for m in hello_msgs {
+            tx.send(m)
+                .await
+                .map_err(|_| Status::unavailable("the node left during the handshake"))?;
+        }
+        let projector = hello.projector_id.clone();
+        let connection = {
+            let mut reg = shared.registry();
+            reg.next_connection += 1;
+            let connection = reg.next_connection;
+            // A reconnecting projector replaces its old stream.
+            reg.peers.insert(
+                projector.clone(),
+                Peer {
+                    connection,
+                    tx,
+                    nodes: nodes.clone(),
+                    shown: None,
+                    awaiting: None,
+                },
+            );
+            connection
+        };
+        tracing::info!(%projector, nodes = nodes.len(), "joined");
+        shared.changed.notify_waiters();
+        tokio::spawn(read_node(shared, projector, connection, nodes, inbound));
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+}
+
+/// Reads one node agent's stream until it ends, errs, or misses three heartbeats.
+async fn read_node(
+    shared: Arc<Shared>,
+    projector: String,
+    connection: u64,
+    nodes: Vec<u32>,
+    mut inbound: Streaming<v1::NodeMessage>,
+) {
+    let silence = 3 * shared.config.heartbeat;
+    loop {
+        let next = match tokio::time::timeout(silence, inbound.next()).await {
+            Err(_) => {
+                tracing::warn!(%projector, "no heartbeat: leaves");
+                break;
+            }
+            Ok(None) => break,
+            Ok(Some(Err(status))) => {
+                tracing::info!(%projector, %status, "stream ended");
+                break;
+            }
+            Ok(Some(Ok(m))) => m,
+        };
+        match next.body {
+            Some(v1::node_message::Body::Shown(s)) => {
+                if let Some(peer) = shared
+                    .registry()
+                    .peers
+                    .get_mut(&projector)
+                    .filter(|p| p.connection == connection)
+                {
+                    peer.shown = Some(peer.shown.map_or(s.seq, |old| old.max(s.seq)));
+                }
+                shared.changed.notify_waiters();
+            }
+            Some(v1::node_message::Body::Contribution(c)) => {
+                if !nodes.contains(&c.node) {
+                    tracing::warn!(%projector, node = c.node, "contribution for a node it does not own: ignored");
+                    continue;
+                }
+                let Some(delta) = c.delta.as_ref() else {
+                    continue;
+                };
+                match from_sparse("contribution", delta) {
+                    Ok((patches, values)) => {
+                        let delta = patches.into_iter().zip(values).collect();
+                        if shared
+                            .contributions
+                            .send(Contribution {
+                                round: c.round,
+                                node: c.node,
+                                delta,
+                            })
+                            .await
+                            .is_err()
+                        {
+                            break;
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(%projector, error = %e, "malformed contribution: ignored")
+                    }
+                }
+            }
+            Some(v1::node_message::Body::Goodbye(g)) => {
+                tracing::info!(%projector, reason = %g.reason, "goodbye");
+                break;
+            }
+            Some(v1::node_message::Body::Heartbeat(_))
+            | Some(v1::node_message::Body::Hello(_))
+            | None => {}
+        }
+    }
+    let mut reg = shared.registry();
+    if reg
+        .peers
+        .get(&projector)
+        .is_some_and(|p| p.connection == connection)
+    {
+        reg.peers.remove(&projector);
+        tracing::info!(%projector, "left");
+    }
+    drop(reg);
+    shared.changed.notify_waiters();
+}
+
+/// Waits until `ready` holds or the deadline passes; true when it holds.
+async fn wait_for(shared: &Shared, deadline: Duration, ready: impl Fn(&Registry) -> bool) -> bool {
+    let until = tokio::time::Instant::now() + deadline;
+    loop {
+        let notified = shared.changed.notified();
+        if ready(&shared.registry()) {
+            return true;
+        }
+        if tokio::time::timeout_at(until, notified).await.is_err() {
+            return ready(&shared.registry());
+        }
+    }
+}
+
+/// Sends every ready projector the errors of its nodes; returns the nodes that were sent.
+async fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary) -> Vec<u32> {
+    let kind = match summary.kind {
+        ErrorKind::Measured => v1::ErrorKind::Measured,
+        ErrorKind::Predicted => v1::ErrorKind::Predicted,
+    };
+    let mut outbox = Vec::new();
+    {
+        let mut reg = shared.registry();
+        for (projector, peer) in reg.peers.iter_mut() {
+            let ready = peer.shown.is_some()
+                && peer
+                    .awaiting
+                    .is_none_or(|a| peer.shown.is_some_and(|s| s >= a));
+            if !ready {
+                tracing::warn!(%projector, round = summary.round, "late: left out of this round");
+                continue;
+            }
+            peer.awaiting = Some(summary.round);
+            for &n in &peer.nodes {
+                let column = &shared.model.problem.columns()[n as usize];
+                let e: Vec<LinearRgb> = column
+                    .support()
+                    .iter()
+                    .map(|&i| errors[i as usize])
+                    .collect();
+                outbox.push((
+                    peer.tx.clone(),
+                    n,
+                    v1::Errors {
+                        round: summary.round,
+                        kind: kind as i32,
+                        objective: summary.objective,
+                        restart: summary.restart,
+                        node: n,
+                        errors: Some(to_sparse(column.support(), &e)),
+                    },
+                ));
+            }
+        }
+    }
+    let mut sent = Vec::with_capacity(outbox.len());
+    for (tx, n, msg) in outbox {
+        // A failed send means the node left; its reader removes it.
+        if tx
+            .send(room_message(v1::room_message::Body::Errors(msg)))
+            .await
+            .is_ok()
+        {
+            sent.push(n);
+        }
+    }
+    sent
+}
+
+/// Collects the contributions of `nodes` for `round` into the aggregator (until the deadline).
+async fn collect(
+    shared: &Shared,
+    rx: &mut mpsc::Receiver<Contribution>,
+    aggregator: &mut ErrorAggregator,
+    round: u64,
+    mut nodes: Vec<u32>,
+) {
+    let until = tokio::time::Instant::now() + shared.config.deadline;
+    while !nodes.is_empty() {
+        match tokio::time::timeout_at(until, rx.recv()).await {
+            Ok(Some(c)) if c.round == round => {
+                if let Some(k) = nodes.iter().position(|&n| n == c.node) {
+                    nodes.swap_remove(k);
+                    if let Err(e) = aggregator.add_contribution(c.delta) {
+                        tracing::warn!(node = c.node, error = %e, "contribution refused");
+                    }
+                }
+            }
+            Ok(Some(c)) => tracing::debug!(
+                node = c.node,
+                round = c.round,
+                expected = round,
+                "out-of-order contribution ignored"
+            ),
+            Ok(None) | Err(_) => {
+                tracing::warn!(
+                    round,
+                    missing = nodes.len(),
+                    "contributions missing at the deadline"
+                );
+                return;
+            }
+        }
+    }
+}
+
+/// Serves the Room service on `listener` and runs rounds until `cancel`. Returns the status
+/// watch and the task's handle.
+pub fn serve(
+    config: CameraConfig,
+    model: RoomModel,
+    mut camera: impl Camera,
+    listener: tokio::net::TcpListener,
+    cancel: CancellationToken,
+) -> (
+    watch::Receiver<RoomStatus>,
+    tokio::task::JoinHandle<Result<(), crate::AgentError>>,
+) {
+    let (contrib_tx, mut contrib_rx) = mpsc::channel(4096);
+    let white = model.problem.white_response();
+    let shared = Arc::new(Shared {
+        config,
+        model,
+        white,
+        registry: Mutex::new(Registry::default()),
+        changed: Notify::new(),
+        contributions: contrib_tx,
+    });
+    let (status_tx, status_rx) = watch::channel(RoomStatus::default());
+    let server_cancel = cancel.clone();
+    let service = Service(shared.clone());
+    let handle = tokio::spawn(async move {
+        let server = tonic::transport::Server::builder()
+            .http2_keepalive_interval(Some(Duration::from_secs(5)))
+            .add_service(v1::room_server::RoomServer::new(service))
+            .serve_with_incoming_shutdown(
+                TcpListenerStream::new(listener),
+                server_cancel.cancelled_owned(),
+            );
+        let rounds = async {
+            let mut aggregator = ErrorAggregator::new(shared.model.problem.patches());
+            let mut captures = 0u64;
+            loop {
+                // Someone must be there, and have shown its last frame.
+                if !wait_for(&shared, Duration::from_secs(3600), |r| {
+                    r.peers.values().any(|p| p.shown.is_some())
+                })
+                .await
+                {
+                    continue;
+                }
+                wait_for(&shared, shared.config.deadline, |r| {
+                    r.peers.values().all(|p| {
+                        p.shown.is_some()
+                            && p.awaiting.is_none_or(|a| p.shown.is_some_and(|s| s >= a))
+                    })
+                })
+                .await;
+                let y = camera.capture();
+                captures += 1;
+                let errors: Vec<LinearRgb> = shared
+                    .model
+                    .problem
+                    .target()
+                    .iter()
+                    .zip(&y)
+                    .map(|(r, y)| *r - *y)
+                    .collect();
+                let summary = match aggregator.measured(errors) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        tracing::error!(error = %e, "capture refused");
+                        continue;
+                    }
+                };
+                let mut round = summary.round;
+                let measured_objective = summary.objective;
+                let sent = broadcast(&shared, aggregator.errors(), &summary).await;
+                collect(&shared, &mut contrib_rx, &mut aggregator, round, sent).await;
+                for _ in 0..shared.config.model_rounds {
+                    let summary = aggregator.predicted();
+                    round = summary.round;
+                    let sent = broadcast(&shared, aggregator.errors(), &summary).await;
+                    collect(&shared, &mut contrib_rx, &mut aggregator, round, sent).await;
+                }
+                let live_projectors = shared.registry().peers.len();
+                status_tx.send_replace(RoomStatus {
+                    round,
+                    captures,
+                    measured_objective,
+                    live_projectors,
+                });
+            }
+        };
+        tokio::select! {
+            result = server => result.map_err(crate::AgentError::from),
+            () = rounds => Ok(()),
+            () = cancel.cancelled() => Ok(()),
+        }
+    });
+    (status_rx, handle)
+}

@@ -1,0 +1,31 @@
+//! roomlight-agent: the camera agent and the node agents of DESIGN §6.
+//!
+//! - [`hardware`]: the `Display` and `Camera` traits and an in-process virtual room for tests.
+//! - [`camera`]: the camera agent: the `Room.Attach` service, the registry of live nodes, and
+//!   the round loop (wait for acknowledgements, capture, send each node its errors).
+//! - [`node`]: a node agent: owns its nodes' values, updates them from the errors it receives,
+//!   drives its display, acknowledges frames and reports contributions.
+//!
+//! This first slice runs measured and model rounds over loopback gRPC with joins and leaves;
+//! discovery, reconnection, state files and calibration over the wire come next.
+
+pub mod camera;
+pub mod hardware;
+pub mod node;
+
+/// What went wrong in an agent.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    /// The transport failed (connect, serve).
+    #[error("transport: {0}")]
+    Transport(#[from] tonic::transport::Error),
+    /// The peer refused us or sent something invalid.
+    #[error("peer: {0}")]
+    Status(#[from] tonic::Status),
+    /// The model handed to the agent is inconsistent.
+    #[error("model: {0}")]
+    Model(#[from] roomlight_core::ModelError),
+    /// A protocol rule was broken.
+    #[error("protocol: {0}")]
+    Protocol(String),
+}

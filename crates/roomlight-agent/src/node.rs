@@ -1,0 +1,174 @@
+//! A node agent (DESIGN §6): one per projector. It owns its nodes' values and attenuation,
+//! receives only the errors on its nodes' supports, computes its own steps, drives its display,
+//! acknowledges each frame and reports its contribution changes for model rounds.
+
+use crate::AgentError;
+use crate::hardware::Display;
+use roomlight_core::{AttenuationColumn, LinearRgb, NodeState, StepRule};
+use roomlight_proto::convert::{from_sparse, to_sparse};
+use roomlight_proto::{PROTOCOL_VERSION, v1};
+use std::collections::HashMap;
+use std::time::Duration;
+use tokio::sync::mpsc;
+use tokio_stream::StreamExt;
+use tokio_stream::wrappers::ReceiverStream;
+use tokio_util::sync::CancellationToken;
+
+/// How a node agent runs.
+#[derive(Debug, Clone)]
+pub struct NodeConfig {
+    /// The camera agent, e.g. `http://127.0.0.1:50051`.
+    pub endpoint: String,
+    /// The room to join.
+    pub room: String,
+    /// The room token.
+    pub token: String,
+    /// This projector's id in the room's calibration.
+    pub projector_id: String,
+    /// The update rule of every node of this projector.
+    pub rule: StepRule,
+    /// The value a node shows before its first update.
+    pub start: LinearRgb,
+}
+
+fn message(body: v1::node_message::Body) -> v1::NodeMessage {
+    v1::NodeMessage { body: Some(body) }
+}
+
+/// Runs one node agent until `cancel` or until the camera agent ends the stream. The display
+/// keeps its last values when the agent stops: the lights stay on.
+pub async fn run(
+    config: NodeConfig,
+    mut display: impl Display,
+    cancel: CancellationToken,
+) -> Result<(), AgentError> {
+    let mut client = v1::room_client::RoomClient::connect(config.endpoint.clone()).await?;
+    let (tx, rx) = mpsc::channel(256);
+    let send = |tx: &mpsc::Sender<v1::NodeMessage>, m| {
+        let tx = tx.clone();
+        async move {
+            tx.send(m)
+                .await
+                .map_err(|_| AgentError::Protocol("the outgoing stream closed".into()))
+        }
+    };
+    send(
+        &tx,
+        message(v1::node_message::Body::Hello(v1::Hello {
+            protocol_version: PROTOCOL_VERSION,
+            room: config.room.clone(),
+            token: config.token.clone(),
+            projector_id: config.projector_id.clone(),
+            ..Default::default()
+        })),
+    )
+    .await?;
+    let mut inbound = client.attach(ReceiverStream::new(rx)).await?.into_inner();
+    let mut heartbeat = Duration::from_secs(1);
+    let mut assigned: Vec<u32> = Vec::new();
+    let mut nodes: HashMap<u32, NodeState> = HashMap::new();
+    let mut applied: HashMap<u64, usize> = HashMap::new();
+    let mut started = false;
+    let mut ticker = tokio::time::interval(heartbeat);
+    loop {
+        let next = tokio::select! {
+            () = cancel.cancelled() => {
+                let _ = tx.send(message(v1::node_message::Body::Goodbye(v1::Goodbye { reason: "shutting down".into() }))).await;
+                return Ok(());
+            }
+            _ = ticker.tick() => {
+                send(&tx, message(v1::node_message::Body::Heartbeat(v1::Heartbeat { sent_unix_ms: 0 }))).await?;
+                continue;
+            }
+            next = inbound.next() => next,
+        };
+        let Some(msg) = next.transpose()? else {
+            return Ok(());
+        };
+        match msg.body {
+            Some(v1::room_message::Body::Welcome(w)) => {
+                heartbeat = Duration::from_millis(u64::from(w.heartbeat_ms.max(50)));
+                ticker = tokio::time::interval(heartbeat);
+            }
+            Some(v1::room_message::Body::Assign(a)) => {
+                assigned = a.nodes.iter().map(|n| n.node).collect()
+            }
+            Some(v1::room_message::Body::Attenuation(a)) => {
+                let (Some(p), Some(s)) = (a.p.as_ref(), a.s.as_ref()) else {
+                    return Err(AgentError::Protocol(format!(
+                        "attenuation of node {} lacks p or s",
+                        a.node
+                    )));
+                };
+                let (support, values) = from_sparse("attenuation p", p)
+                    .map_err(|e| AgentError::Protocol(e.to_string()))?;
+                let (_, white) = from_sparse("attenuation s", s)
+                    .map_err(|e| AgentError::Protocol(e.to_string()))?;
+                let column = AttenuationColumn::new(support, values)?;
+                let state = NodeState::new(column, &white, config.rule, config.start)?;
+                display.show(a.node, state.shown());
+                nodes.insert(a.node, state);
+                if !started
+                    && !assigned.is_empty()
+                    && assigned.iter().all(|n| nodes.contains_key(n))
+                {
+                    started = true;
+                    send(
+                        &tx,
+                        message(v1::node_message::Body::Shown(v1::Shown { seq: 0 })),
+                    )
+                    .await?;
+                }
+            }
+            Some(v1::room_message::Body::Errors(e)) => {
+                let Some(state) = nodes.get_mut(&e.node) else {
+                    tracing::warn!(
+                        node = e.node,
+                        "errors for a node this projector does not own: ignored"
+                    );
+                    continue;
+                };
+                let Some(sparse) = e.errors.as_ref() else {
+                    continue;
+                };
+                let errors = match from_sparse("errors", sparse) {
+                    Ok((_, v)) => v,
+                    Err(err) => {
+                        tracing::warn!(node = e.node, error = %err, "malformed errors: ignored");
+                        continue;
+                    }
+                };
+                // Invalid errors leave the node where it is (and it still acknowledges the round).
+                let delta = state.update(&errors, e.restart).unwrap_or(LinearRgb::ZERO);
+                display.show(e.node, state.shown());
+                let contribution: Vec<(u32, LinearRgb)> = state.contribution(delta).collect();
+                let (patches, values): (Vec<u32>, Vec<LinearRgb>) =
+                    contribution.into_iter().unzip();
+                send(
+                    &tx,
+                    message(v1::node_message::Body::Contribution(v1::Contribution {
+                        round: e.round,
+                        node: e.node,
+                        delta: Some(to_sparse(&patches, &values)),
+                    })),
+                )
+                .await?;
+                let done = applied.entry(e.round).or_insert(0);
+                *done += 1;
+                if *done == nodes.len() {
+                    applied.remove(&e.round);
+                    send(
+                        &tx,
+                        message(v1::node_message::Body::Shown(v1::Shown { seq: e.round })),
+                    )
+                    .await?;
+                }
+            }
+            Some(v1::room_message::Body::Goodbye(g)) => {
+                tracing::info!(reason = %g.reason, "the camera agent said goodbye");
+                return Ok(());
+            }
+            Some(v1::room_message::Body::Show(_)) | None => {}
+        }
+    }
+}

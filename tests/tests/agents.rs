@@ -1,0 +1,227 @@
+//! The camera agent and node agents in one process over loopback gRPC, against a virtual room:
+//! the distributed loop reaches the optimum; a projector that leaves is corrected for by the
+//! others; a wrong token is refused. Every wait has a deadline.
+
+use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
+use roomlight_agent::hardware::VirtualRoom;
+use roomlight_agent::node::{self, NodeConfig};
+use roomlight_core::closed_loop::{Plant, PlantConfig};
+use roomlight_core::optimum::optimum;
+use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
+use roomlight_core::{LinearRgb, Problem, StepRule};
+use std::collections::HashMap;
+use std::time::Duration;
+use tokio::sync::watch;
+use tokio_util::sync::CancellationToken;
+
+const TOKEN: &str = "s3cret";
+
+struct Sandbox {
+    room: VirtualRoom,
+    problem: Problem,
+    status: watch::Receiver<RoomStatus>,
+    endpoint: String,
+    cancel: CancellationToken,
+    nodes: HashMap<
+        String,
+        (
+            CancellationToken,
+            tokio::task::JoinHandle<Result<(), roomlight_agent::AgentError>>,
+        ),
+    >,
+    owners: HashMap<String, Vec<u32>>,
+}
+
+impl Sandbox {
+    /// A 12-node synthetic room owned by three projectors of four nodes each.
+    async fn start(model_rounds: usize) -> Self {
+        let problem = synthetic_room(&SyntheticConfig::new(12, 4))
+            .expect("room")
+            .problem;
+        let owners: HashMap<String, Vec<u32>> = (0..3)
+            .map(|p| (format!("p{p}"), (4 * p..4 * p + 4).collect()))
+            .collect();
+        let room =
+            VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind");
+        let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+        let cancel = CancellationToken::new();
+        let config = CameraConfig {
+            room: "lab".into(),
+            token: TOKEN.into(),
+            heartbeat: Duration::from_millis(200),
+            deadline: Duration::from_secs(2),
+            model_rounds,
+            calibration_epoch: 1,
+        };
+        let (status, _handle) = camera::serve(
+            config,
+            RoomModel {
+                problem: problem.clone(),
+                owners: owners.clone(),
+            },
+            room.camera(),
+            listener,
+            cancel.clone(),
+        );
+        Self {
+            room,
+            problem,
+            status,
+            endpoint,
+            cancel,
+            nodes: HashMap::new(),
+            owners,
+        }
+    }
+
+    fn join(&mut self, projector: &str) {
+        let cancel = self.cancel.child_token();
+        let config = NodeConfig {
+            endpoint: self.endpoint.clone(),
+            room: "lab".into(),
+            token: TOKEN.into(),
+            projector_id: projector.into(),
+            rule: StepRule::Momentum { theta: 1.0 },
+            start: LinearRgb::splat(0.5),
+        };
+        let handle = tokio::spawn(node::run(config, self.room.display(), cancel.clone()));
+        self.nodes.insert(projector.into(), (cancel, handle));
+    }
+
+    async fn leave(&mut self, projector: &str) {
+        if let Some((cancel, handle)) = self.nodes.remove(projector) {
+            cancel.cancel();
+            let _ = tokio::time::timeout(Duration::from_secs(5), handle).await;
+        }
+        self.room.unplug(&self.owners[projector]);
+    }
+
+    /// Waits (at most `within`) until the status satisfies `pred`.
+    async fn wait(&mut self, within: Duration, pred: impl Fn(&RoomStatus) -> bool) -> RoomStatus {
+        let result = tokio::time::timeout(within, async {
+            loop {
+                if pred(&self.status.borrow()) {
+                    return self.status.borrow().clone();
+                }
+                if self.status.changed().await.is_err() {
+                    return self.status.borrow().clone();
+                }
+            }
+        })
+        .await;
+        match result {
+            Ok(s) => s,
+            Err(_) => panic!(
+                "condition not reached within {within:?}; last status {:?}",
+                self.status.borrow()
+            ),
+        }
+    }
+
+    fn excess(&self, truth: &Problem) -> f64 {
+        let best = optimum(truth).expect("optimum");
+        best.excess(self.room.true_objective())
+    }
+}
+
+impl Drop for Sandbox {
+    fn drop(&mut self) {
+        self.cancel.cancel();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn agents_reach_the_optimum_and_correct_for_a_projector_that_leaves() {
+    let mut sb = Sandbox::start(5).await;
+    for p in ["p0", "p1", "p2"] {
+        sb.join(p);
+    }
+    let status = sb
+        .wait(Duration::from_secs(30), |s| {
+            s.live_projectors == 3 && s.captures >= 8
+        })
+        .await;
+    let excess = sb.excess(&sb.problem.clone());
+    assert!(
+        excess < 1e-3,
+        "after {} captures the excess is {excess}",
+        status.captures
+    );
+    // p2 goes away: its light vanishes from the errors and the others make up for it.
+    sb.leave("p2").await;
+    let gone: Vec<usize> = sb.owners["p2"].iter().map(|&n| n as usize).collect();
+    let without = sb.problem.without_nodes(&gone);
+    let before = sb
+        .wait(Duration::from_secs(10), |s| s.live_projectors == 2)
+        .await
+        .captures;
+    sb.wait(Duration::from_secs(30), |s| s.captures >= before + 8)
+        .await;
+    let excess = sb.excess(&without);
+    assert!(excess < 1e-3, "after p2 left the excess is {excess}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_projector_that_joins_later_enters_the_next_rounds() {
+    let mut sb = Sandbox::start(0).await;
+    sb.join("p0");
+    sb.join("p1");
+    sb.wait(Duration::from_secs(30), |s| {
+        s.live_projectors == 2 && s.captures >= 3
+    })
+    .await;
+    sb.join("p2");
+    let at = sb
+        .wait(Duration::from_secs(10), |s| s.live_projectors == 3)
+        .await
+        .captures;
+    sb.wait(Duration::from_secs(30), |s| s.captures >= at + 12)
+        .await;
+    let excess = sb.excess(&sb.problem.clone());
+    assert!(excess < 1e-2, "after the join the excess is {excess}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_wrong_token_another_room_or_version_is_refused_with_a_clear_status() {
+    use roomlight_proto::v1;
+    let sb = Sandbox::start(0).await;
+    for (room, token, version, code) in [
+        (
+            "lab",
+            "guess",
+            roomlight_proto::PROTOCOL_VERSION,
+            tonic::Code::Unauthenticated,
+        ),
+        (
+            "kitchen",
+            TOKEN,
+            roomlight_proto::PROTOCOL_VERSION,
+            tonic::Code::FailedPrecondition,
+        ),
+        ("lab", TOKEN, 99, tonic::Code::FailedPrecondition),
+    ] {
+        let mut client = v1::room_client::RoomClient::connect(sb.endpoint.clone())
+            .await
+            .expect("connect");
+        let hello = v1::NodeMessage {
+            body: Some(v1::node_message::Body::Hello(v1::Hello {
+                protocol_version: version,
+                room: room.into(),
+                token: token.into(),
+                projector_id: "p0".into(),
+                ..Default::default()
+            })),
+        };
+        let outcome = tokio::time::timeout(
+            Duration::from_secs(10),
+            client.attach(tokio_stream::iter(vec![hello])),
+        )
+        .await
+        .expect("an answer in time");
+        let status = outcome.expect_err("refused");
+        assert_eq!(status.code(), code, "{room}/{token}/{version}: {status}");
+    }
+}
