@@ -225,3 +225,124 @@ async fn a_wrong_token_another_room_or_version_is_refused_with_a_clear_status() 
         assert_eq!(status.code(), code, "{room}/{token}/{version}: {status}");
     }
 }
+
+fn hello(projector: &str) -> roomlight_proto::v1::NodeMessage {
+    use roomlight_proto::v1;
+    v1::NodeMessage {
+        body: Some(v1::node_message::Body::Hello(v1::Hello {
+            protocol_version: roomlight_proto::PROTOCOL_VERSION,
+            room: "lab".into(),
+            token: TOKEN.into(),
+            projector_id: projector.into(),
+            ..Default::default()
+        })),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_duplicate_projector_is_refused_and_a_silent_one_leaves_within_two_seconds() {
+    use roomlight_proto::v1;
+    let mut sb = Sandbox::start(0).await;
+    sb.join("p0");
+    sb.wait(Duration::from_secs(10), |s| {
+        s.live_projectors == 1 && s.captures >= 2
+    })
+    .await;
+    let mut client = v1::room_client::RoomClient::connect(sb.endpoint.clone())
+        .await
+        .expect("connect");
+    let status = client
+        .attach(tokio_stream::iter(vec![hello("p0")]))
+        .await
+        .expect_err("duplicate");
+    assert_eq!(status.code(), tonic::Code::AlreadyExists, "{status}");
+    // p1 says hello, then goes silent with its stream open: no heartbeats, no acknowledgements.
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    tx.send(hello("p1")).await.expect("queue hello");
+    let _inbound = client
+        .attach(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .expect("admitted");
+    let joined = tokio::time::Instant::now();
+    sb.wait(Duration::from_secs(5), |s| s.live_projectors == 2)
+        .await;
+    sb.wait(Duration::from_secs(5), |s| s.live_projectors == 1)
+        .await;
+    assert!(
+        joined.elapsed() < Duration::from_secs(2),
+        "left after {:?}",
+        joined.elapsed()
+    );
+    // The room went on with p0 meanwhile.
+    let before = sb.status.borrow().captures;
+    sb.wait(Duration::from_secs(10), |s| s.captures >= before + 3)
+        .await;
+    drop(tx);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn malformed_contributions_are_refused_without_disturbing_the_others() {
+    use roomlight_proto::v1;
+    let mut sb = Sandbox::start(5).await;
+    sb.join("p0");
+    sb.join("p1");
+    // p2 is a rogue: it answers every round with NaN contributions for a node it does not own
+    // and for its own nodes, and acknowledges nothing.
+    let mut client = v1::room_client::RoomClient::connect(sb.endpoint.clone())
+        .await
+        .expect("connect");
+    let (tx, rx) = tokio::sync::mpsc::channel(64);
+    tx.send(hello("p2")).await.expect("queue hello");
+    tx.send(v1::NodeMessage {
+        body: Some(v1::node_message::Body::Shown(v1::Shown { seq: 0 })),
+    })
+    .await
+    .expect("queue");
+    let mut inbound = client
+        .attach(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .expect("admitted")
+        .into_inner();
+    let rogue = tokio::spawn(async move {
+        use tokio_stream::StreamExt;
+        while let Some(Ok(m)) = inbound.next().await {
+            if let Some(v1::room_message::Body::Errors(e)) = m.body {
+                for node in [e.node, 0] {
+                    let bad = v1::SparseRgb {
+                        patches: vec![0],
+                        values: vec![f64::NAN, 0.0, 0.0],
+                    };
+                    let msg = v1::NodeMessage {
+                        body: Some(v1::node_message::Body::Contribution(v1::Contribution {
+                            round: e.round,
+                            node,
+                            delta: Some(bad),
+                        })),
+                    };
+                    if tx.send(msg).await.is_err() {
+                        return;
+                    }
+                }
+                let shown = v1::NodeMessage {
+                    body: Some(v1::node_message::Body::Shown(v1::Shown { seq: e.round })),
+                };
+                let _ = tx.send(shown).await;
+            }
+        }
+    });
+    let status = sb.wait(Duration::from_secs(30), |s| s.captures >= 10).await;
+    assert!(status.measured_objective.is_finite());
+    // p2's nodes show nothing (it never drives a display): the optimum is the room without them.
+    let gone: Vec<usize> = sb.owners["p2"].iter().map(|&n| n as usize).collect();
+    sb.room.unplug(&sb.owners["p2"]);
+    let without = sb.problem.without_nodes(&gone);
+    let before = sb.status.borrow().captures;
+    sb.wait(Duration::from_secs(30), |s| s.captures >= before + 6)
+        .await;
+    let excess = sb.excess(&without);
+    assert!(
+        excess < 1e-2,
+        "the honest projectors still converge: excess {excess}"
+    );
+    rogue.abort();
+}

@@ -153,6 +153,15 @@ impl v1::room_server::Room for Service {
                 hello.projector_id, shared.config.room
             )));
         };
+        // One stream per projector: a second one while the first is alive is refused (a
+        // reconnecting node is admitted once its old stream has ended or missed its heartbeats).
+        if shared.registry().peers.contains_key(&hello.projector_id) {
+            tracing::warn!(projector = %hello.projector_id, "refused: already attached");
+            return Err(Status::already_exists(format!(
+                "projector {:?} is already attached to room {:?}",
+                hello.projector_id, shared.config.room
+            )));
+        }
         let (tx, rx) = mpsc::channel(256);
         // Welcome, the node list, then each node's column and s on its support.
         let mut hello_msgs = vec![
@@ -195,7 +204,6 @@ impl v1::room_server::Room for Service {
             let mut reg = shared.registry();
             reg.next_connection += 1;
             let connection = reg.next_connection;
-            // A reconnecting projector replaces its old stream.
             reg.peers.insert(
                 projector.clone(),
                 Peer {
