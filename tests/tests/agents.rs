@@ -21,6 +21,12 @@ struct Sandbox {
     problem: Problem,
     status: watch::Receiver<RoomStatus>,
     endpoint: String,
+    address: std::net::SocketAddr,
+    config: CameraConfig,
+    camera: (
+        CancellationToken,
+        tokio::task::JoinHandle<Result<(), roomlight_agent::AgentError>>,
+    ),
     cancel: CancellationToken,
     nodes: HashMap<
         String,
@@ -46,7 +52,8 @@ impl Sandbox {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await
             .expect("bind");
-        let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+        let address = listener.local_addr().expect("address");
+        let endpoint = format!("http://{address}");
         let cancel = CancellationToken::new();
         let config = CameraConfig {
             room: "lab".into(),
@@ -56,25 +63,61 @@ impl Sandbox {
             model_rounds,
             calibration_epoch: 1,
         };
-        let (status, _handle) = camera::serve(
-            config,
+        let camera_cancel = cancel.child_token();
+        let (status, handle) = camera::serve(
+            config.clone(),
             RoomModel {
                 problem: problem.clone(),
                 owners: owners.clone(),
             },
             room.camera(),
             listener,
-            cancel.clone(),
+            camera_cancel.clone(),
         );
         Self {
             room,
             problem,
             status,
             endpoint,
+            address,
+            config,
+            camera: (camera_cancel, handle),
             cancel,
             nodes: HashMap::new(),
             owners,
         }
+    }
+
+    /// Stops the camera agent and waits until it is gone.
+    async fn stop_camera(&mut self) {
+        self.camera.0.cancel();
+        let handle = std::mem::replace(&mut self.camera.1, tokio::spawn(async { Ok(()) }));
+        tokio::time::timeout(Duration::from_secs(10), handle)
+            .await
+            .expect("camera agent stops in time")
+            .expect("task")
+            .expect("clean stop");
+    }
+
+    /// Starts a new camera agent on the same address.
+    async fn start_camera(&mut self) {
+        let listener = tokio::net::TcpListener::bind(self.address)
+            .await
+            .expect("rebind the same address");
+        let cancel = self.cancel.child_token();
+        let model = RoomModel {
+            problem: self.problem.clone(),
+            owners: self.owners.clone(),
+        };
+        let (status, handle) = camera::serve(
+            self.config.clone(),
+            model,
+            self.room.camera(),
+            listener,
+            cancel.clone(),
+        );
+        self.status = status;
+        self.camera = (cancel, handle);
     }
 
     fn join(&mut self, projector: &str) {
@@ -345,4 +388,51 @@ async fn malformed_contributions_are_refused_without_disturbing_the_others() {
         "the honest projectors still converge: excess {excess}"
     );
     rogue.abort();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_lights_stay_on_while_the_camera_agent_restarts_and_the_nodes_resume() {
+    let mut sb = Sandbox::start(5).await;
+    for p in ["p0", "p1", "p2"] {
+        sb.join(p);
+    }
+    sb.wait(Duration::from_secs(30), |s| {
+        s.live_projectors == 3 && s.captures >= 8
+    })
+    .await;
+    sb.stop_camera().await;
+    // No camera agent: every node keeps showing what it showed (checked a few times over 300 ms).
+    let lit = sb.room.shown();
+    assert!(lit.iter().any(|v| v.max_abs() > 0.0));
+    let mut ticks = tokio::time::interval(Duration::from_millis(100));
+    for _ in 0..3 {
+        ticks.tick().await;
+        assert_eq!(
+            sb.room.shown(),
+            lit,
+            "a node changed its light without a camera agent"
+        );
+    }
+    // A new camera agent on the same address: the nodes reconnect and resume from their values,
+    // so the first capture is already at the optimum.
+    sb.start_camera().await;
+    let status = sb
+        .wait(Duration::from_secs(30), |s| {
+            s.live_projectors == 3 && s.captures >= 1
+        })
+        .await;
+    let best = optimum(&sb.problem).expect("optimum");
+    assert!(
+        best.excess(status.measured_objective) < 1e-3,
+        "first capture after the restart: excess {}",
+        best.excess(status.measured_objective)
+    );
+    sb.wait(Duration::from_secs(30), |s| s.captures >= 4).await;
+    assert!(sb.excess(&sb.problem.clone()) < 1e-3);
+    for p in ["p0", "p1", "p2"] {
+        assert!(
+            sb.nodes.get(p).is_some_and(|(_, h)| !h.is_finished()),
+            "node agent {p} must still run"
+        );
+    }
 }

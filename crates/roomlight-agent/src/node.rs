@@ -35,13 +35,72 @@ fn message(body: v1::node_message::Body) -> v1::NodeMessage {
     v1::NodeMessage { body: Some(body) }
 }
 
-/// Runs one node agent until `cancel` or until the camera agent ends the stream. The display
-/// keeps its last values when the agent stops: the lights stay on.
+/// How a session with the camera agent ended.
+enum SessionEnd {
+    /// `cancel` fired: the node said goodbye.
+    Cancelled,
+    /// The camera agent ended the stream or went away.
+    Closed,
+}
+
+/// True for refusals that retrying cannot fix (wrong token, room or version, unknown projector,
+/// a malformed message).
+fn fatal(status: &tonic::Status) -> bool {
+    matches!(
+        status.code(),
+        tonic::Code::Unauthenticated
+            | tonic::Code::FailedPrecondition
+            | tonic::Code::NotFound
+            | tonic::Code::InvalidArgument
+            | tonic::Code::PermissionDenied
+    )
+}
+
+/// Runs one node agent until `cancel`. When the camera agent goes away the display keeps its last
+/// values (the lights stay on) and the agent reconnects with exponential backoff and jitter,
+/// resuming from the values it shows. A refusal that retrying cannot fix ends it with an error.
 pub async fn run(
     config: NodeConfig,
     mut display: impl Display,
     cancel: CancellationToken,
 ) -> Result<(), AgentError> {
+    // The last value each node showed: the start of the next session.
+    let mut memory: HashMap<u32, LinearRgb> = HashMap::new();
+    let mut backoff = MIN_BACKOFF;
+    loop {
+        let outcome = session(&config, &mut display, &cancel, &mut memory).await;
+        match outcome {
+            Ok(SessionEnd::Cancelled) => return Ok(()),
+            Ok(SessionEnd::Closed) => backoff = MIN_BACKOFF,
+            Err(AgentError::Status(status)) if fatal(&status) => {
+                tracing::error!(projector = %config.projector_id, %status, "refused by the camera agent");
+                return Err(AgentError::Status(status));
+            }
+            Err(e) => tracing::warn!(projector = %config.projector_id, error = %e, "session lost"),
+        }
+        // Jitter: up to half the backoff, from the clock's nanoseconds (no need for a generator).
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos());
+        let jitter = backoff.mul_f64(f64::from(nanos % 1000) / 2000.0);
+        tokio::select! {
+            () = cancel.cancelled() => return Ok(()),
+            () = tokio::time::sleep(backoff + jitter) => {}
+        }
+        backoff = (backoff * 2).min(MAX_BACKOFF);
+    }
+}
+
+/// First and largest wait before reconnecting.
+const MIN_BACKOFF: Duration = Duration::from_millis(100);
+const MAX_BACKOFF: Duration = Duration::from_secs(5);
+
+async fn session(
+    config: &NodeConfig,
+    display: &mut impl Display,
+    cancel: &CancellationToken,
+    memory: &mut HashMap<u32, LinearRgb>,
+) -> Result<SessionEnd, AgentError> {
     let mut client = v1::room_client::RoomClient::connect(config.endpoint.clone()).await?;
     let (tx, rx) = mpsc::channel(256);
     let send = |tx: &mpsc::Sender<v1::NodeMessage>, m| {
@@ -74,7 +133,7 @@ pub async fn run(
         let next = tokio::select! {
             () = cancel.cancelled() => {
                 let _ = tx.send(message(v1::node_message::Body::Goodbye(v1::Goodbye { reason: "shutting down".into() }))).await;
-                return Ok(());
+                return Ok(SessionEnd::Cancelled);
             }
             _ = ticker.tick() => {
                 send(&tx, message(v1::node_message::Body::Heartbeat(v1::Heartbeat { sent_unix_ms: 0 }))).await?;
@@ -83,7 +142,7 @@ pub async fn run(
             next = inbound.next() => next,
         };
         let Some(msg) = next.transpose()? else {
-            return Ok(());
+            return Ok(SessionEnd::Closed);
         };
         match msg.body {
             Some(v1::room_message::Body::Welcome(w)) => {
@@ -105,7 +164,8 @@ pub async fn run(
                 let (_, white) = from_sparse("attenuation s", s)
                     .map_err(|e| AgentError::Protocol(e.to_string()))?;
                 let column = AttenuationColumn::new(support, values)?;
-                let state = NodeState::new(column, &white, config.rule, config.start)?;
+                let start = memory.get(&a.node).copied().unwrap_or(config.start);
+                let state = NodeState::new(column, &white, config.rule, start)?;
                 display.show(a.node, state.shown());
                 nodes.insert(a.node, state);
                 if !started
@@ -141,6 +201,7 @@ pub async fn run(
                 // Invalid errors leave the node where it is (and it still acknowledges the round).
                 let delta = state.update(&errors, e.restart).unwrap_or(LinearRgb::ZERO);
                 display.show(e.node, state.shown());
+                memory.insert(e.node, state.shown());
                 let contribution: Vec<(u32, LinearRgb)> = state.contribution(delta).collect();
                 let (patches, values): (Vec<u32>, Vec<LinearRgb>) =
                     contribution.into_iter().unzip();
@@ -166,7 +227,7 @@ pub async fn run(
             }
             Some(v1::room_message::Body::Goodbye(g)) => {
                 tracing::info!(reason = %g.reason, "the camera agent said goodbye");
-                return Ok(());
+                return Ok(SessionEnd::Closed);
             }
             Some(v1::room_message::Body::Show(_)) | None => {}
         }
