@@ -5,17 +5,19 @@
 //! collect contributions, and run model rounds between captures.
 
 use crate::hardware::Camera;
+use prost::Message;
 use roomlight_core::aggregator::{ErrorAggregator, ErrorKind, RoundSummary};
 use roomlight_core::{LinearRgb, Problem};
 use roomlight_proto::convert::{from_sparse, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::collections::HashMap;
 use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 use subtle::ConstantTimeEq;
 use tokio::sync::{Notify, mpsc, watch};
-use tokio_stream::wrappers::{ReceiverStream, TcpListenerStream};
+use tokio_stream::wrappers::ReceiverStream;
 use tokio_stream::{Stream, StreamExt};
 use tokio_util::sync::CancellationToken;
 use tonic::{Request, Response, Status, Streaming};
@@ -58,6 +60,10 @@ pub struct RoomStatus {
     pub measured_objective: f64,
     /// Projectors attached now.
     pub live_projectors: usize,
+    /// Protobuf bytes sent to node agents since the previous status (errors and setup).
+    pub bytes_out: u64,
+    /// Protobuf bytes received from node agents since the previous status.
+    pub bytes_in: u64,
 }
 
 #[derive(Debug)]
@@ -91,6 +97,8 @@ struct Shared {
     registry: Mutex<Registry>,
     changed: Notify,
     contributions: mpsc::Sender<Contribution>,
+    bytes_out: AtomicU64,
+    bytes_in: AtomicU64,
 }
 
 impl Shared {
@@ -243,7 +251,12 @@ async fn read_node(
                 tracing::info!(%projector, %status, "stream ended");
                 break;
             }
-            Ok(Some(Ok(m))) => m,
+            Ok(Some(Ok(m))) => {
+                shared
+                    .bytes_in
+                    .fetch_add(m.encoded_len() as u64, Ordering::Relaxed);
+                m
+            }
         };
         match next.body {
             Some(v1::node_message::Body::Shown(s)) => {
@@ -365,6 +378,9 @@ async fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary
     }
     let mut sent = Vec::with_capacity(outbox.len());
     for (tx, n, msg) in outbox {
+        shared
+            .bytes_out
+            .fetch_add(msg.encoded_len() as u64, Ordering::Relaxed);
         // A failed send means the node left; its reader removes it.
         if tx
             .send(room_message(v1::room_message::Body::Errors(msg)))
@@ -435,6 +451,8 @@ pub fn serve(
         registry: Mutex::new(Registry::default()),
         changed: Notify::new(),
         contributions: contrib_tx,
+        bytes_out: AtomicU64::new(0),
+        bytes_in: AtomicU64::new(0),
     });
     let (status_tx, status_rx) = watch::channel(RoomStatus::default());
     let server_cancel = cancel.clone();
@@ -444,7 +462,8 @@ pub fn serve(
             .http2_keepalive_interval(Some(Duration::from_secs(5)))
             .add_service(v1::room_server::RoomServer::new(service))
             .serve_with_incoming_shutdown(
-                TcpListenerStream::new(listener),
+                // Small messages both ways every round: Nagle's algorithm would add ~40 ms.
+                tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true)),
                 server_cancel.cancelled_owned(),
             );
         let rounds = async {
@@ -499,6 +518,8 @@ pub fn serve(
                     captures,
                     measured_objective,
                     live_projectors,
+                    bytes_out: shared.bytes_out.swap(0, Ordering::Relaxed),
+                    bytes_in: shared.bytes_in.swap(0, Ordering::Relaxed),
                 });
             }
         };

@@ -2,6 +2,7 @@
 
 mod bench;
 mod bench_calib;
+mod bench_net;
 mod bench_sim;
 mod demo;
 mod graycode_cmd;
@@ -64,6 +65,13 @@ enum BenchCommand {
         #[arg(long)]
         quick: bool,
     },
+    /// The distributed runtime over loopback gRPC: round overhead and bytes for 10, 100 and
+    /// 1000 nodes (ten nodes per node agent).
+    Net {
+        /// 10 and 100 nodes only.
+        #[arg(long)]
+        quick: bool,
+    },
     /// The simulator on the embedded lab: precomputation, capture times, memory.
     Sim {
         /// The small test room instead of the lab.
@@ -83,6 +91,9 @@ fn main() -> Result<()> {
         Command::Bench {
             which: BenchCommand::Core { quick, json, seed },
         } => bench::core(quick, json.as_deref(), seed, &ALLOCATOR),
+        Command::Bench {
+            which: BenchCommand::Net { quick },
+        } => bench_net::run(quick, &ALLOCATOR),
         Command::Bench {
             which: BenchCommand::Calib { quick },
         } => bench_calib::run(quick),

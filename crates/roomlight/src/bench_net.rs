@@ -1,0 +1,122 @@
+//! `roomlight bench net`: the cost of one round of the distributed runtime over loopback gRPC —
+//! errors out to every node, its update, the contribution and acknowledgement back — with a
+//! virtual camera whose capture costs microseconds. Timings are printed, not asserted.
+
+use anyhow::{Context, Result};
+use peak_alloc::PeakAlloc;
+use roomlight_agent::camera::{self, CameraConfig, RoomModel};
+use roomlight_agent::hardware::VirtualRoom;
+use roomlight_agent::node::{self, NodeConfig};
+use roomlight_core::closed_loop::{Plant, PlantConfig};
+use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
+use roomlight_core::{LinearRgb, StepRule};
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+use tokio_util::sync::CancellationToken;
+
+const NODES_PER_AGENT: usize = 10;
+
+pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the runtime")?;
+    let sizes: &[usize] = if quick { &[10, 100] } else { &[10, 100, 1000] };
+    println!(
+        "{:>6} {:>7} {:>13} {:>11} {:>15} {:>14} {:>18}",
+        "nodes", "agents", "median ms", "p99 ms", "bytes out/rnd", "bytes in/rnd", "heap per agent"
+    );
+    for &n in sizes {
+        runtime.block_on(case(n, alloc))?;
+    }
+    Ok(())
+}
+
+async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<()> {
+    let problem = synthetic_room(&SyntheticConfig::new(nodes, 1))?.problem;
+    let agents = nodes.div_ceil(NODES_PER_AGENT);
+    let owners: HashMap<String, Vec<u32>> = (0..agents)
+        .map(|a| {
+            (
+                format!("p{a}"),
+                ((a * NODES_PER_AGENT) as u32..((a + 1) * NODES_PER_AGENT).min(nodes) as u32)
+                    .collect(),
+            )
+        })
+        .collect();
+    let room = VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default())?);
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+    let endpoint = format!("http://{}", listener.local_addr()?);
+    let cancel = CancellationToken::new();
+    let config = CameraConfig {
+        room: "bench".into(),
+        token: "t".into(),
+        heartbeat: Duration::from_secs(1),
+        deadline: Duration::from_secs(5),
+        model_rounds: 0,
+        calibration_epoch: 1,
+    };
+    let (mut status, _camera) = camera::serve(
+        config,
+        RoomModel {
+            problem,
+            owners: owners.clone(),
+        },
+        room.camera(),
+        listener,
+        cancel.clone(),
+    );
+    let before = alloc.current_usage();
+    for id in owners.keys() {
+        let config = NodeConfig {
+            endpoint: endpoint.clone(),
+            room: "bench".into(),
+            token: "t".into(),
+            projector_id: id.clone(),
+            rule: StepRule::Safe { theta: 1.0 },
+            start: LinearRgb::splat(0.5),
+        };
+        tokio::spawn(node::run(config, room.display(), cancel.child_token()));
+    }
+    let ready = tokio::time::timeout(Duration::from_secs(60), async {
+        loop {
+            let s = status.borrow().clone();
+            if s.live_projectors == agents && s.captures >= 2 {
+                return Ok::<_, anyhow::Error>(());
+            }
+            status.changed().await?;
+        }
+    })
+    .await;
+    ready.context("the agents did not all join within 60 s")??;
+    let heap_per_agent = alloc.current_usage().saturating_sub(before) as f64 / agents as f64 / 1e6;
+    let rounds = if nodes >= 1000 { 30 } else { 60 };
+    let mut times = Vec::with_capacity(rounds);
+    let (mut out, mut inn) = (0u64, 0u64);
+    let mut last = Instant::now();
+    for _ in 0..rounds {
+        tokio::time::timeout(Duration::from_secs(30), status.changed())
+            .await
+            .context("a round took over 30 s")??;
+        let now = Instant::now();
+        times.push((now - last).as_secs_f64() * 1e3);
+        last = now;
+        let s = status.borrow().clone();
+        out += s.bytes_out;
+        inn += s.bytes_in;
+    }
+    cancel.cancel();
+    times.remove(0);
+    times.sort_by(f64::total_cmp);
+    let pct = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
+    println!(
+        "{nodes:>6} {agents:>7} {:>13.3} {:>11.3} {:>15} {:>14} {:>15.2} MB",
+        pct(0.5),
+        pct(0.99),
+        out / rounds as u64,
+        inn / rounds as u64,
+        heap_per_agent
+    );
+    Ok(())
+}
