@@ -121,6 +121,10 @@ impl Sandbox {
     }
 
     fn join(&mut self, projector: &str) {
+        self.join_with_state(projector, None);
+    }
+
+    fn join_with_state(&mut self, projector: &str, state_file: Option<std::path::PathBuf>) {
         let cancel = self.cancel.child_token();
         let config = NodeConfig {
             endpoint: self.endpoint.clone(),
@@ -129,6 +133,7 @@ impl Sandbox {
             projector_id: projector.into(),
             rule: StepRule::Momentum { theta: 1.0 },
             start: LinearRgb::splat(0.5),
+            state_file,
         };
         let handle = tokio::spawn(node::run(config, self.room.display(), cancel.clone()));
         self.nodes.insert(projector.into(), (cancel, handle));
@@ -435,4 +440,78 @@ async fn the_lights_stay_on_while_the_camera_agent_restarts_and_the_nodes_resume
             "node agent {p} must still run"
         );
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restarted_node_relights_from_its_state_file_before_it_reconnects() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let state = dir.path().join("p0.state.json");
+    let mut sb = Sandbox::start(5).await;
+    sb.join_with_state("p0", Some(state.clone()));
+    sb.join("p1");
+    sb.join("p2");
+    sb.wait(Duration::from_secs(30), |s| {
+        s.live_projectors == 3 && s.captures >= 8
+    })
+    .await;
+    let p0 = sb.owners["p0"].clone();
+    let lit: Vec<LinearRgb> = p0.iter().map(|&n| sb.room.shown()[n as usize]).collect();
+    assert!(
+        lit.iter().all(|v| v.max_abs() > 0.0),
+        "p0 must be lit before the reboot"
+    );
+    // p0's host reboots while the camera agent is down too: its projector goes dark.
+    sb.stop_camera().await;
+    if let Some((cancel, handle)) = sb.nodes.remove("p0") {
+        cancel.cancel();
+        tokio::time::timeout(Duration::from_secs(5), handle)
+            .await
+            .expect("stops")
+            .expect("task")
+            .expect("clean");
+    }
+    let saved = roomlight_agent::node::SavedState::load(&state)
+        .expect("readable")
+        .expect("written");
+    assert_eq!(saved.values.len(), p0.len());
+    let mut display = sb.room.display();
+    for &n in &p0 {
+        roomlight_agent::hardware::Display::show(&mut display, n, LinearRgb::ZERO);
+    }
+    // The new p0 agent relights from the file with no camera agent to talk to.
+    sb.join_with_state("p0", Some(state.clone()));
+    let relit = tokio::time::timeout(Duration::from_secs(5), async {
+        let mut tick = tokio::time::interval(Duration::from_millis(20));
+        loop {
+            tick.tick().await;
+            let now: Vec<LinearRgb> = p0.iter().map(|&n| sb.room.shown()[n as usize]).collect();
+            if now
+                .iter()
+                .zip(&lit)
+                .all(|(a, b)| (*a - *b).max_abs() < 1e-9)
+            {
+                return;
+            }
+        }
+    })
+    .await;
+    assert!(relit.is_ok(), "p0 did not relight from its state file");
+    // The camera agent comes back: the calibration epoch matches, the state is accepted, and
+    // the room is at the optimum from the first capture on.
+    sb.start_camera().await;
+    let status = sb
+        .wait(Duration::from_secs(30), |s| {
+            s.live_projectors == 3 && s.captures >= 1
+        })
+        .await;
+    let best = optimum(&sb.problem).expect("optimum");
+    assert!(
+        best.excess(status.measured_objective) < 1e-3,
+        "excess {}",
+        best.excess(status.measured_objective)
+    );
+    // A corrupt state file is refused with a message naming it.
+    std::fs::write(&state, "{not json").expect("write");
+    let err = roomlight_agent::node::SavedState::load(&state).expect_err("corrupt");
+    assert!(err.to_string().contains("p0.state.json"), "{err}");
 }

@@ -179,7 +179,11 @@ impl v1::room_server::Room for Service {
                 calibration_epoch: shared.config.calibration_epoch,
                 heartbeat_ms: u32::try_from(shared.config.heartbeat.as_millis())
                     .unwrap_or(u32::MAX),
-                state_accepted: false,
+                // A node's values are worth keeping only under the same calibration.
+                state_accepted: hello
+                    .state
+                    .as_ref()
+                    .is_some_and(|st| st.calibration_epoch == shared.config.calibration_epoch),
             })),
             room_message(v1::room_message::Body::Assign(v1::Assign {
                 nodes: nodes

@@ -7,7 +7,10 @@ use crate::hardware::Display;
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState, StepRule};
 use roomlight_proto::convert::{from_sparse, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio_stream::StreamExt;
@@ -29,6 +32,57 @@ pub struct NodeConfig {
     pub rule: StepRule,
     /// The value a node shows before its first update.
     pub start: LinearRgb,
+    /// Where the node keeps its values between runs (written atomically, at most once a second
+    /// and when it stops); `None` keeps nothing.
+    pub state_file: Option<PathBuf>,
+}
+
+/// What a node agent keeps on disk: the values its nodes show, and the calibration they belong to.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SavedState {
+    /// Calibration epoch the values were computed under.
+    pub calibration_epoch: u64,
+    /// Node id → linear light shown.
+    pub values: Vec<(u32, LinearRgb)>,
+}
+
+impl SavedState {
+    /// Reads a state file; a missing file is `Ok(None)`, an unreadable one an error naming it.
+    pub fn load(path: &Path) -> Result<Option<Self>, AgentError> {
+        match std::fs::read_to_string(path) {
+            Ok(text) => {
+                let state: Self = serde_json::from_str(&text).map_err(|e| {
+                    AgentError::Protocol(format!("state file {}: {e}", path.display()))
+                })?;
+                if state.values.iter().any(|(_, v)| !v.is_finite()) {
+                    return Err(AgentError::Protocol(format!(
+                        "state file {}: a value is not finite",
+                        path.display()
+                    )));
+                }
+                Ok(Some(state))
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(AgentError::Protocol(format!(
+                "state file {}: {e}",
+                path.display()
+            ))),
+        }
+    }
+
+    /// Writes the state atomically: a temporary file beside it, synced, then renamed over it.
+    pub fn save(&self, path: &Path) -> Result<(), AgentError> {
+        let io =
+            |e: std::io::Error| AgentError::Protocol(format!("state file {}: {e}", path.display()));
+        let tmp = path.with_extension("tmp");
+        let text = serde_json::to_string(self).map_err(|e| AgentError::Protocol(e.to_string()))?;
+        {
+            let mut f = std::fs::File::create(&tmp).map_err(io)?;
+            f.write_all(text.as_bytes()).map_err(io)?;
+            f.sync_all().map_err(io)?;
+        }
+        std::fs::rename(&tmp, path).map_err(io)
+    }
 }
 
 fn message(body: v1::node_message::Body) -> v1::NodeMessage {
@@ -66,9 +120,34 @@ pub async fn run(
 ) -> Result<(), AgentError> {
     // The last value each node showed: the start of the next session.
     let mut memory: HashMap<u32, LinearRgb> = HashMap::new();
+    let mut epoch = 0;
+    // Relight at once from the state file, before any camera agent is reachable.
+    if let Some(path) = &config.state_file
+        && let Some(saved) = SavedState::load(path)?
+    {
+        for &(node, value) in &saved.values {
+            display.show(node, value);
+            memory.insert(node, value);
+        }
+        epoch = saved.calibration_epoch;
+        tracing::info!(projector = %config.projector_id, nodes = saved.values.len(), "relit from the state file");
+    }
+    let mut keeper = Keeper {
+        path: config.state_file.clone(),
+        last: None,
+    };
     let mut backoff = MIN_BACKOFF;
     loop {
-        let outcome = session(&config, &mut display, &cancel, &mut memory).await;
+        let outcome = session(
+            &config,
+            &mut display,
+            &cancel,
+            &mut memory,
+            &mut epoch,
+            &mut keeper,
+        )
+        .await;
+        keeper.flush(epoch, &memory);
         match outcome {
             Ok(SessionEnd::Cancelled) => return Ok(()),
             Ok(SessionEnd::Closed) => backoff = MIN_BACKOFF,
@@ -95,11 +174,46 @@ pub async fn run(
 const MIN_BACKOFF: Duration = Duration::from_millis(100);
 const MAX_BACKOFF: Duration = Duration::from_secs(5);
 
+/// Writes the state file at most once a second, and when asked to flush.
+struct Keeper {
+    path: Option<PathBuf>,
+    last: Option<std::time::Instant>,
+}
+
+impl Keeper {
+    fn maybe(&mut self, epoch: u64, memory: &HashMap<u32, LinearRgb>) {
+        if self
+            .last
+            .is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
+        {
+            self.flush(epoch, memory);
+        }
+    }
+
+    fn flush(&mut self, epoch: u64, memory: &HashMap<u32, LinearRgb>) {
+        let Some(path) = &self.path else { return };
+        let mut values: Vec<(u32, LinearRgb)> = memory.iter().map(|(&n, &v)| (n, v)).collect();
+        values.sort_by_key(|(n, _)| *n);
+        if let Err(e) = (SavedState {
+            calibration_epoch: epoch,
+            values,
+        })
+        .save(path)
+        {
+            // The lights matter more than the file: log and carry on.
+            tracing::warn!(error = %e, "could not write the state file");
+        }
+        self.last = Some(std::time::Instant::now());
+    }
+}
+
 async fn session(
     config: &NodeConfig,
     display: &mut impl Display,
     cancel: &CancellationToken,
     memory: &mut HashMap<u32, LinearRgb>,
+    epoch: &mut u64,
+    keeper: &mut Keeper,
 ) -> Result<SessionEnd, AgentError> {
     let mut client = v1::room_client::RoomClient::connect(config.endpoint.clone()).await?;
     let (tx, rx) = mpsc::channel(256);
@@ -118,6 +232,17 @@ async fn session(
             room: config.room.clone(),
             token: config.token.clone(),
             projector_id: config.projector_id.clone(),
+            state: Some(v1::PersistedState {
+                calibration_epoch: *epoch,
+                nodes: memory
+                    .iter()
+                    .map(|(&node, &x)| v1::NodeState {
+                        node,
+                        x: Some(roomlight_proto::convert::to_rgb(x)),
+                        attenuation: None,
+                    })
+                    .collect(),
+            }),
             ..Default::default()
         })),
     )
@@ -148,6 +273,11 @@ async fn session(
             Some(v1::room_message::Body::Welcome(w)) => {
                 heartbeat = Duration::from_millis(u64::from(w.heartbeat_ms.max(50)));
                 ticker = tokio::time::interval(heartbeat);
+                // Values from another calibration mean nothing now: start afresh.
+                if !w.state_accepted {
+                    memory.clear();
+                }
+                *epoch = w.calibration_epoch;
             }
             Some(v1::room_message::Body::Assign(a)) => {
                 assigned = a.nodes.iter().map(|n| n.node).collect()
@@ -218,6 +348,7 @@ async fn session(
                 *done += 1;
                 if *done == nodes.len() {
                     applied.remove(&e.round);
+                    keeper.maybe(*epoch, memory);
                     send(
                         &tx,
                         message(v1::node_message::Body::Shown(v1::Shown { seq: e.round })),
