@@ -4,7 +4,7 @@
 
 use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
 use roomlight_agent::hardware::VirtualRoom;
-use roomlight_agent::node::{self, NodeConfig};
+use roomlight_agent::node::{self, NodeConfig, SavedState};
 use roomlight_core::closed_loop::{Plant, PlantConfig};
 use roomlight_core::optimum::optimum;
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
@@ -470,7 +470,7 @@ async fn a_restarted_node_relights_from_its_state_file_before_it_reconnects() {
             .expect("task")
             .expect("clean");
     }
-    let saved = roomlight_agent::node::SavedState::load(&state)
+    let saved = SavedState::load(&state)
         .expect("readable")
         .expect("written");
     assert_eq!(saved.values.len(), p0.len());
@@ -512,6 +512,6 @@ async fn a_restarted_node_relights_from_its_state_file_before_it_reconnects() {
     );
     // A corrupt state file is refused with a message naming it.
     std::fs::write(&state, "{not json").expect("write");
-    let err = roomlight_agent::node::SavedState::load(&state).expect_err("corrupt");
+    let err = SavedState::load(&state).expect_err("corrupt");
     assert!(err.to_string().contains("p0.state.json"), "{err}");
 }

@@ -76,6 +76,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<()> {
             projector_id: id.clone(),
             rule: StepRule::Safe { theta: 1.0 },
             start: LinearRgb::splat(0.5),
+            state_file: None,
         };
         tokio::spawn(node::run(config, room.display(), cancel.child_token()));
     }
