@@ -2,9 +2,14 @@
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../proto");
-    let file = root.join("roomlight/v1/room.proto");
-    println!("cargo:rerun-if-changed={}", file.display());
-    let descriptors = protox::compile([&file], [&root])?;
+    let files = [
+        root.join("roomlight/v1/room.proto"),
+        root.join("roomlight/v1/hardware.proto"),
+    ];
+    for f in &files {
+        println!("cargo:rerun-if-changed={}", f.display());
+    }
+    let descriptors = protox::compile(&files, [&root])?;
     tonic_prost_build::configure().compile_fds(descriptors)?;
     Ok(())
 }

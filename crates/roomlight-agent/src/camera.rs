@@ -325,6 +325,13 @@ async fn read_node(
     shared.changed.notify_waiters();
 }
 
+/// True when every attached projector shows the last frame it was sent.
+fn all_shown(r: &Registry) -> bool {
+    r.peers
+        .values()
+        .all(|p| p.shown.is_some() && p.awaiting.is_none_or(|a| p.shown.is_some_and(|s| s >= a)))
+}
+
 /// Waits until `ready` holds or the deadline passes; true when it holds.
 async fn wait_for(shared: &Shared, deadline: Duration, ready: impl Fn(&Registry) -> bool) -> bool {
     let until = tokio::time::Instant::now() + deadline;
@@ -482,14 +489,25 @@ pub fn serve(
                 {
                     continue;
                 }
-                wait_for(&shared, shared.config.deadline, |r| {
-                    r.peers.values().all(|p| {
-                        p.shown.is_some()
-                            && p.awaiting.is_none_or(|a| p.shown.is_some_and(|s| s >= a))
-                    })
-                })
-                .await;
-                let y = camera.capture();
+                wait_for(&shared, shared.config.deadline, all_shown).await;
+                let y = match camera.capture().await {
+                    Ok(y) => y,
+                    Err(e) => {
+                        // The camera is unreachable: the lights stay as they are; try again.
+                        tracing::warn!(error = %e, "capture failed");
+                        tokio::time::sleep(Duration::from_millis(200)).await;
+                        continue;
+                    }
+                };
+                if y.len() != shared.model.problem.patches() {
+                    tracing::error!(
+                        got = y.len(),
+                        expected = shared.model.problem.patches(),
+                        "capture has the wrong number of patches"
+                    );
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                    continue;
+                }
                 captures += 1;
                 let errors: Vec<LinearRgb> = shared
                     .model
@@ -511,6 +529,8 @@ pub fn serve(
                 let sent = broadcast(&shared, aggregator.errors(), &summary).await;
                 collect(&shared, &mut contrib_rx, &mut aggregator, round, sent).await;
                 for _ in 0..shared.config.model_rounds {
+                    // Acknowledgements follow contributions: wait for them too.
+                    wait_for(&shared, shared.config.deadline, all_shown).await;
                     let summary = aggregator.predicted();
                     round = summary.round;
                     let sent = broadcast(&shared, aggregator.errors(), &summary).await;

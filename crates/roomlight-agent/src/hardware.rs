@@ -15,7 +15,8 @@ pub trait Display: Send + 'static {
 /// Measures the chart patches (linear camera values, one per patch).
 pub trait Camera: Send + 'static {
     /// One capture of every patch.
-    fn capture(&mut self) -> Vec<LinearRgb>;
+    fn capture(&mut self)
+    -> impl Future<Output = Result<Vec<LinearRgb>, crate::AgentError>> + Send;
 }
 
 #[derive(Debug)]
@@ -110,13 +111,22 @@ impl Display for VirtualDisplay {
 #[derive(Debug, Clone)]
 pub struct VirtualCamera(VirtualRoom);
 
-impl Camera for VirtualCamera {
-    fn capture(&mut self) -> Vec<LinearRgb> {
+impl VirtualCamera {
+    /// One capture, at once.
+    pub fn capture_now(&self) -> Vec<LinearRgb> {
         let shown = self.0.shown();
         self.0.with(|s| {
             s.captures += 1;
             let k = s.captures;
             s.plant.capture(&shown, k)
         })
+    }
+}
+
+impl Camera for VirtualCamera {
+    fn capture(
+        &mut self,
+    ) -> impl Future<Output = Result<Vec<LinearRgb>, crate::AgentError>> + Send {
+        std::future::ready(Ok(self.capture_now()))
     }
 }

@@ -12,6 +12,7 @@
 pub mod camera;
 pub mod hardware;
 pub mod node;
+pub mod remote;
 
 /// What went wrong in an agent.
 #[derive(Debug, thiserror::Error)]

@@ -237,6 +237,17 @@ impl Problem {
         })
     }
 
+    /// Runs every check of [`Problem::new`] and [`AttenuationColumn::new`] again: for a problem
+    /// that came from outside (a file, the network) through serde, which does not validate.
+    pub fn revalidate(self) -> Result<Self, ModelError> {
+        let columns = self
+            .columns
+            .into_iter()
+            .map(|c| AttenuationColumn::new(c.support, c.values))
+            .collect::<Result<Vec<_>, _>>()?;
+        Self::new(columns, self.black, self.target, self.noise)
+    }
+
     /// Number of nodes.
     pub fn nodes(&self) -> usize {
         self.columns.len()

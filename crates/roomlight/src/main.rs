@@ -6,6 +6,7 @@ mod bench_net;
 mod bench_sim;
 mod demo;
 mod graycode_cmd;
+mod procs;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -32,6 +33,20 @@ enum Command {
     /// Runs the best end-to-end pipeline there is so far: a synthetic room lit by distributed
     /// node updates from the conventional start, reported against the exact optimum.
     Demo(demo::DemoArgs),
+    /// The simulated hardware as a process: a synthetic room served as `VirtualHardware`.
+    Sim(procs::SimArgs),
+    /// The camera agent of a room.
+    Camera {
+        /// Its TOML config (see deploy/camera.toml).
+        #[arg(long)]
+        config: PathBuf,
+    },
+    /// A node agent (one per projector).
+    Node {
+        /// Its TOML config (see deploy/node.toml).
+        #[arg(long)]
+        config: PathBuf,
+    },
     /// Gray-code structured light for real photographs.
     Graycode {
         #[command(subcommand)]
@@ -87,6 +102,9 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Demo(args) => demo::run(&args),
+        Command::Sim(args) => procs::sim(&args),
+        Command::Camera { config } => procs::camera(&config),
+        Command::Node { config } => procs::node(&config),
         Command::Graycode { which } => graycode_cmd::run(which),
         Command::Bench {
             which: BenchCommand::Core { quick, json, seed },

@@ -1,0 +1,141 @@
+//! The virtual hardware over gRPC (DESIGN §6): `roomlight sim` serves a [`VirtualRoom`] as the
+//! `VirtualHardware` service; node agents show through [`RemoteDisplay`] and the camera agent
+//! captures through [`RemoteCamera`], so the same binaries run against simulated hardware in
+//! separate processes.
+
+use crate::AgentError;
+use crate::hardware::{Camera, Display, VirtualRoom};
+use roomlight_core::LinearRgb;
+use roomlight_proto::convert::{from_rgb, to_rgb};
+use roomlight_proto::v1;
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+use tonic::{Request, Response, Status};
+
+#[derive(Clone)]
+struct Hardware(VirtualRoom);
+
+#[tonic::async_trait]
+impl v1::virtual_hardware_server::VirtualHardware for Hardware {
+    async fn show(
+        &self,
+        request: Request<v1::ShowRequest>,
+    ) -> Result<Response<v1::ShowReply>, Status> {
+        let mut display = self.0.display();
+        for v in &request.get_ref().values {
+            let value = from_rgb("show value", v.x.as_ref())?;
+            display.show(v.node, value);
+        }
+        Ok(Response::new(v1::ShowReply {}))
+    }
+
+    async fn capture(
+        &self,
+        _request: Request<v1::CaptureRequest>,
+    ) -> Result<Response<v1::CaptureReply>, Status> {
+        let values = self.0.camera().capture_now();
+        Ok(Response::new(v1::CaptureReply {
+            values: values.iter().flat_map(|v| v.0).collect(),
+            true_objective: self.0.true_objective(),
+        }))
+    }
+}
+
+/// Serves a virtual room until `cancel`.
+pub async fn serve_hardware(
+    room: VirtualRoom,
+    listener: tokio::net::TcpListener,
+    cancel: CancellationToken,
+) -> Result<(), AgentError> {
+    tonic::transport::Server::builder()
+        .add_service(v1::virtual_hardware_server::VirtualHardwareServer::new(
+            Hardware(room),
+        ))
+        .serve_with_incoming_shutdown(
+            tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true)),
+            cancel.cancelled_owned(),
+        )
+        .await?;
+    Ok(())
+}
+
+/// A display in another process: values are queued and sent in order by a background task.
+#[derive(Debug, Clone)]
+pub struct RemoteDisplay(mpsc::UnboundedSender<(u32, LinearRgb)>);
+
+impl RemoteDisplay {
+    /// Connects to `endpoint` (e.g. `http://127.0.0.1:7000`); the task ends with `cancel`.
+    pub async fn connect(endpoint: String, cancel: CancellationToken) -> Result<Self, AgentError> {
+        let mut client =
+            v1::virtual_hardware_client::VirtualHardwareClient::connect(endpoint).await?;
+        let (tx, mut rx) = mpsc::unbounded_channel::<(u32, LinearRgb)>();
+        tokio::spawn(async move {
+            loop {
+                let first = tokio::select! {
+                    () = cancel.cancelled() => return,
+                    v = rx.recv() => v,
+                };
+                let Some(first) = first else { return };
+                // Everything queued meanwhile goes in the same request.
+                let mut batch = vec![first];
+                while let Ok(v) = rx.try_recv() {
+                    batch.push(v);
+                }
+                let values = batch
+                    .into_iter()
+                    .map(|(node, x)| v1::NodeState {
+                        node,
+                        x: Some(to_rgb(x)),
+                        attenuation: None,
+                    })
+                    .collect();
+                if let Err(status) = client.show(v1::ShowRequest { values }).await {
+                    tracing::warn!(%status, "the display did not take the frame");
+                }
+            }
+        });
+        Ok(Self(tx))
+    }
+}
+
+impl Display for RemoteDisplay {
+    fn show(&mut self, node: u32, value: LinearRgb) {
+        // The task only stops with the agent.
+        let _ = self.0.send((node, value));
+    }
+}
+
+/// A camera in another process.
+#[derive(Debug, Clone)]
+pub struct RemoteCamera(
+    v1::virtual_hardware_client::VirtualHardwareClient<tonic::transport::Channel>,
+);
+
+impl RemoteCamera {
+    /// Connects to `endpoint`.
+    pub async fn connect(endpoint: String) -> Result<Self, AgentError> {
+        Ok(Self(
+            v1::virtual_hardware_client::VirtualHardwareClient::connect(endpoint).await?,
+        ))
+    }
+}
+
+impl Camera for RemoteCamera {
+    fn capture(&mut self) -> impl Future<Output = Result<Vec<LinearRgb>, AgentError>> + Send {
+        let mut client = self.0.clone();
+        async move {
+            let reply = client.capture(v1::CaptureRequest {}).await?.into_inner();
+            if reply.values.len() % 3 != 0 || reply.values.iter().any(|v| !v.is_finite()) {
+                return Err(AgentError::Protocol(
+                    "capture: expected three finite values per patch".into(),
+                ));
+            }
+            tracing::debug!(true_objective = reply.true_objective, "captured");
+            Ok(reply
+                .values
+                .chunks_exact(3)
+                .map(|c| LinearRgb([c[0], c[1], c[2]]))
+                .collect())
+        }
+    }
+}

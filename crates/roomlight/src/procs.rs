@@ -1,0 +1,298 @@
+//! The processes of an installation: `roomlight sim`, `roomlight camera`, `roomlight node`.
+//! Each prints `listening on ADDR` once it serves, logs with tracing (RUST_LOG), and stops
+//! cleanly on Ctrl-C or SIGTERM (nodes say goodbye and flush their state file).
+
+use anyhow::{Context, Result, bail};
+use roomlight_agent::camera::{self, CameraConfig, RoomModel};
+use roomlight_agent::hardware::VirtualRoom;
+use roomlight_agent::node::{self, NodeConfig};
+use roomlight_agent::remote::{RemoteCamera, RemoteDisplay, serve_hardware};
+use roomlight_core::closed_loop::{Plant, PlantConfig};
+use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
+use roomlight_core::{LinearRgb, Problem, StepRule};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+use tokio_util::sync::CancellationToken;
+
+/// The calibrated model a camera agent loads: every node's attenuation and who owns it.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct ModelFile {
+    /// Columns, targets, black offsets, noise.
+    pub problem: Problem,
+    /// Projector id → node ids.
+    pub owners: HashMap<String, Vec<u32>>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SimArgs {
+    /// Nodes of the synthetic room.
+    #[arg(long, default_value_t = 12)]
+    synthetic: usize,
+    /// Projectors (node agents) the nodes are split among.
+    #[arg(long, default_value_t = 3)]
+    projectors: usize,
+    /// Seed of the room and of the camera noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Camera noise, in multiples of the patch noise (0: noiseless).
+    #[arg(long, default_value_t = 0.0)]
+    noise: f64,
+    /// Address to serve on (port 0: any free port, printed).
+    #[arg(long, default_value = "127.0.0.1:50050")]
+    listen: String,
+    /// Where to write the room's model (the stand-in for calibration) for the camera agent.
+    #[arg(long)]
+    model_out: PathBuf,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraFile {
+    room: String,
+    token: String,
+    listen: String,
+    hardware: String,
+    model: PathBuf,
+    #[serde(default = "heartbeat_default")]
+    heartbeat_ms: u64,
+    #[serde(default = "deadline_default")]
+    deadline_ms: u64,
+    #[serde(default)]
+    model_rounds: usize,
+    #[serde(default = "epoch_default")]
+    calibration_epoch: u64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NodeFile {
+    room: String,
+    token: String,
+    camera: String,
+    hardware: String,
+    projector: String,
+    #[serde(default)]
+    state_file: Option<PathBuf>,
+    #[serde(default = "rule_default")]
+    rule: String,
+    #[serde(default = "theta_default")]
+    theta: f64,
+    #[serde(default = "start_default")]
+    start: f64,
+}
+
+fn heartbeat_default() -> u64 {
+    500
+}
+fn deadline_default() -> u64 {
+    2000
+}
+fn epoch_default() -> u64 {
+    1
+}
+fn rule_default() -> String {
+    "momentum".into()
+}
+fn theta_default() -> f64 {
+    1.0
+}
+fn start_default() -> f64 {
+    0.5
+}
+
+fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("{}: not a valid config", path.display()))
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the runtime")
+}
+
+fn init_logs() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+/// Cancels `token` on Ctrl-C or SIGTERM.
+fn stop_on_signals(token: CancellationToken) {
+    tokio::spawn(async move {
+        let ctrl_c = tokio::signal::ctrl_c();
+        #[cfg(unix)]
+        {
+            if let Ok(mut term) =
+                tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+            {
+                tokio::select! {
+                    _ = ctrl_c => {}
+                    _ = term.recv() => {}
+                }
+            } else {
+                let _ = ctrl_c.await;
+            }
+        }
+        #[cfg(not(unix))]
+        let _ = ctrl_c.await;
+        token.cancel();
+    });
+}
+
+fn announce(what: &str, addr: std::net::SocketAddr) {
+    println!("{what} listening on {addr}");
+    let _ = std::io::stdout().flush();
+}
+
+pub fn sim(args: &SimArgs) -> Result<()> {
+    init_logs();
+    if args.projectors == 0 || args.synthetic < args.projectors {
+        bail!(
+            "--projectors must be between 1 and --synthetic ({})",
+            args.synthetic
+        );
+    }
+    let problem = synthetic_room(&SyntheticConfig::new(args.synthetic, args.seed))?.problem;
+    let per = args.synthetic.div_ceil(args.projectors);
+    let owners: HashMap<String, Vec<u32>> = (0..args.projectors)
+        .map(|p| {
+            (
+                format!("p{p}"),
+                ((p * per) as u32..((p + 1) * per).min(args.synthetic) as u32).collect(),
+            )
+        })
+        .filter(|(_, nodes): &(String, Vec<u32>)| !nodes.is_empty())
+        .collect();
+    let model = ModelFile {
+        problem: problem.clone(),
+        owners,
+    };
+    let tmp = args.model_out.with_extension("tmp");
+    std::fs::write(&tmp, serde_json::to_string(&model)?)
+        .with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, &args.model_out)
+        .with_context(|| format!("writing {}", args.model_out.display()))?;
+    let plant = Plant::new(
+        problem,
+        PlantConfig {
+            noise_scale: args.noise,
+            seed: args.seed,
+            ..PlantConfig::default()
+        },
+    )?;
+    let room = VirtualRoom::new(plant);
+    runtime()?.block_on(async {
+        let listener = tokio::net::TcpListener::bind(&args.listen)
+            .await
+            .with_context(|| format!("binding {}", args.listen))?;
+        announce("sim", listener.local_addr()?);
+        let cancel = CancellationToken::new();
+        stop_on_signals(cancel.clone());
+        serve_hardware(room, listener, cancel).await?;
+        Ok(())
+    })
+}
+
+pub fn camera(path: &Path) -> Result<()> {
+    init_logs();
+    let file: CameraFile = read_toml(path)?;
+    let text = std::fs::read_to_string(&file.model)
+        .with_context(|| format!("reading the model {}", file.model.display()))?;
+    let model: ModelFile = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a room model", file.model.display()))?;
+    let problem = model
+        .problem
+        .revalidate()
+        .with_context(|| format!("{}: invalid model", file.model.display()))?;
+    for (p, nodes) in &model.owners {
+        if let Some(n) = nodes.iter().find(|&&n| n as usize >= problem.nodes()) {
+            bail!(
+                "{}: projector {p} owns node {n}, the model has {} nodes",
+                file.model.display(),
+                problem.nodes()
+            );
+        }
+    }
+    let config = CameraConfig {
+        room: file.room,
+        token: file.token,
+        heartbeat: Duration::from_millis(file.heartbeat_ms.max(50)),
+        deadline: Duration::from_millis(file.deadline_ms.max(10)),
+        model_rounds: file.model_rounds,
+        calibration_epoch: file.calibration_epoch,
+    };
+    runtime()?.block_on(async {
+        let camera = RemoteCamera::connect(file.hardware.clone()).await.with_context(|| format!("connecting to the camera at {}", file.hardware))?;
+        let listener = tokio::net::TcpListener::bind(&file.listen).await.with_context(|| format!("binding {}", file.listen))?;
+        announce("camera", listener.local_addr()?);
+        let cancel = CancellationToken::new();
+        stop_on_signals(cancel.clone());
+        let (mut status, handle) = camera::serve(config, RoomModel { problem, owners: model.owners }, camera, listener, cancel.clone());
+        loop {
+            tokio::select! {
+                () = cancel.cancelled() => break,
+                changed = status.changed() => {
+                    if changed.is_err() {
+                        break;
+                    }
+                    let s = status.borrow().clone();
+                    println!("round {} captures {} objective {:.6e} live {}", s.round, s.captures, s.measured_objective, s.live_projectors);
+                    let _ = std::io::stdout().flush();
+                }
+            }
+        }
+        handle.await.context("the camera agent task")??;
+        Ok(())
+    })
+}
+
+pub fn node(path: &Path) -> Result<()> {
+    init_logs();
+    let file: NodeFile = read_toml(path)?;
+    let rule = match file.rule.as_str() {
+        "safe" => StepRule::Safe { theta: file.theta },
+        "momentum" => StepRule::Momentum { theta: file.theta },
+        "paper" => StepRule::paper(),
+        other => bail!(
+            "{}: rule {other:?}, expected safe, momentum or paper",
+            path.display()
+        ),
+    };
+    rule.validate()
+        .with_context(|| format!("{}: theta", path.display()))?;
+    if !(0.0..=1.0).contains(&file.start) {
+        bail!(
+            "{}: start {}, expected a value in [0, 1]",
+            path.display(),
+            file.start
+        );
+    }
+    runtime()?.block_on(async {
+        let cancel = CancellationToken::new();
+        stop_on_signals(cancel.clone());
+        let display = RemoteDisplay::connect(file.hardware.clone(), cancel.clone())
+            .await
+            .with_context(|| format!("connecting to the display at {}", file.hardware))?;
+        let config = NodeConfig {
+            endpoint: file.camera,
+            room: file.room,
+            token: file.token,
+            projector_id: file.projector,
+            rule,
+            start: LinearRgb::splat(file.start),
+            state_file: file.state_file,
+        };
+        node::run(config, display, cancel).await?;
+        Ok(())
+    })
+}
