@@ -102,6 +102,77 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         to(&paper),
         to(&trace)
     );
+    agents_over_grpc(problem, &best, args)?;
     println!("demo finished in {:.2} s", t0.elapsed().as_secs_f64());
     Ok(())
+}
+
+/// The same room run by the real agents: a camera agent and one node agent per ten nodes, in
+/// this process, talking gRPC over loopback; the virtual room stands in for displays and camera.
+fn agents_over_grpc(
+    problem: &roomlight_core::Problem,
+    best: &roomlight_core::optimum::Optimum,
+    args: &DemoArgs,
+) -> Result<()> {
+    use roomlight_agent::camera::{self, CameraConfig, RoomModel};
+    use roomlight_agent::hardware::VirtualRoom;
+    use roomlight_agent::node::{self, NodeConfig};
+    use std::collections::HashMap;
+    use std::time::Duration;
+    use tokio_util::sync::CancellationToken;
+    let per = 10;
+    let agents = problem.nodes().div_ceil(per);
+    let owners: HashMap<String, Vec<u32>> = (0..agents)
+        .map(|a| {
+            (
+                format!("p{a}"),
+                ((a * per) as u32..((a + 1) * per).min(problem.nodes()) as u32).collect(),
+            )
+        })
+        .collect();
+    let plant = Plant::new(
+        problem.clone(),
+        PlantConfig {
+            noise_scale: 1.0,
+            seed: args.seed,
+            ..PlantConfig::default()
+        },
+    )?;
+    let room = VirtualRoom::new(plant);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+        let endpoint = format!("http://{}", listener.local_addr()?);
+        let cancel = CancellationToken::new();
+        let config = CameraConfig { room: "demo".into(), token: "demo".into(), heartbeat: Duration::from_millis(500), deadline: Duration::from_secs(2), model_rounds: 5, calibration_epoch: 1 };
+        let (mut status, _handle) = camera::serve(config, RoomModel { problem: problem.clone(), owners: owners.clone() }, room.camera(), listener, cancel.clone());
+        for id in owners.keys() {
+            let config = NodeConfig { endpoint: endpoint.clone(), room: "demo".into(), token: "demo".into(), projector_id: id.clone(), rule: StepRule::Momentum { theta: 1.0 }, start: LinearRgb::splat(0.5), state_file: None };
+            tokio::spawn(node::run(config, room.display(), cancel.child_token()));
+        }
+        println!("the real agents over loopback gRPC: a camera agent and {agents} node agents (model rounds K = 5, camera noise on)");
+        let flat = vec![LinearRgb::splat(0.5); problem.nodes()];
+        println!("  start (every node at 0.5): true excess {:.2e}", best.excess(problem.objective(&flat)));
+        let started = Instant::now();
+        let mut last = 0;
+        let outcome = tokio::time::timeout(Duration::from_secs(60), async {
+            while last < 6 {
+                status.changed().await?;
+                let s = status.borrow().clone();
+                if s.captures > last && s.live_projectors == agents {
+                    last = s.captures;
+                    println!("  after capture {:>2} and its model rounds: {} node agents, true excess {:.2e}", s.captures, s.live_projectors, best.excess(room.true_objective()));
+                }
+            }
+            Ok::<_, anyhow::Error>(())
+        })
+        .await;
+        cancel.cancel();
+        outcome.context("the agents did not converge within 60 s")??;
+        println!("agents: final excess {:.2e} after {last} captures in {:.2} s", best.excess(room.true_objective()), started.elapsed().as_secs_f64());
+        Ok(())
+    })
 }

@@ -80,6 +80,17 @@ fn demo_quick_converges_and_says_so() {
         .and_then(|s| s.parse().ok())
         .unwrap_or_else(|| panic!("no excess in {line}"));
     assert!(excess < 1e-2, "{line}");
+    // The same room through the real agents over loopback gRPC.
+    let agents = stdout
+        .lines()
+        .find(|l| l.starts_with("agents: final excess"))
+        .unwrap_or_else(|| panic!("no agents line in\n{stdout}"));
+    let excess: f64 = agents
+        .split_whitespace()
+        .nth(3)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no excess in {agents}"));
+    assert!(excess < 1e-2, "{agents}");
 }
 
 #[test]
