@@ -201,3 +201,67 @@ pub fn ring_node(
         weights: grown.into_iter().map(|b| f32::from(u8::from(b))).collect(),
     })
 }
+
+/// Shapes the ring node so that one level fills the ring evenly: its weight at each texture
+/// pixel is the light the cone mask removed there (`missing`, per camera pixel: a capture with
+/// the large aperture unmasked minus one with it masked) over the texture projector's own light
+/// there (`gain`, per camera pixel: texture at white minus black), scaled so the largest is 1.
+/// Texture pixels of the ring that no camera pixel measures take the mean ratio.
+pub fn shape_ring(
+    node: &mut Node,
+    texture: &Correspondence,
+    missing: &[f32],
+    gain: &[f32],
+) -> Result<(), CalibError> {
+    if missing.len() != texture.map.len() || gain.len() != texture.map.len() {
+        return Err(CalibError::Invalid {
+            field: "ring",
+            problem: "measurements do not match the camera".into(),
+        });
+    }
+    let tw = texture.projector_width as usize;
+    let mut sum = vec![0.0f64; node.weights.len()];
+    let mut count = vec![0u32; node.weights.len()];
+    for (i, m) in texture.map.iter().enumerate() {
+        if let Some((x, y)) = m {
+            let p = *y as usize * tw + *x as usize;
+            // Where the texture projector gives (almost) no light the ratio means nothing.
+            if node.weights[p] > 0.0 && gain[i] > 1e-6 {
+                sum[p] += f64::from((missing[i] / gain[i]).max(0.0));
+                count[p] += 1;
+            }
+        }
+    }
+    let measured: Vec<f64> = sum
+        .iter()
+        .zip(&count)
+        .filter(|(_, c)| **c > 0)
+        .map(|(s, c)| s / f64::from(*c))
+        .collect();
+    if measured.is_empty() {
+        return Err(CalibError::Invalid {
+            field: "ring",
+            problem: "no camera pixel measures the ring".into(),
+        });
+    }
+    let mean = measured.iter().sum::<f64>() / measured.len() as f64;
+    let ratio: Vec<f64> = (0..node.weights.len())
+        .map(|p| {
+            if node.weights[p] <= 0.0 {
+                0.0
+            } else if count[p] > 0 {
+                sum[p] / f64::from(count[p])
+            } else {
+                mean
+            }
+        })
+        .collect();
+    let top = ratio.iter().copied().fold(0.0, f64::max);
+    // All-zero ratios (nothing missing): the node stays as it is.
+    if top > 0.0 {
+        for (w, r) in node.weights.iter_mut().zip(&ratio) {
+            *w = (r / top) as f32;
+        }
+    }
+    Ok(())
+}

@@ -4,7 +4,7 @@
 mod common;
 
 use common::{decode_projector, small_scene};
-use roomlight_calib::cone::{Sphere, ThinLens, cone_mask, ring_node};
+use roomlight_calib::cone::{Sphere, ThinLens, cone_mask, ring_node, shape_ring};
 use roomlight_calib::graycode::{Coding, DecodeConfig};
 use roomlight_sim::{Frame, ProjectorImage, Room};
 
@@ -88,7 +88,7 @@ fn the_cone_mask_keeps_the_target_dark_and_the_ring_goes_to_the_texture_projecto
     let large = decode_projector(&room, area, Coding::Gray, &DecodeConfig::strict(), 70);
     let tex = decode_projector(&room, texture, Coding::Xor04, &DecodeConfig::default(), 71);
     let target: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let node = ring_node(&large, &mask, &target, &tex, texture, 0, 2).expect("ring node");
+    let mut node = ring_node(&large, &mask, &target, &tex, texture, 0, 2).expect("ring node");
     let truth = room.true_correspondence(texture);
     let (mut ring, mut covered) = (0, 0);
     for i in 0..target.len() {
@@ -107,4 +107,92 @@ fn the_cone_mask_keeps_the_target_dark_and_the_ring_goes_to_the_texture_projecto
         ring > 20 && covered as f64 >= 0.9 * ring as f64,
         "ring {ring}, covered {covered}"
     );
+    // The ring is lit again: the area projector without the cone mask is the reference level
+    // there; with the mask, the texture projector's ring node at one level x fills it in.
+    // x is fitted on the ring's mean; the check is that the whole ring comes back evenly.
+    let (tw, th) = (
+        room.projectors()[texture].pinhole.width,
+        room.projectors()[texture].pinhole.height,
+    );
+    let n = room.projectors().len();
+    let unmasked = vec![false; mask.len()];
+    let render = |masked: bool, x: f32| {
+        let mut frames = vec![Frame::Black; n];
+        frames[area] = frame(if masked { &mask } else { &unmasked });
+        frames[texture] = Frame::Linear(ProjectorImage {
+            width: tw,
+            height: th,
+            pixels: node.weights.iter().map(|&w| [w * x; 3]).collect(),
+        });
+        room.render(&frames, None).expect("render")
+    };
+    let ring_pixels: Vec<usize> = (0..target.len())
+        .filter(|&i| {
+            large.map[i].is_some_and(|(x, y)| mask[(y * w + x) as usize])
+                && !target[i]
+                && truth[i].is_some_and(|p| node.weights[p as usize] > 0.0)
+        })
+        .collect();
+    let mean = |c: &roomlight_sim::Capture| {
+        ring_pixels
+            .iter()
+            .map(|&i| f64::from(c.pixels[i][1]))
+            .sum::<f64>()
+            / ring_pixels.len() as f64
+    };
+    let reference = render(false, 0.0);
+    let dark = render(true, 0.0);
+    // Shape the ring node from two measurements: the light the mask removed, and the texture
+    // projector's own light (its ring node at white over black).
+    let missing: Vec<f32> = reference
+        .pixels
+        .iter()
+        .zip(&dark.pixels)
+        .map(|(a, b)| a[1] - b[1])
+        .collect();
+    let full_binary = render(true, 1.0);
+    let gain: Vec<f32> = full_binary
+        .pixels
+        .iter()
+        .zip(&dark.pixels)
+        .map(|(a, b)| a[1] - b[1])
+        .collect();
+    shape_ring(&mut node, &tex, &missing, &gain).expect("shaped");
+    let render = |masked: bool, x: f32| {
+        let mut frames = vec![Frame::Black; n];
+        frames[area] = frame(if masked { &mask } else { &unmasked });
+        frames[texture] = Frame::Linear(ProjectorImage {
+            width: tw,
+            height: th,
+            pixels: node.weights.iter().map(|&w| [w * x; 3]).collect(),
+        });
+        room.render(&frames, None).expect("render")
+    };
+    let full = render(true, 1.0);
+    let (want, base, gain) = (mean(&reference), mean(&dark), mean(&full) - mean(&dark));
+    assert!(
+        base < 0.9 * want,
+        "the cone mask must darken the ring: {base} vs {want}"
+    );
+    let x = ((want - base) / gain).clamp(0.0, 1.0) as f32;
+    let relit = render(true, x);
+    let within = ring_pixels
+        .iter()
+        .filter(|&&i| {
+            (f64::from(relit.pixels[i][1]) / f64::from(reference.pixels[i][1]) - 1.0).abs() <= 0.1
+        })
+        .count();
+    let share = within as f64 / ring_pixels.len() as f64;
+    println!(
+        "ring relit with x = {x:.3}: {:.0}% of its pixels within 10% of the unmasked light (mean {:.4} vs {:.4})",
+        100.0 * share,
+        mean(&relit),
+        want
+    );
+    assert!(
+        (mean(&relit) / want - 1.0).abs() <= 0.1,
+        "ring mean {} vs {want}",
+        mean(&relit)
+    );
+    assert!(share >= 0.8, "only {share} of the ring within 10%");
 }
