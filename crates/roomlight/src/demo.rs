@@ -17,12 +17,56 @@ pub struct DemoArgs {
     /// A smaller room (for tests).
     #[arg(long)]
     pub quick: bool,
+    /// The synthetic-room comparison of update rules instead of the simulated lab.
+    #[arg(long)]
+    pub synthetic: bool,
     /// Seed of the synthetic room and the camera noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
 }
 
 pub fn run(args: &DemoArgs) -> Result<()> {
+    if args.synthetic {
+        return synthetic(args);
+    }
+    let t0 = Instant::now();
+    let mut scene = if args.quick {
+        roomlight_sim::scenes::small()?
+    } else {
+        roomlight_sim::scenes::lab()?
+    };
+    if args.quick {
+        // Enough camera pixels per chart patch.
+        scene.camera.resolution = [640, 480];
+    }
+    let name = scene.name.clone();
+    let room =
+        roomlight_sim::Room::build(scene).with_context(|| format!("building the {name} room"))?;
+    println!(
+        "{name}: simulated room built in {:.1} s ({} projectors, {} charts)",
+        t0.elapsed().as_secs_f64(),
+        room.projectors().len(),
+        room.geometry().charts.len()
+    );
+    let preset = 0;
+    let preset_name = room
+        .scene()
+        .presets
+        .first()
+        .map_or("none".to_string(), |p| p.name.clone());
+    let mut noise = roomlight_sim::CameraNoise::new(&room);
+    let cal = crate::pipeline::calibrate(&room, preset, &mut noise, |line| println!("{line}"))?;
+    println!(
+        "calibration: {} captures; target: LED preset {preset_name}",
+        cal.captures
+    );
+    crate::pipeline::run_agents(&room, preset, &cal, |line| println!("{line}"))?;
+    println!("demo finished in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// The synthetic-room comparison: the in-memory loop against the paper's rule, then the agents.
+fn synthetic(args: &DemoArgs) -> Result<()> {
     let t0 = Instant::now();
     let nodes = if args.quick { 25 } else { 100 };
     let room = synthetic_room(&SyntheticConfig::new(nodes, args.seed))

@@ -6,6 +6,7 @@ mod bench_net;
 mod bench_sim;
 mod demo;
 mod graycode_cmd;
+mod pipeline;
 mod procs;
 
 use anyhow::Result;

@@ -66,9 +66,37 @@ fn bench_core_quick_writes_every_rule_and_case() {
     }
 }
 
+/// The whole method on the small simulated room: calibration from captures, then the agents;
+/// the result must beat the conventional start in true ΔE00 and come near the true optimum.
 #[test]
-fn demo_quick_converges_and_says_so() {
+fn demo_quick_calibrates_and_lights_the_room_better_than_the_conventional_start() {
     let stdout = roomlight(&["demo", "--quick"]);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("agents over loopback gRPC"))
+        .unwrap_or_else(|| panic!("no agents line in\n{stdout}"));
+    let number_after = |text: &str, key: &str| -> f64 {
+        text.split(key)
+            .nth(1)
+            .and_then(|s| s.split_whitespace().next())
+            .map(|s| s.trim_end_matches([',', ';', ')']))
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("no {key:?} in {text}"))
+    };
+    let de = number_after(line, "true mean ΔE00 ");
+    let conventional = number_after(line, "conventional start ");
+    assert!(de < 0.5 * conventional, "{line}");
+    let truth = stdout
+        .lines()
+        .find(|l| l.starts_with("against the truth"))
+        .unwrap_or_else(|| panic!("no truth line in\n{stdout}"));
+    // Typically 1.5e-2; a loaded machine changes the interleaving of rounds and noise draws.
+    assert!(number_after(truth, "true optimum ") < 0.25, "{truth}");
+}
+
+#[test]
+fn demo_synthetic_quick_converges_and_says_so() {
+    let stdout = roomlight(&["demo", "--synthetic", "--quick"]);
     let line = stdout
         .lines()
         .find(|l| l.starts_with("distributed result"))
