@@ -1,6 +1,6 @@
-//! `roomlight demo`, as far as it goes today: a synthetic room (no rendering yet) lit by the
-//! distributed node updates from the conventional start, measured against the exact optimum.
-//! The simulated room, calibration and the real agents replace the synthetic parts as they land.
+//! `roomlight demo`: the whole method on the simulated lab (calibration from captures, then the
+//! real agents over loopback gRPC; see `crate::pipeline`), or with `--synthetic` the comparison of
+//! update rules on a synthetic room against the exact optimum. The report of issue 6 builds on it.
 
 use anyhow::{Context, Result};
 use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
