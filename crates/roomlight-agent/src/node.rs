@@ -347,7 +347,8 @@ async fn session(
                 let done = applied.entry(e.round).or_insert(0);
                 *done += 1;
                 if *done == nodes.len() {
-                    applied.remove(&e.round);
+                    // This round is complete; rounds before it will never be.
+                    applied.retain(|r, _| *r > e.round);
                     keeper.maybe(*epoch, memory);
                     send(
                         &tx,

@@ -116,13 +116,14 @@ fn the_cone_mask_keeps_the_target_dark_and_the_ring_goes_to_the_texture_projecto
     );
     let n = room.projectors().len();
     let unmasked = vec![false; mask.len()];
-    let render = |masked: bool, x: f32| {
+    // The area projector (cone-masked or not) and the texture projector's ring node at level x.
+    let render = |masked: bool, weights: &[f32], x: f32| {
         let mut frames = vec![Frame::Black; n];
         frames[area] = frame(if masked { &mask } else { &unmasked });
         frames[texture] = Frame::Linear(ProjectorImage {
             width: tw,
             height: th,
-            pixels: node.weights.iter().map(|&w| [w * x; 3]).collect(),
+            pixels: weights.iter().map(|&w| [w * x; 3]).collect(),
         });
         room.render(&frames, None).expect("render")
     };
@@ -140,8 +141,8 @@ fn the_cone_mask_keeps_the_target_dark_and_the_ring_goes_to_the_texture_projecto
             .sum::<f64>()
             / ring_pixels.len() as f64
     };
-    let reference = render(false, 0.0);
-    let dark = render(true, 0.0);
+    let reference = render(false, &node.weights, 0.0);
+    let dark = render(true, &node.weights, 0.0);
     // Shape the ring node from two measurements: the light the mask removed, and the texture
     // projector's own light (its ring node at white over black).
     let missing: Vec<f32> = reference
@@ -150,7 +151,7 @@ fn the_cone_mask_keeps_the_target_dark_and_the_ring_goes_to_the_texture_projecto
         .zip(&dark.pixels)
         .map(|(a, b)| a[1] - b[1])
         .collect();
-    let full_binary = render(true, 1.0);
+    let full_binary = render(true, &node.weights, 1.0);
     let gain: Vec<f32> = full_binary
         .pixels
         .iter()
@@ -158,24 +159,14 @@ fn the_cone_mask_keeps_the_target_dark_and_the_ring_goes_to_the_texture_projecto
         .map(|(a, b)| a[1] - b[1])
         .collect();
     shape_ring(&mut node, &tex, &missing, &gain).expect("shaped");
-    let render = |masked: bool, x: f32| {
-        let mut frames = vec![Frame::Black; n];
-        frames[area] = frame(if masked { &mask } else { &unmasked });
-        frames[texture] = Frame::Linear(ProjectorImage {
-            width: tw,
-            height: th,
-            pixels: node.weights.iter().map(|&w| [w * x; 3]).collect(),
-        });
-        room.render(&frames, None).expect("render")
-    };
-    let full = render(true, 1.0);
+    let full = render(true, &node.weights, 1.0);
     let (want, base, gain) = (mean(&reference), mean(&dark), mean(&full) - mean(&dark));
     assert!(
         base < 0.9 * want,
         "the cone mask must darken the ring: {base} vs {want}"
     );
     let x = ((want - base) / gain).clamp(0.0, 1.0) as f32;
-    let relit = render(true, x);
+    let relit = render(true, &node.weights, x);
     let within = ring_pixels
         .iter()
         .filter(|&&i| {

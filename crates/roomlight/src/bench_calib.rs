@@ -2,7 +2,7 @@
 //! simulator's true correspondence, and the cost of decoding. Timings are printed, not asserted.
 
 use anyhow::{Context, Result};
-use roomlight_calib::charts::{ChartCorners, PatchStatus, SampleConfig, sample_charts};
+use roomlight_calib::charts::{PatchStatus, SampleConfig, sample_charts};
 use roomlight_calib::graycode::{
     Coding, Correspondence, DecodeConfig, Manifest, decode, group_disjoint,
 };
@@ -280,17 +280,7 @@ pub fn run(quick: bool) -> Result<()> {
         }
     }
     // Charts and nodes on the same room.
-    let charts: Vec<ChartCorners> = room
-        .chart_corners_px()
-        .into_iter()
-        .zip(&room.scene().charts)
-        .filter_map(|(c, spec)| {
-            c.map(|corners| ChartCorners {
-                name: spec.name.clone(),
-                corners,
-            })
-        })
-        .collect();
+    let charts = crate::pipeline::chart_corners(&room)?;
     let preset = room
         .scene()
         .presets

@@ -36,6 +36,22 @@ fn image(c: &roomlight_sim::Capture) -> LinearImage {
     }
 }
 
+/// The charts' corners in the camera image, as configured for a real room (here from the
+/// simulator's camera model); a chart out of view is an error, not skipped.
+pub fn chart_corners(room: &Room) -> Result<Vec<ChartCorners>> {
+    room.chart_corners_px()
+        .into_iter()
+        .zip(&room.scene().charts)
+        .map(|(c, spec)| {
+            c.map(|corners| ChartCorners {
+                name: spec.name.clone(),
+                corners,
+            })
+            .with_context(|| format!("chart {} is not in the camera's view", spec.name))
+        })
+        .collect()
+}
+
 /// The result of calibrating a room.
 pub struct Calibrated {
     /// The measured model over the usable patches.
@@ -58,18 +74,7 @@ pub fn calibrate(
     mut say: impl FnMut(String),
 ) -> Result<Calibrated> {
     let n = room.projectors().len();
-    let charts: Vec<ChartCorners> = room
-        .chart_corners_px()
-        .into_iter()
-        .zip(&room.scene().charts)
-        .map(|(c, spec)| {
-            c.map(|corners| ChartCorners {
-                name: spec.name.clone(),
-                corners,
-            })
-            .with_context(|| format!("chart {} is not in the camera's view", spec.name))
-        })
-        .collect::<Result<_>>()?;
+    let charts = chart_corners(room)?;
     let luminaires: Vec<usize> = (0..n)
         .filter(|&k| {
             room.scene().projectors[k].role == ProjectorRole::Luminaire
