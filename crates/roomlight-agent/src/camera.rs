@@ -99,6 +99,8 @@ struct Shared {
     contributions: mpsc::Sender<Contribution>,
     bytes_out: AtomicU64,
     bytes_in: AtomicU64,
+    /// Cancelled when the camera agent stops: ends every node's reader.
+    cancel: CancellationToken,
 }
 
 impl Shared {
@@ -245,7 +247,11 @@ async fn read_node(
 ) {
     let silence = 3 * shared.config.heartbeat;
     loop {
-        let next = match tokio::time::timeout(silence, inbound.next()).await {
+        let next = tokio::select! {
+            () = shared.cancel.cancelled() => break,
+            next = tokio::time::timeout(silence, inbound.next()) => next,
+        };
+        let next = match next {
             Err(_) => {
                 tracing::warn!(%projector, "no heartbeat: leaves");
                 break;
@@ -464,6 +470,7 @@ pub fn serve(
         contributions: contrib_tx,
         bytes_out: AtomicU64::new(0),
         bytes_in: AtomicU64::new(0),
+        cancel: cancel.clone(),
     });
     let (status_tx, status_rx) = watch::channel(RoomStatus::default());
     let server_cancel = cancel.clone();
@@ -547,10 +554,29 @@ pub fn serve(
                 });
             }
         };
+        tokio::pin!(server);
         tokio::select! {
-            result = server => result.map_err(crate::AgentError::from),
-            () = rounds => Ok(()),
-            () = cancel.cancelled() => Ok(()),
+            result = &mut server => return result.map_err(crate::AgentError::from),
+            () = rounds => {}
+            () = cancel.cancelled() => {}
+        }
+        // Stopping: say goodbye and end every node's stream, so the node agents reconnect to
+        // whichever camera agent comes next instead of waiting on a stream nobody writes to.
+        let peers: Vec<Peer> = shared.registry().peers.drain().map(|(_, p)| p).collect();
+        for peer in peers {
+            let _ = peer
+                .tx
+                .try_send(room_message(v1::room_message::Body::Goodbye(v1::Goodbye {
+                    reason: "the camera agent is stopping".into(),
+                })));
+        }
+        // The server's graceful shutdown now only waits for the streams to drain.
+        match tokio::time::timeout(Duration::from_secs(2), server).await {
+            Ok(result) => result.map_err(crate::AgentError::from),
+            Err(_) => {
+                tracing::warn!("connections still open 2 s after stopping: dropped");
+                Ok(())
+            }
         }
     });
     (status_rx, handle)

@@ -118,6 +118,21 @@ pub async fn run(
     mut display: impl Display,
     cancel: CancellationToken,
 ) -> Result<(), AgentError> {
+    // A malformed address cannot heal by retrying. HTTP/2 pings notice a camera host that
+    // vanished without closing the connection (power loss, cable pulled): the session ends and
+    // the agent reconnects, and the lights stay on meanwhile.
+    let endpoint = tonic::transport::Endpoint::from_shared(config.endpoint.clone())
+        .map_err(|e| {
+            AgentError::Protocol(format!(
+                "camera endpoint {:?}: {e}; expected an address like http://host:port",
+                config.endpoint
+            ))
+        })?
+        .connect_timeout(Duration::from_secs(5))
+        .http2_keep_alive_interval(Duration::from_secs(5))
+        .keep_alive_timeout(Duration::from_secs(10))
+        .keep_alive_while_idle(true)
+        .tcp_nodelay(true);
     // The last value each node showed: the start of the next session.
     let mut memory: HashMap<u32, LinearRgb> = HashMap::new();
     let mut epoch = 0;
@@ -140,6 +155,7 @@ pub async fn run(
     loop {
         let outcome = session(
             &config,
+            &endpoint,
             &mut display,
             &cancel,
             &mut memory,
@@ -209,13 +225,14 @@ impl Keeper {
 
 async fn session(
     config: &NodeConfig,
+    endpoint: &tonic::transport::Endpoint,
     display: &mut impl Display,
     cancel: &CancellationToken,
     memory: &mut HashMap<u32, LinearRgb>,
     epoch: &mut u64,
     keeper: &mut Keeper,
 ) -> Result<SessionEnd, AgentError> {
-    let mut client = v1::room_client::RoomClient::connect(config.endpoint.clone()).await?;
+    let mut client = v1::room_client::RoomClient::new(endpoint.connect().await?);
     let (tx, rx) = mpsc::channel(256);
     let send = |tx: &mpsc::Sender<v1::NodeMessage>, m| {
         let tx = tx.clone();
