@@ -3,7 +3,7 @@
 //! others; a wrong token is refused. Every wait has a deadline.
 
 use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
-use roomlight_agent::hardware::VirtualRoom;
+use roomlight_agent::hardware::{Camera, VirtualCamera, VirtualRoom};
 use roomlight_agent::node::{self, NodeConfig, SavedState};
 use roomlight_core::closed_loop::{Plant, PlantConfig};
 use roomlight_core::optimum::optimum;
@@ -41,14 +41,24 @@ struct Sandbox {
 impl Sandbox {
     /// A 12-node synthetic room owned by three projectors of four nodes each.
     async fn start(model_rounds: usize) -> Self {
+        Self::start_with(model_rounds, None, PlantConfig::default(), |c| c).await
+    }
+
+    /// The same room with a start handed out by the camera agent, a plant of one's own and the
+    /// camera wrapped by `wrap`.
+    async fn start_with<C: Camera + Send + 'static>(
+        model_rounds: usize,
+        start: Option<Vec<LinearRgb>>,
+        plant: PlantConfig,
+        wrap: impl FnOnce(VirtualCamera) -> C,
+    ) -> Self {
         let problem = synthetic_room(&SyntheticConfig::new(12, 4))
             .expect("room")
             .problem;
         let owners: HashMap<String, Vec<u32>> = (0..3)
             .map(|p| (format!("p{p}"), (4 * p..4 * p + 4).collect()))
             .collect();
-        let room =
-            VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
+        let room = VirtualRoom::new(Plant::new(problem.clone(), plant).expect("plant"));
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await
             .expect("bind");
@@ -69,8 +79,9 @@ impl Sandbox {
             RoomModel {
                 problem: problem.clone(),
                 owners: owners.clone(),
+                start: start.clone(),
             },
-            room.camera(),
+            wrap(room.camera()),
             listener,
             camera_cancel.clone(),
         );
@@ -108,6 +119,7 @@ impl Sandbox {
         let model = RoomModel {
             problem: self.problem.clone(),
             owners: self.owners.clone(),
+            start: None,
         };
         let (status, handle) = camera::serve(
             self.config.clone(),
@@ -510,4 +522,91 @@ async fn a_restarted_node_relights_from_its_state_file_before_it_reconnects() {
     std::fs::write(&state, "{not json").expect("write");
     let err = SavedState::load(&state).expect_err("corrupt");
     assert!(err.to_string().contains("p0.state.json"), "{err}");
+}
+
+/// Records every capture it passes on.
+struct Recording {
+    inner: VirtualCamera,
+    captures: std::sync::Arc<std::sync::Mutex<Vec<Vec<LinearRgb>>>>,
+}
+
+impl Camera for Recording {
+    async fn capture(&mut self) -> Result<Vec<LinearRgb>, roomlight_agent::AgentError> {
+        let y = self.inner.capture().await?;
+        self.captures
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(y.clone());
+        Ok(y)
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn nodes_start_from_the_camera_agents_start_and_the_room_reports_settled_at_the_noise_floor()
+{
+    // A start of the camera agent's own (as the conventional start would be), different per node.
+    let start: Vec<LinearRgb> = (0..12)
+        .map(|n| LinearRgb([0.1 + 0.05 * n as f64, 0.2, 0.9 - 0.05 * n as f64]))
+        .collect();
+    let captures = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let recorded = captures.clone();
+    let mut sb = Sandbox::start_with(
+        0,
+        Some(start.clone()),
+        PlantConfig {
+            noise_scale: 1.0,
+            seed: 3,
+            ..PlantConfig::default()
+        },
+        move |inner| Recording {
+            inner,
+            captures: recorded,
+        },
+    )
+    .await;
+    for p in ["p0", "p1", "p2"] {
+        sb.join(p);
+    }
+    let status = sb.wait(Duration::from_secs(60), |s| s.settled).await;
+    // The first capture saw the start (to within the camera noise), not the nodes' own 0.5.
+    let first = captures
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .first()
+        .cloned()
+        .expect("a capture");
+    let expected = sb.problem.response(&start);
+    let own_default = sb.problem.response(&vec![LinearRgb::splat(0.5); 12]);
+    let distance = |a: &[LinearRgb], b: &[LinearRgb]| -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (*x - *y).norm_squared())
+            .sum::<f64>()
+            .sqrt()
+    };
+    let noise = sb
+        .problem
+        .noise()
+        .iter()
+        .map(|s| s.norm_squared())
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        distance(&first, &expected) < 5.0 * noise,
+        "first capture {:.3e} from the start's response (noise {noise:.3e})",
+        distance(&first, &expected)
+    );
+    assert!(
+        distance(&own_default, &expected) > 10.0 * noise,
+        "the start must be told apart from 0.5: {:.3e} vs noise {noise:.3e}",
+        distance(&own_default, &expected)
+    );
+    // Settled means at the noise floor: close to the optimum, and reached in a few captures.
+    let excess = sb.excess(&sb.problem.clone());
+    assert!(excess < 1e-2, "settled with excess {excess}");
+    assert!(
+        status.captures >= 3 && status.captures < 60,
+        "settled after {} captures",
+        status.captures
+    );
 }

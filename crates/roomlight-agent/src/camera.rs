@@ -7,8 +7,9 @@
 use crate::hardware::Camera;
 use prost::Message;
 use roomlight_core::aggregator::{ErrorAggregator, ErrorKind, RoundSummary};
+use roomlight_core::closed_loop::objective_noise;
 use roomlight_core::{LinearRgb, Problem};
-use roomlight_proto::convert::{from_sparse, to_sparse};
+use roomlight_proto::convert::{from_sparse, to_rgb, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::collections::HashMap;
 use std::pin::Pin;
@@ -47,6 +48,9 @@ pub struct RoomModel {
     pub problem: Problem,
     /// Projector id → its node ids (indices of `problem`'s columns).
     pub owners: HashMap<String, Vec<u32>>,
+    /// Each node's start when it brings no value of its own (the conventional start); `None`:
+    /// the node agents' own default. Clamped to [0, 1]; a non-finite entry is not sent.
+    pub start: Option<Vec<LinearRgb>>,
 }
 
 /// What the round loop has done so far (for tests, logs and the demo).
@@ -64,6 +68,9 @@ pub struct RoomStatus {
     pub bytes_out: u64,
     /// Protobuf bytes received from node agents since the previous status.
     pub bytes_in: u64,
+    /// The measured `G` moved less than its noise (3√2 σ_G) over each of the last two captures
+    /// (DESIGN §3.6): further rounds only chase camera noise.
+    pub settled: bool,
 }
 
 #[derive(Debug)]
@@ -205,6 +212,13 @@ impl v1::room_server::Room for Service {
                     node: n,
                     p: Some(to_sparse(column.support(), column.values())),
                     s: Some(to_sparse(column.support(), &s)),
+                    start: shared
+                        .model
+                        .start
+                        .as_ref()
+                        .and_then(|v| v.get(n as usize))
+                        .filter(|x| x.is_finite())
+                        .map(|x| to_rgb(x.clamp_unit())),
                 },
             )));
         }
@@ -487,6 +501,8 @@ pub fn serve(
         let rounds = async {
             let mut aggregator = ErrorAggregator::new(shared.model.problem.patches());
             let mut captures = 0u64;
+            let mut previous: Option<f64> = None;
+            let mut quiet = 0u32;
             loop {
                 // Someone must be there, and have shown its last frame.
                 if !wait_for(&shared, Duration::from_secs(3600), |r| {
@@ -533,6 +549,19 @@ pub fn serve(
                 };
                 let mut round = summary.round;
                 let measured_objective = summary.objective;
+                let noise = objective_noise(aggregator.errors(), shared.model.problem.noise());
+                quiet = match previous {
+                    // A noiseless camera: settled when G stops changing to rounding.
+                    Some(g)
+                        if (measured_objective - g).abs()
+                            <= (3.0 * std::f64::consts::SQRT_2 * noise)
+                                .max(1e-12 * measured_objective.max(g)) =>
+                    {
+                        quiet + 1
+                    }
+                    _ => 0,
+                };
+                previous = Some(measured_objective);
                 let sent = broadcast(&shared, aggregator.errors(), &summary).await;
                 collect(&shared, &mut contrib_rx, &mut aggregator, round, sent).await;
                 for _ in 0..shared.config.model_rounds {
@@ -551,6 +580,7 @@ pub fn serve(
                     live_projectors,
                     bytes_out: shared.bytes_out.swap(0, Ordering::Relaxed),
                     bytes_in: shared.bytes_in.swap(0, Ordering::Relaxed),
+                    settled: quiet >= 2,
                 });
             }
         };

@@ -5,7 +5,7 @@
 use crate::AgentError;
 use crate::hardware::Display;
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState, StepRule};
-use roomlight_proto::convert::{from_sparse, to_sparse};
+use roomlight_proto::convert::{from_rgb, from_sparse, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -311,7 +311,24 @@ async fn session(
                 let (_, white) = from_sparse("attenuation s", s)
                     .map_err(|e| AgentError::Protocol(e.to_string()))?;
                 let column = AttenuationColumn::new(support, values)?;
-                let start = memory.get(&a.node).copied().unwrap_or(config.start);
+                // Its own last value, else the camera agent's start, else the configured one.
+                let offered = match a
+                    .start
+                    .as_ref()
+                    .map(|v| from_rgb("attenuation start", Some(v)))
+                    .transpose()
+                {
+                    Ok(v) => v.map(LinearRgb::clamp_unit),
+                    Err(e) => {
+                        tracing::warn!(node = a.node, error = %e, "malformed start: ignored");
+                        None
+                    }
+                };
+                let start = memory
+                    .get(&a.node)
+                    .copied()
+                    .or(offered)
+                    .unwrap_or(config.start);
                 let state = NodeState::new(column, &white, config.rule, start)?;
                 display.show(a.node, state.shown());
                 nodes.insert(a.node, state);

@@ -62,6 +62,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<()> {
         RoomModel {
             problem,
             owners: owners.clone(),
+            start: None,
         },
         room.camera(),
         listener,

@@ -366,6 +366,7 @@ pub fn run_agents(
             RoomModel {
                 problem: cal.problem.clone(),
                 owners: owners.clone(),
+                start: None,
             },
             hw.clone(),
             listener,
