@@ -2,6 +2,8 @@
 //! real agents over loopback gRPC; see `crate::pipeline`), or with `--synthetic` the comparison of
 //! update rules on a synthetic room against the exact optimum. The report of issue 6 builds on it.
 
+use crate::pipeline::{self, RunOptions};
+use crate::report::{self, PresetOutcome, Report, RuleOutcome};
 use anyhow::{Context, Result};
 use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
 use roomlight_core::conventional::conventional_start;
@@ -9,6 +11,7 @@ use roomlight_core::metrics::patch_delta_e;
 use roomlight_core::optimum::optimum;
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, StepRule};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Options of the demo.
@@ -23,6 +26,9 @@ pub struct DemoArgs {
     /// Seed of the synthetic room and the camera noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Where the report goes.
+    #[arg(long, default_value = "roomlight-report")]
+    pub out: std::path::PathBuf,
 }
 
 pub fn run(args: &DemoArgs) -> Result<()> {
@@ -42,27 +48,223 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let name = scene.name.clone();
     let room =
         roomlight_sim::Room::build(scene).with_context(|| format!("building the {name} room"))?;
-    println!(
-        "{name}: simulated room built in {:.1} s ({} projectors, {} charts)",
+    let mut calibration = vec![format!(
+        "simulated room built in {:.1} s ({} projectors, {} charts, camera {}×{})",
         t0.elapsed().as_secs_f64(),
         room.projectors().len(),
-        room.geometry().charts.len()
-    );
-    let preset = 0;
-    let preset_name = room
-        .scene()
-        .presets
-        .first()
-        .map_or("none".to_string(), |p| p.name.clone());
-    let mut noise = roomlight_sim::CameraNoise::new(&room);
-    let cal = crate::pipeline::calibrate(&room, preset, &mut noise, |line| println!("{line}"))?;
+        room.geometry().charts.len(),
+        room.scene().camera.resolution[0],
+        room.scene().camera.resolution[1],
+    )];
+    println!("{name}: {}", calibration[0]);
+    let dir = &args.out;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut noise = roomlight_sim::CameraNoise::with_seed(&room, args.seed);
+    let cal = pipeline::calibrate(&room, &mut noise, |line| {
+        println!("{line}");
+        calibration.push(line);
+    })?;
+    let t = Instant::now();
+    let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
+    let transport = pipeline::Transport::new(basis, &cal.corners)?;
     println!(
-        "calibration: {} captures; target: LED preset {preset_name}",
-        cal.captures
+        "simulated hardware: each node's light rendered once in {:.1} s",
+        t.elapsed().as_secs_f64()
     );
-    crate::pipeline::run_agents(&room, preset, &cal, |line| println!("{line}"))?;
-    println!("demo finished in {:.1} s", t0.elapsed().as_secs_f64());
+    let mut presets = Vec::new();
+    let mut rules = Vec::new();
+    let mut captures = cal.captures;
+    for (preset, spec) in room.scene().presets.iter().enumerate() {
+        let model = pipeline::measure_target(&room, &cal, preset, &mut noise)?;
+        captures += 1;
+        let truth = pipeline::Truth::new(&room, &transport, &model, preset)?;
+        let options = RunOptions::default_rule(args.seed + preset as u64);
+        let result = pipeline::run_agents(&room, &cal, &model, &transport, &truth, options)?;
+        let r = &result;
+        println!(
+            "{}: {} captures{}, mean ΔE00 {:.2} (max {:.2}), conventional start {:.2}, true optimum {:.2}; excess over G* {:.1e} (true {:.1e}), {:.1} s",
+            spec.name,
+            r.captures,
+            if r.settled {
+                " until settled"
+            } else {
+                " (cap)"
+            },
+            mean(&r.de00),
+            r.de00.iter().copied().fold(0.0, f64::max),
+            mean(&r.conventional_de00),
+            r.best_mean_de00,
+            r.final_excess,
+            r.true_excess,
+            r.seconds
+        );
+        let images = preset_images(&room, &cal, &model, &result, preset, &spec.name, dir)?;
+        if preset == 0 {
+            // The rules of DESIGN §3.2–§3.4 on the same target, from the same start.
+            let compared = [
+                ("paper (fixed ε)", StepRule::paper(), 0),
+                ("safe step", StepRule::Safe { theta: 1.0 }, 0),
+                ("momentum", StepRule::Momentum { theta: 1.0 }, 0),
+                (
+                    "momentum + 5 model rounds",
+                    StepRule::Momentum { theta: 1.0 },
+                    5,
+                ),
+                (
+                    "safe step + 20 model rounds",
+                    StepRule::Safe { theta: 1.0 },
+                    20,
+                ),
+                (
+                    "momentum + 20 model rounds (default)",
+                    StepRule::Momentum { theta: 1.0 },
+                    20,
+                ),
+            ];
+            // The same capture budget for every rule, whether or not it would have settled.
+            let budget = if args.quick { 30 } else { 60 };
+            for (label, rule, model_rounds) in compared {
+                let options = RunOptions {
+                    rule,
+                    model_rounds,
+                    max_captures: budget,
+                    stop_when_settled: false,
+                    seed: args.seed,
+                };
+                let result =
+                    pipeline::run_agents(&room, &cal, &model, &transport, &truth, options)?;
+                println!(
+                    "  rule {label}: {} captures, {:.2} s, true excess {:.1e}, mean ΔE00 {:.2}",
+                    result.captures,
+                    result.seconds,
+                    result.true_excess,
+                    mean(&result.de00)
+                );
+                rules.push(RuleOutcome {
+                    label: label.into(),
+                    result,
+                });
+            }
+        }
+        presets.push(PresetOutcome {
+            name: spec.name.clone(),
+            chart_of_patch: model
+                .patches
+                .iter()
+                .map(|&i| i / PATCHES_PER_CHART)
+                .collect(),
+            model,
+            result,
+            images,
+        });
+    }
+    let report = Report {
+        room: name,
+        seed: args.seed,
+        chart_names: room.scene().charts.iter().map(|c| c.name.clone()).collect(),
+        calibration,
+        calibration_captures: captures,
+        presets,
+        rules,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+    };
+    report::write(dir, &report)?;
+    println!(
+        "report: {} (demo finished in {:.1} s)",
+        dir.join("index.html").display(),
+        t0.elapsed().as_secs_f64()
+    );
     Ok(())
+}
+
+/// Patches per colour chart.
+const PATCHES_PER_CHART: usize = 24;
+
+fn mean(v: &[f64]) -> f64 {
+    // Empty: 0 (nothing measured).
+    if v.is_empty() {
+        0.0
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// Renders the room under the LEDs, at the conventional start and with the result (noiseless,
+/// the same exposure for the three), as tone-mapped sRGB PNGs with linear 16-bit ones beside.
+fn preset_images(
+    room: &roomlight_sim::Room,
+    cal: &pipeline::Calibrated,
+    model: &pipeline::Model,
+    result: &pipeline::RunResult,
+    preset: usize,
+    name: &str,
+    dir: &std::path::Path,
+) -> Result<[String; 3]> {
+    use roomlight_sim::Frame;
+    use roomlight_sim::room::PngEncoding;
+    let dark = vec![Frame::Black; room.projectors().len()];
+    let captures = [
+        room.render(&dark, Some(preset))?,
+        room.render(
+            &pipeline::frames_for_values(room, &cal.regions, &model.conventional),
+            None,
+        )?,
+        room.render(
+            &pipeline::frames_for_values(room, &cal.regions, &result.x),
+            None,
+        )?,
+    ];
+    // Exposure: the target's 99th percentile channel value maps to full scale.
+    let mut levels: Vec<f32> = captures[0]
+        .pixels
+        .iter()
+        .map(|p| p.iter().copied().fold(0.0, f32::max))
+        .collect();
+    levels.sort_by(f32::total_cmp);
+    let white = levels
+        .get(levels.len() * 99 / 100)
+        .copied()
+        .filter(|w| *w > 0.0)
+        .unwrap_or(1.0);
+    let slug: String = name
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
+        .collect();
+    let mut names = Vec::new();
+    for (capture, what) in captures.iter().zip(["target", "conventional", "result"]) {
+        let file = format!("{slug}-{what}.png");
+        capture.save_png(&dir.join(&file), PngEncoding::Srgb8, white)?;
+        capture.save_png(
+            &dir.join(format!("{slug}-{what}.linear16.png")),
+            PngEncoding::Linear16,
+            white,
+        )?;
+        names.push(file);
+    }
+    // The three side by side, small: the report's headline picture.
+    let thumbs = names
+        .iter()
+        .map(|file| {
+            let path = dir.join(file);
+            image::open(&path)
+                .with_context(|| format!("reading back {}", path.display()))
+                .map(|img| img.thumbnail(320, 240).to_rgb8())
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let (w, h) = thumbs
+        .iter()
+        .fold((0, 0), |(w, h), t| (w + t.width(), h.max(t.height())));
+    let mut strip = image::RgbImage::new(w, h);
+    let mut x = 0;
+    for t in &thumbs {
+        image::imageops::replace(&mut strip, t, i64::from(x), 0);
+        x += t.width();
+    }
+    let path = dir.join(format!("{slug}-strip.png"));
+    strip
+        .save(&path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok([names[0].clone(), names[1].clone(), names[2].clone()])
 }
 
 /// The synthetic-room comparison: the in-memory loop against the paper's rule, then the agents.

@@ -8,6 +8,7 @@ mod demo;
 mod graycode_cmd;
 mod pipeline;
 mod procs;
+mod report;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};

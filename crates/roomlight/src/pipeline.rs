@@ -2,15 +2,18 @@
 //! feathering, Hadamard attenuation and the LED target measured from noisy captures through the
 //! charts, then the real agents over loopback gRPC. The simulator is touched only through
 //! captures, except (1) the target mask, which a real room configures by hand, (2) projector
-//! frames in linear light (a real node inverts its measured response), and (3) the rounds use the
-//! node basis' patch values with the measured patch noise instead of rendering and sampling a
-//! full capture each round (the same numbers, faster).
+//! frames in linear light (a real node inverts its measured response), and (3) captures during
+//! the rounds are built from each node's light rendered once (light is linear, so this is the
+//! same image), then exposed with camera noise and sampled through the charts exactly as in
+//! calibration. Sampling matters: the simulator's own patch averages differ from what the chart
+//! sampling sees by enough to hold the loop 4–37% above the optimum, so the truth used for the
+//! metrics is the noiseless camera, sampled the same way.
 
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::{self, CameraConfig, RoomModel};
 use roomlight_agent::hardware::{Camera, Display};
 use roomlight_agent::node::{self, NodeConfig};
-use roomlight_calib::attenuation::{Scheme, plan, solve};
+use roomlight_calib::attenuation::{Attenuation, Scheme, plan, solve};
 use roomlight_calib::charts::{
     ChartCorners, PatchSample, PatchStatus, SampleConfig, sample_charts,
 };
@@ -52,39 +55,74 @@ pub fn chart_corners(room: &Room) -> Result<Vec<ChartCorners>> {
         .collect()
 }
 
-/// The result of calibrating a room.
+/// What calibration measured once for the room, whatever the lighting target.
 pub struct Calibrated {
-    /// The measured model over the usable patches.
-    pub problem: Problem,
     /// Each node's projector and weights (for the simulated hardware).
     pub regions: Vec<NodeRegion>,
-    /// Room patch index of each model patch.
-    pub patches: Vec<usize>,
-    /// Each node's own chart, in model patch ids.
-    pub charts: Vec<Vec<PatchId>>,
+    /// Each node's own chart (room chart index).
+    pub node_charts: Vec<usize>,
+    /// The charts' corners in the camera image.
+    pub corners: Vec<ChartCorners>,
+    /// Attenuation, black level and which patches it could measure.
+    pub attenuation: Attenuation,
+    /// Attenuation columns (entries within 3σ of zero dropped), over every room patch.
+    pub columns: Vec<Vec<(u32, LinearRgb)>>,
     /// Captures used.
     pub captures: usize,
 }
 
-/// Calibrates the standard luminaires of `room` against the LED preset `preset`.
+/// The model for one lighting target: the measured problem over the patches usable in every
+/// capture.
+pub struct Model {
+    /// Columns, black, target and noise over the usable patches.
+    pub problem: Problem,
+    /// Room patch index of each model patch.
+    pub patches: Vec<usize>,
+    /// The conventional start (DESIGN §3.1), one value per node.
+    pub conventional: Vec<LinearRgb>,
+}
+
+/// Node values as projector frames: each node's weights times its value, in linear light.
+pub fn frames_for_values(room: &Room, regions: &[NodeRegion], x: &[LinearRgb]) -> Vec<Frame> {
+    (0..room.projectors().len())
+        .map(|k| {
+            let p = &room.projectors()[k].pinhole;
+            let mut pixels = vec![[0.0f32; 3]; (p.width * p.height) as usize];
+            for (r, v) in regions.iter().zip(x).filter(|(r, _)| r.projector == k) {
+                for (px, w) in pixels.iter_mut().zip(&r.weights) {
+                    for (c, value) in px.iter_mut().zip(v.0) {
+                        *c += w * value as f32;
+                    }
+                }
+            }
+            Frame::Linear(ProjectorImage {
+                width: p.width,
+                height: p.height,
+                pixels,
+            })
+        })
+        .collect()
+}
+
+/// Calibrates the standard luminaires of `room`: structured light, nodes, black level and
+/// Hadamard attenuation, all from noisy captures through the charts.
 pub fn calibrate(
     room: &Room,
-    preset: usize,
     noise: &mut CameraNoise,
     mut say: impl FnMut(String),
 ) -> Result<Calibrated> {
     let n = room.projectors().len();
-    let charts = chart_corners(room)?;
+    let corners = chart_corners(room)?;
     let luminaires: Vec<usize> = (0..n)
         .filter(|&k| {
             room.scene().projectors[k].role == ProjectorRole::Luminaire
                 && room.projectors()[k].kind == ProjectorKind::Standard
         })
         .collect();
-    let mut captures = 0;
-    let mut shoot = |frames: &[Frame], preset: Option<usize>| -> Result<LinearImage> {
-        captures += 1;
-        Ok(image(&noise.expose(&room.render(frames, preset)?)))
+    let captures = std::cell::Cell::new(0usize);
+    let mut shoot = |frames: &[Frame]| -> Result<LinearImage> {
+        captures.set(captures.get() + 1);
+        Ok(image(&noise.expose(&room.render(frames, None)?)))
     };
     // 1. Structured light, one projector at a time.
     let t = Instant::now();
@@ -101,7 +139,7 @@ pub fn calibrate(
                 height: img.height,
                 pixels: img.pixels,
             });
-            caps.push(shoot(&frames, None)?);
+            caps.push(shoot(&frames)?);
         }
         corr.push(decode(&manifest, &DecodeConfig::default(), |f| {
             Ok(&caps[manifest
@@ -112,13 +150,15 @@ pub fn calibrate(
         })?);
     }
     say(format!(
-        "structured light: {} projectors decoded in {:.1} s",
+        "structured light: {} projectors decoded, {} captures, {:.1} s",
         luminaires.len(),
+        captures.get(),
         t.elapsed().as_secs_f64()
     ));
     // 2. Nodes.
+    let t = Instant::now();
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let seg = segment(&corr, &charts, Some(&mask), &SplitConfig::default())?;
+    let seg = segment(&corr, &corners, Some(&mask), &SplitConfig::default())?;
     let regions: Vec<NodeRegion> = seg
         .nodes
         .iter()
@@ -129,57 +169,65 @@ pub fn calibrate(
         .collect();
     let node_charts: Vec<usize> = seg.nodes.iter().map(|nd| nd.chart).collect();
     say(format!(
-        "nodes: {} over {} charts",
+        "nodes: {} over {} charts, {:.1} s",
         regions.len(),
-        charts.len()
+        corners.len(),
+        t.elapsed().as_secs_f64()
     ));
-    // 3. Black, attenuation (Hadamard) and the LED target, through the charts.
-    let frames_for = |on: &[bool]| -> Vec<Frame> {
-        (0..n)
-            .map(|k| {
-                let p = &room.projectors()[k].pinhole;
-                let mut pixels = vec![[0.0f32; 3]; (p.width * p.height) as usize];
-                for (r, _) in regions
-                    .iter()
-                    .zip(on)
-                    .filter(|(r, o)| **o && r.projector == k)
-                {
-                    for (px, w) in pixels.iter_mut().zip(&r.weights) {
-                        px.iter_mut().for_each(|c| *c += w);
-                    }
-                }
-                Frame::Linear(ProjectorImage {
-                    width: p.width,
-                    height: p.height,
-                    pixels,
-                })
-            })
-            .collect()
-    };
+    // 3. Black and attenuation (Hadamard), through the charts.
+    let t = Instant::now();
+    let before = captures.get();
     let config = SampleConfig::default();
     let nodes = regions.len();
-    let black = sample_charts(
-        &shoot(&frames_for(&vec![false; nodes]), None)?,
-        &charts,
-        &config,
-    )?;
+    let on_off = |on: &[bool]| {
+        let x: Vec<LinearRgb> = on
+            .iter()
+            .map(|&o| if o { LinearRgb::ONE } else { LinearRgb::ZERO })
+            .collect();
+        frames_for_values(room, &regions, &x)
+    };
+    let black = sample_charts(&shoot(&on_off(&vec![false; nodes]))?, &corners, &config)?;
     let rows = plan(nodes, Scheme::Hadamard);
     let mut measured: Vec<Vec<PatchSample>> = Vec::with_capacity(rows.len());
     for on in &rows {
-        measured.push(sample_charts(
-            &shoot(&frames_for(on), None)?,
-            &charts,
-            &config,
-        )?);
+        measured.push(sample_charts(&shoot(&on_off(on))?, &corners, &config)?);
     }
-    let att = solve(Scheme::Hadamard, nodes, &black, &measured)?;
-    let target = sample_charts(
-        &shoot(&vec![Frame::Black; n], Some(preset))?,
-        &charts,
-        &config,
-    )?;
-    // 4. The model over the patches measured everywhere.
-    let patches: Vec<usize> = (0..black.len())
+    let attenuation = solve(Scheme::Hadamard, nodes, &black, &measured)?;
+    let columns: Vec<Vec<(u32, LinearRgb)>> = attenuation
+        .columns(3.0)?
+        .iter()
+        .map(|c| c.iter().collect())
+        .collect();
+    say(format!(
+        "attenuation: {} captures (black + Hadamard), {} of {} patches usable, {:.1} s",
+        captures.get() - before,
+        attenuation.usable.iter().filter(|&&u| u).count(),
+        black.len(),
+        t.elapsed().as_secs_f64()
+    ));
+    Ok(Calibrated {
+        regions,
+        node_charts,
+        corners,
+        attenuation,
+        columns,
+        captures: captures.get(),
+    })
+}
+
+/// Captures the LED preset `preset` (projectors dark) and builds the model for it over the
+/// patches measured in every capture, with its conventional start.
+pub fn measure_target(
+    room: &Room,
+    cal: &Calibrated,
+    preset: usize,
+    noise: &mut CameraNoise,
+) -> Result<Model> {
+    let frames = vec![Frame::Black; room.projectors().len()];
+    let capture = image(&noise.expose(&room.render(&frames, Some(preset))?));
+    let target = sample_charts(&capture, &cal.corners, &SampleConfig::default())?;
+    let att = &cal.attenuation;
+    let patches: Vec<usize> = (0..target.len())
         .filter(|&i| att.usable[i] && target[i].status == PatchStatus::Ok)
         .collect();
     if patches.is_empty() {
@@ -190,81 +238,120 @@ pub fn calibrate(
         .enumerate()
         .map(|(k, &i)| (i, k as PatchId))
         .collect();
-    let full = att.columns(3.0)?;
-    let columns: Vec<AttenuationColumn> = full
+    let columns: Vec<AttenuationColumn> = cal
+        .columns
         .iter()
         .map(|c| {
             let (s, v): (Vec<PatchId>, Vec<LinearRgb>) = c
                 .iter()
-                .filter_map(|(i, p)| index.get(&(i as usize)).map(|&k| (k, p)))
+                .filter_map(|&(i, p)| index.get(&(i as usize)).map(|&k| (k, p)))
                 .unzip();
             AttenuationColumn::new(s, v)
         })
         .collect::<Result<_, _>>()?;
-    let pick = |v: &[LinearRgb]| patches.iter().map(|&i| v[i]).collect::<Vec<_>>();
     let problem = Problem::new(
         columns,
-        pick(&att.black),
+        patches.iter().map(|&i| att.black[i]).collect(),
         patches.iter().map(|&i| target[i].mean).collect(),
         patches.iter().map(|&i| target[i].std_error).collect(),
     )?;
-    let charts_of_nodes = node_charts
+    let per_chart = cal.corners.len().max(1);
+    let patches_per_chart = target.len() / per_chart;
+    let charts: Vec<Vec<PatchId>> = cal
+        .node_charts
         .iter()
         .map(|&m| {
-            (0..24)
-                .filter_map(|j| index.get(&(24 * m + j)).copied())
+            (0..patches_per_chart)
+                .filter_map(|j| index.get(&(patches_per_chart * m + j)).copied())
                 .collect()
         })
         .collect();
-    say(format!(
-        "attenuation: {} Hadamard captures, {} of {} patches usable, {:.1}% of the entries kept",
-        rows.len(),
-        patches.len(),
-        black.len(),
-        100.0 * problem.columns().iter().map(|c| c.len()).sum::<usize>() as f64
-            / (nodes * patches.len()).max(1) as f64
-    ));
-    Ok(Calibrated {
+    let conventional = problem
+        .columns()
+        .iter()
+        .zip(&charts)
+        .map(|(c, chart)| {
+            conventional_value(
+                c,
+                chart,
+                problem.target(),
+                problem.black(),
+                LinearRgb::splat(0.5),
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(Model {
         problem,
-        regions,
         patches,
-        charts: charts_of_nodes,
-        captures,
+        conventional,
     })
 }
 
-/// The simulated projectors and camera behind the agents: node values in, noisy patch values out.
+/// The simulated projectors and camera behind the agents: node values in; out, the chart
+/// patches sampled from a rendered capture with camera noise, exactly as calibration measured
+/// them (each node's light is rendered once, so a capture costs one linear combination).
 #[derive(Clone)]
 struct SimHardware {
     basis: Arc<NodeBasis>,
+    corners: Arc<Vec<ChartCorners>>,
     shown: Arc<Mutex<Vec<LinearRgb>>>,
     patches: Arc<Vec<usize>>,
-    sigma: Arc<Vec<LinearRgb>>,
-    rng: Arc<Mutex<u64>>,
+    noise: Arc<Mutex<CameraNoise>>,
+    /// Every capture: when, the values shown, the noisy patch values returned.
+    log: Arc<Mutex<Vec<CaptureLog>>>,
+}
+
+struct CaptureLog {
+    at: Instant,
+    shown: Vec<LinearRgb>,
+    measured: Vec<LinearRgb>,
+}
+
+/// The chart patches of a capture, every room patch.
+fn sample(capture: &roomlight_sim::Capture, corners: &[ChartCorners]) -> Result<Vec<LinearRgb>> {
+    Ok(
+        sample_charts(&image(capture), corners, &SampleConfig::default())?
+            .iter()
+            .map(|p| p.mean)
+            .collect(),
+    )
 }
 
 impl SimHardware {
-    fn true_values(&self) -> Vec<LinearRgb> {
-        let x = self
-            .shown
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone();
-        let all = self.basis.patch_values(&x);
+    fn pick(&self, all: &[LinearRgb]) -> Vec<LinearRgb> {
         self.patches.iter().map(|&i| all[i]).collect()
     }
 
-    /// A standard normal sample (Box–Muller on a 64-bit LCG; the noise only needs to be plausible).
-    fn normal(&self) -> f64 {
-        let mut s = self.rng.lock().unwrap_or_else(PoisonError::into_inner);
-        let mut next = || {
-            *s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((*s >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        };
-        let (u, v) = (next(), next());
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    /// What a noiseless camera would measure on the model's patches for node values `x`.
+    fn noiseless(&self, x: &[LinearRgb]) -> Result<Vec<LinearRgb>> {
+        Ok(self.pick(&sample(&self.basis.capture(x), &self.corners)?))
+    }
+
+    fn shown(&self) -> Vec<LinearRgb> {
+        self.shown
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    fn measure(&self) -> Result<Vec<LinearRgb>> {
+        let shown = self.shown();
+        let capture = self.basis.capture(&shown);
+        let noisy = self
+            .noise
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .expose(&capture);
+        let measured = self.pick(&sample(&noisy, &self.corners)?);
+        self.log
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(CaptureLog {
+                at: Instant::now(),
+                shown,
+                measured: measured.clone(),
+            });
+        Ok(measured)
     }
 }
 
@@ -285,59 +372,184 @@ impl Camera for SimHardware {
     fn capture(
         &mut self,
     ) -> impl Future<Output = Result<Vec<LinearRgb>, roomlight_agent::AgentError>> + Send {
-        let values = self.true_values();
-        let noisy = values
-            .iter()
-            .zip(self.sigma.iter())
-            .map(|(v, s)| {
-                LinearRgb(std::array::from_fn(|c| {
-                    (v[c] + s[c] * self.normal()).max(0.0)
-                }))
-            })
-            .collect();
-        std::future::ready(Ok(noisy))
+        std::future::ready(
+            self.measure()
+                .map_err(|e| roomlight_agent::AgentError::Protocol(format!("capture: {e:#}"))),
+        )
     }
 }
 
-/// Runs the agents on a calibrated room and reports true ΔE00 against the LED target.
+/// How the agents run for one target.
+#[derive(Debug, Clone, Copy)]
+pub struct RunOptions {
+    /// The node agents' update rule.
+    pub rule: StepRule,
+    /// Model rounds per capture (DESIGN §3.4).
+    pub model_rounds: usize,
+    /// Stop here if the camera agent has not reported settled before.
+    pub max_captures: u64,
+    /// Stop when the camera agent reports settled (DESIGN §3.6); otherwise run to
+    /// `max_captures` (to compare rules over the same budget).
+    pub stop_when_settled: bool,
+    /// Seed of the capture noise.
+    pub seed: u64,
+}
+
+impl RunOptions {
+    /// The default: FISTA momentum with restarts and twenty model rounds per capture, the
+    /// fastest combination on the demo rooms in captures and in wall time (`roomlight demo`
+    /// prints the comparison). The rounds wait for every node's acknowledgement, so the errors
+    /// are never stale and momentum keeps its guarantee.
+    pub fn default_rule(seed: u64) -> Self {
+        Self {
+            rule: StepRule::Momentum { theta: 1.0 },
+            model_rounds: 20,
+            max_captures: 60,
+            stop_when_settled: true,
+            seed,
+        }
+    }
+}
+
+/// The room after each capture's rounds, against the simulator's truth.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct TracePoint {
+    /// Captures taken (0: the conventional start, before any).
+    pub capture: u64,
+    /// Wall time since the agents started.
+    pub seconds: f64,
+    /// `(G − G*)/G*` of the measured model from the camera's capture of these values (noisy;
+    /// none for the final values, which no capture saw).
+    pub measured_excess: Option<f64>,
+    /// The same on the true problem for the values shown after this capture's rounds.
+    pub true_excess: f64,
+    /// True mean ΔE00 against the LED target for those values.
+    pub mean_de00: f64,
+}
+
+/// One run of the agents on one target.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    /// Captures until the camera agent settled (or the cap).
+    pub captures: u64,
+    /// Whether the camera agent reported settled (DESIGN §3.6) before the cap.
+    pub settled: bool,
+    /// Every capture's point, the conventional start first.
+    pub trace: Vec<TracePoint>,
+    /// The values the nodes show at the end.
+    pub x: Vec<LinearRgb>,
+    /// The measured model's `G` for them and its optimum `G*`.
+    pub g: f64,
+    /// The measured model's optimum.
+    pub g_star: f64,
+    /// `(G − G*)/G*` on the measured model.
+    pub final_excess: f64,
+    /// The same on the true problem.
+    pub true_excess: f64,
+    /// True ΔE00 per model patch at the end and at the conventional start.
+    pub de00: Vec<f64>,
+    /// True ΔE00 per model patch at the conventional start.
+    pub conventional_de00: Vec<f64>,
+    /// Mean ΔE00 the true optimum would reach (what the room allows).
+    pub best_mean_de00: f64,
+    /// Wall time of the run.
+    pub seconds: f64,
+}
+
+/// The room as a noiseless camera sees it through the charts: every node's light at full
+/// white and the black level, on every room patch. Measured once per calibration.
+pub struct Transport {
+    basis: Arc<NodeBasis>,
+    corners: Arc<Vec<ChartCorners>>,
+    black: Vec<LinearRgb>,
+    columns: Vec<Vec<LinearRgb>>,
+}
+
+impl Transport {
+    /// Renders each node alone at full white (and all black), noiselessly, and samples the charts.
+    pub fn new(basis: Arc<NodeBasis>, corners: &[ChartCorners]) -> Result<Self> {
+        let nodes = basis.nodes();
+        let black = sample(&basis.capture(&vec![LinearRgb::ZERO; nodes]), corners)?;
+        let columns = (0..nodes)
+            .map(|n| {
+                let mut x = vec![LinearRgb::ZERO; nodes];
+                x[n] = LinearRgb::ONE;
+                Ok(sample(&basis.capture(&x), corners)?
+                    .iter()
+                    .zip(&black)
+                    .map(|(a, b)| (*a - *b).map(|v| v.max(0.0)))
+                    .collect())
+            })
+            .collect::<Result<_>>()?;
+        Ok(Self {
+            basis,
+            corners: Arc::new(corners.to_vec()),
+            black,
+            columns,
+        })
+    }
+}
+
+/// The truth for one target on the model's patches, as a noiseless camera sees it.
+pub struct Truth {
+    /// The LED target.
+    pub target: Vec<LinearRgb>,
+    /// The true problem (true transport and target): its optimum is what the room could reach;
+    /// the measured model's optimum differs from it by the calibration's errors.
+    pub problem: Problem,
+}
+
+impl Truth {
+    /// The truth for `model`'s patches under `preset`.
+    pub fn new(room: &Room, transport: &Transport, model: &Model, preset: usize) -> Result<Self> {
+        let pick = |v: &[LinearRgb]| model.patches.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let target = pick(&sample(
+            &room.render(&vec![Frame::Black; room.projectors().len()], Some(preset))?,
+            &transport.corners,
+        )?);
+        let columns = transport
+            .columns
+            .iter()
+            .map(|c| {
+                let dense = pick(c);
+                AttenuationColumn::from_dense_with_cutoff(
+                    &dense,
+                    &vec![LinearRgb::ZERO; dense.len()],
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let problem = Problem::new(
+            columns,
+            pick(&transport.black),
+            target.clone(),
+            model.problem.noise().to_vec(),
+        )?;
+        Ok(Self { target, problem })
+    }
+}
+
+/// Runs the camera agent and one node agent per projector over loopback gRPC on `model`, from
+/// its conventional start until the camera agent reports settled (or `max_captures`), and
+/// measures the result against the simulator's truth.
 pub fn run_agents(
     room: &Room,
-    preset: usize,
     cal: &Calibrated,
-    mut say: impl FnMut(String),
-) -> Result<()> {
-    let basis = NodeBasis::new(room, &cal.regions, None)?;
-    let truth_target: Vec<LinearRgb> = {
-        let all = room.patch_values(&vec![Frame::Black; room.projectors().len()], Some(preset))?;
-        cal.patches.iter().map(|&i| all[i]).collect()
-    };
-    let nodes = cal.problem.nodes();
+    model: &Model,
+    transport: &Transport,
+    truth: &Truth,
+    options: RunOptions,
+) -> Result<RunResult> {
     let hw = SimHardware {
-        basis: Arc::new(basis),
-        shown: Arc::new(Mutex::new(vec![LinearRgb::ZERO; nodes])),
-        patches: Arc::new(cal.patches.clone()),
-        sigma: Arc::new(cal.problem.noise().to_vec()),
-        rng: Arc::new(Mutex::new(7)),
+        basis: transport.basis.clone(),
+        corners: transport.corners.clone(),
+        shown: Arc::new(Mutex::new(model.conventional.clone())),
+        patches: Arc::new(model.patches.clone()),
+        noise: Arc::new(Mutex::new(CameraNoise::with_seed(room, options.seed))),
+        log: Arc::new(Mutex::new(Vec::new())),
     };
-    // The conventional start, for comparison (DESIGN §3.1), shown by the same hardware.
-    let conventional: Vec<LinearRgb> = cal
-        .problem
-        .columns()
-        .iter()
-        .zip(&cal.charts)
-        .map(|(c, chart)| {
-            conventional_value(
-                c,
-                chart,
-                cal.problem.target(),
-                cal.problem.black(),
-                LinearRgb::splat(0.5),
-            )
-        })
-        .collect::<Result<_, _>>()?;
-    *hw.shown.lock().unwrap_or_else(PoisonError::into_inner) = conventional;
-    let de_conv = patch_delta_e(&truth_target, &hw.true_values())?;
-    let best = optimum(&cal.problem)?;
+    let best = optimum(&model.problem)?;
+    let true_best = optimum(&truth.problem)?;
+    let de_conv = patch_delta_e(&truth.target, &hw.noiseless(&model.conventional)?)?;
     let mut owners: HashMap<String, Vec<u32>> = HashMap::new();
     for (n, r) in cal.regions.iter().enumerate() {
         owners
@@ -349,7 +561,8 @@ pub fn run_agents(
         .worker_threads(2)
         .enable_all()
         .build()?;
-    let result = runtime.block_on(async {
+    let t0 = Instant::now();
+    let last = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let endpoint = format!("http://{}", listener.local_addr()?);
         let cancel = CancellationToken::new();
@@ -358,108 +571,112 @@ pub fn run_agents(
             token: "demo".into(),
             heartbeat: Duration::from_millis(500),
             deadline: Duration::from_secs(2),
-            model_rounds: 5,
+            model_rounds: options.model_rounds,
             calibration_epoch: 1,
         };
-        let (mut status, _h) = camera::serve(
+        let (mut status, camera_task) = camera::serve(
             config,
             RoomModel {
-                problem: cal.problem.clone(),
+                problem: model.problem.clone(),
                 owners: owners.clone(),
-                start: None,
+                start: Some(model.conventional.clone()),
             },
             hw.clone(),
             listener,
             cancel.clone(),
         );
+        let mut node_tasks = Vec::new();
         for id in owners.keys() {
             let config = NodeConfig {
                 endpoint: endpoint.clone(),
                 room: "lab".into(),
                 token: "demo".into(),
                 projector_id: id.clone(),
-                rule: StepRule::Safe { theta: 1.0 },
+                rule: options.rule,
                 start: LinearRgb::splat(0.5),
                 state_file: None,
             };
-            tokio::spawn(node::run(config, hw.clone(), cancel.child_token()));
+            node_tasks.push(tokio::spawn(node::run(
+                config,
+                hw.clone(),
+                cancel.child_token(),
+            )));
         }
         let outcome = tokio::time::timeout(Duration::from_secs(120), async {
             loop {
                 status.changed().await?;
                 let s = status.borrow().clone();
-                if s.live_projectors == owners.len() && s.captures >= 25 {
+                if s.live_projectors == owners.len()
+                    && (s.settled && options.stop_when_settled
+                        || s.captures >= options.max_captures)
+                {
                     return Ok::<_, anyhow::Error>(s);
                 }
             }
         })
         .await;
         cancel.cancel();
-        outcome.context("the agents did not finish 25 captures within 120 s")?
+        for task in node_tasks {
+            let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
+        }
+        let _ = tokio::time::timeout(Duration::from_secs(5), camera_task).await;
+        outcome.with_context(|| {
+            format!(
+                "the agents neither stopped nor took {} captures within 120 s",
+                options.max_captures
+            )
+        })?
     })?;
-    let de = patch_delta_e(&truth_target, &hw.true_values())?;
-    let shown = hw
+    let end = Instant::now();
+    let x = hw
         .shown
         .lock()
         .unwrap_or_else(PoisonError::into_inner)
         .clone();
-    // The true problem (simulator transport over the same patches, the true LED target): its
-    // optimum is what the room could reach; the measured model's optimum differs from it by
-    // the calibration's errors.
-    let true_problem = {
-        let pick = |v: Vec<LinearRgb>| cal.patches.iter().map(|&i| v[i]).collect::<Vec<_>>();
-        let black = pick(hw.basis.patch_values(&vec![LinearRgb::ZERO; nodes]));
-        let columns = (0..nodes)
-            .map(|n| {
-                let mut x = vec![LinearRgb::ZERO; nodes];
-                x[n] = LinearRgb::ONE;
-                let dense: Vec<LinearRgb> = pick(hw.basis.patch_values(&x))
-                    .iter()
-                    .zip(&black)
-                    .map(|(a, b)| (*a - *b).map(|v| v.max(0.0)))
-                    .collect();
-                AttenuationColumn::from_dense_with_cutoff(
-                    &dense,
-                    &vec![LinearRgb::ZERO; dense.len()],
-                )
+    let de = patch_delta_e(&truth.target, &hw.noiseless(&x)?)?;
+    // The room after k captures' rounds is what capture k + 1 saw; after the last, what it shows.
+    let log = std::mem::take(&mut *hw.log.lock().unwrap_or_else(PoisonError::into_inner));
+    let states = log
+        .iter()
+        .map(|l| (l.at, &l.shown, Some(&l.measured)))
+        .chain(std::iter::once((end, &x, None)));
+    let trace = states
+        .enumerate()
+        .map(|(k, (at, shown, measured))| {
+            let values = hw.noiseless(shown)?;
+            Ok(TracePoint {
+                capture: k as u64,
+                seconds: at.saturating_duration_since(t0).as_secs_f64(),
+                measured_excess: measured.map(|y| {
+                    best.excess(roomlight_core::metrics::objective(
+                        &model
+                            .problem
+                            .target()
+                            .iter()
+                            .zip(y)
+                            .map(|(r, y)| *r - *y)
+                            .collect::<Vec<_>>(),
+                    ))
+                }),
+                true_excess: true_best.excess(truth.problem.objective(shown)),
+                mean_de00: patch_delta_e(&truth.target, &values)?.mean,
             })
-            .collect::<Result<Vec<_>, _>>()?;
-        Problem::new(
-            columns,
-            black,
-            truth_target.clone(),
-            cal.problem.noise().to_vec(),
-        )?
-    };
-    let true_best = optimum(&true_problem)?;
-    let de_best = patch_delta_e(&truth_target, &true_problem.response(&true_best.x))?;
-    say(format!(
-        "against the truth: excess over the true optimum {:.2e} (the true optimum's mean ΔE00 is {:.2})",
-        true_best.excess(true_problem.objective(&shown)),
-        de_best.mean
-    ));
-    let at_white = shown
-        .iter()
-        .flat_map(|x| x.0)
-        .filter(|&v| v >= 0.999)
-        .count();
-    let at_black = shown
-        .iter()
-        .flat_map(|x| x.0)
-        .filter(|&v| v <= 0.001)
-        .count();
-    say(format!(
-        "node channels at full white: {at_white}, at black: {at_black}, of {}",
-        3 * shown.len()
-    ));
-    say(format!(
-        "agents over loopback gRPC: {} node agents, {} captures; excess over the measured model's optimum {:.2e}; true mean ΔE00 {:.2} (max {:.2}) against the LED target, conventional start {:.2}",
-        owners.len(),
-        result.captures,
-        best.excess(cal.problem.objective(&shown)),
-        de.mean,
-        de.max,
-        de_conv.mean
-    ));
-    Ok(())
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let de_best = patch_delta_e(&truth.target, &truth.problem.response(&true_best.x))?;
+    let g = model.problem.objective(&x);
+    Ok(RunResult {
+        captures: last.captures,
+        settled: last.settled,
+        trace,
+        g,
+        g_star: best.objective,
+        final_excess: best.excess(g),
+        true_excess: true_best.excess(truth.problem.objective(&x)),
+        x,
+        de00: de.per_patch,
+        conventional_de00: de_conv.per_patch,
+        best_mean_de00: de_best.mean,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
 }

@@ -1,0 +1,446 @@
+//! The demo's report: `index.html` with its images and plots beside it (readable offline),
+//! `metrics.json` with the figures, `problem.json` with each preset's measured problem so anyone
+//! can check the optimum with another solver.
+
+use crate::pipeline::{Model, RunResult, TracePoint};
+use anyhow::{Context, Result};
+use plotters::prelude::*;
+use roomlight_core::LinearRgb;
+use serde_json::{Value, json};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// One LED preset reproduced by the agents.
+pub struct PresetOutcome {
+    /// The preset's name.
+    pub name: String,
+    /// The measured model the agents ran on.
+    pub model: Model,
+    /// What they reached.
+    pub result: RunResult,
+    /// Room chart of each model patch.
+    pub chart_of_patch: Vec<usize>,
+    /// File names (in the report folder) of the room under the LEDs, at the conventional start
+    /// and with the distributed result, tone-mapped sRGB.
+    pub images: [String; 3],
+}
+
+/// One update rule run on the first preset, for the convergence plots.
+pub struct RuleOutcome {
+    /// Its label.
+    pub label: String,
+    /// What it reached, capture by capture.
+    pub result: RunResult,
+}
+
+/// Everything the report shows.
+pub struct Report {
+    /// The room's name.
+    pub room: String,
+    /// Seed of the camera noise.
+    pub seed: u64,
+    /// Chart names, by room chart index.
+    pub chart_names: Vec<String>,
+    /// One line per calibration stage.
+    pub calibration: Vec<String>,
+    /// Captures calibration used.
+    pub calibration_captures: usize,
+    /// Every preset.
+    pub presets: Vec<PresetOutcome>,
+    /// The rules compared on the first preset.
+    pub rules: Vec<RuleOutcome>,
+    /// Wall time of the whole demo.
+    pub wall_seconds: f64,
+}
+
+fn mean(v: &[f64]) -> f64 {
+    // Empty: 0, so an empty chart shows as "no patch" rather than NaN.
+    if v.is_empty() {
+        0.0
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn max(v: &[f64]) -> f64 {
+    v.iter().copied().fold(0.0, f64::max)
+}
+
+impl PresetOutcome {
+    /// Mean ΔE00 per room chart (charts without a usable patch left out): (chart, result,
+    /// conventional).
+    fn per_chart(&self) -> Vec<(usize, f64, f64)> {
+        let charts = self
+            .chart_of_patch
+            .iter()
+            .copied()
+            .max()
+            .map_or(0, |m| m + 1);
+        (0..charts)
+            .filter_map(|c| {
+                let pick = |v: &[f64]| -> Vec<f64> {
+                    v.iter()
+                        .zip(&self.chart_of_patch)
+                        .filter(|(_, k)| **k == c)
+                        .map(|(d, _)| *d)
+                        .collect()
+                };
+                let result = pick(&self.result.de00);
+                (!result.is_empty()).then(|| {
+                    (
+                        c,
+                        mean(&result),
+                        mean(&pick(&self.result.conventional_de00)),
+                    )
+                })
+            })
+            .collect()
+    }
+}
+
+/// `metrics.json`.
+pub fn metrics(report: &Report) -> Value {
+    let presets: serde_json::Map<String, Value> = report
+        .presets
+        .iter()
+        .map(|p| {
+            let r = &p.result;
+            let charts: serde_json::Map<String, Value> = p
+                .per_chart()
+                .into_iter()
+                .map(|(c, de, conv)| {
+                    (
+                        report.chart_names.get(c).cloned().unwrap_or(c.to_string()),
+                        json!({ "mean_de00": de, "conventional_mean_de00": conv }),
+                    )
+                })
+                .collect();
+            (
+                p.name.clone(),
+                json!({
+                    "captures": r.captures,
+                    "settled": r.settled,
+                    "final_excess": r.final_excess,
+                    "G": r.g,
+                    "G_star": r.g_star,
+                    "true_excess": r.true_excess,
+                    "mean_de00": mean(&r.de00),
+                    "max_de00": max(&r.de00),
+                    "conventional_mean_de00": mean(&r.conventional_de00),
+                    "conventional_max_de00": max(&r.conventional_de00),
+                    "true_optimum_mean_de00": r.best_mean_de00,
+                    "patches": r.de00.len(),
+                    "seconds": r.seconds,
+                    "charts": charts,
+                }),
+            )
+        })
+        .collect();
+    let rules: serde_json::Map<String, Value> = report
+        .rules
+        .iter()
+        .map(|r| {
+            (
+                r.label.clone(),
+                json!({
+                    "captures": r.result.captures,
+                    "settled": r.result.settled,
+                    "final_excess": r.result.final_excess,
+                    "true_excess": r.result.true_excess,
+                    "mean_de00": mean(&r.result.de00),
+                    "seconds": r.result.seconds,
+                    "trace": r.result.trace,
+                }),
+            )
+        })
+        .collect();
+    json!({
+        "room": report.room,
+        "seed": report.seed,
+        "calibration_captures": report.calibration_captures,
+        "presets": presets,
+        "rules": rules,
+        "wall_seconds": report.wall_seconds,
+    })
+}
+
+fn channel(v: &[LinearRgb], c: usize) -> Vec<f64> {
+    v.iter().map(|x| x[c]).collect()
+}
+
+/// `problem.json`: per preset and channel the measured attenuation (sparse), `d`, `r`, `s`,
+/// the final `x`, `G` and `G*` (`G = ½ Σ_i e_i²` on that channel).
+pub fn problem(report: &Report) -> Value {
+    let presets: serde_json::Map<String, Value> = report
+        .presets
+        .iter()
+        .map(|p| {
+            let problem = &p.model.problem;
+            let s = problem.white_response();
+            let errors = problem.errors(&p.result.x);
+            let best = roomlight_core::optimum::optimum(problem).ok();
+            let channels: Vec<Value> = ["r", "g", "b"]
+                .iter()
+                .enumerate()
+                .map(|(c, name)| {
+                    let columns: Vec<Value> = problem
+                        .columns()
+                        .iter()
+                        .enumerate()
+                        .map(|(n, col)| {
+                            let (patches, values): (Vec<u32>, Vec<f64>) =
+                                col.iter().map(|(i, v)| (i, v[c])).unzip();
+                            json!({ "node": n, "patches": patches, "values": values })
+                        })
+                        .collect();
+                    json!({
+                        "channel": name,
+                        "attenuation": columns,
+                        "d": channel(problem.black(), c),
+                        "r": channel(problem.target(), c),
+                        "s": channel(&s, c),
+                        "x": channel(&p.result.x, c),
+                        "G": 0.5 * errors.iter().map(|e| e[c] * e[c]).sum::<f64>(),
+                        "G_star": best.as_ref().map(|b| b.objective_per_channel[c]),
+                    })
+                })
+                .collect();
+            (
+                p.name.clone(),
+                json!({
+                    "nodes": problem.nodes(),
+                    "patches": problem.patches(),
+                    "bounds": [0.0, 1.0],
+                    "objective": "G = 1/2 sum_i (r_i - d_i - sum_n A_in x_n)^2 per channel, 0 <= x_n <= 1",
+                    "channels": channels,
+                }),
+            )
+        })
+        .collect();
+    json!({ "room": report.room, "presets": presets })
+}
+
+/// A log-scale plot of `y(point)` against `x(point)` for each rule, as SVG.
+fn plot(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[(&str, Vec<(f64, f64)>)],
+    log_y: bool,
+) -> Result<()> {
+    let area = SVGBackend::new(path, (720, 400)).into_drawing_area();
+    let fail = |e: &dyn std::fmt::Display| anyhow::anyhow!("plot {}: {e}", path.display());
+    area.fill(&WHITE).map_err(|e| fail(&e))?;
+    let x_max = series
+        .iter()
+        .flat_map(|(_, s)| s.iter().map(|p| p.0))
+        .fold(1e-3, f64::max);
+    let ys = || series.iter().flat_map(|(_, s)| s.iter().map(|p| p.1));
+    let colours = [RED, BLUE, GREEN, MAGENTA, BLACK, CYAN];
+    let mut chart = ChartBuilder::on(&area);
+    chart
+        .caption(title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(60);
+    if log_y {
+        // Values below 1e-6 are drawn at 1e-6 (the plot's floor).
+        let floor = 1e-6;
+        let top = ys().fold(floor * 10.0, f64::max) * 2.0;
+        let mut c = chart
+            .build_cartesian_2d(0.0..x_max, (floor..top).log_scale())
+            .map_err(|e| fail(&e))?;
+        c.configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .draw()
+            .map_err(|e| fail(&e))?;
+        for ((label, s), colour) in series.iter().zip(colours.iter().cycle()) {
+            let colour = *colour;
+            c.draw_series(LineSeries::new(
+                s.iter().map(|&(x, y)| (x, y.max(floor))),
+                colour.stroke_width(2),
+            ))
+            .map_err(|e| fail(&e))?
+            .label(*label)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], colour));
+        }
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| fail(&e))?;
+    } else {
+        let top = ys().fold(1e-3, f64::max) * 1.1;
+        let mut c = chart
+            .build_cartesian_2d(0.0..x_max, 0.0..top)
+            .map_err(|e| fail(&e))?;
+        c.configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .draw()
+            .map_err(|e| fail(&e))?;
+        for ((label, s), colour) in series.iter().zip(colours.iter().cycle()) {
+            let colour = *colour;
+            c.draw_series(LineSeries::new(s.iter().copied(), colour.stroke_width(2)))
+                .map_err(|e| fail(&e))?
+                .label(*label)
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], colour));
+        }
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| fail(&e))?;
+    }
+    area.present().map_err(|e| fail(&e))?;
+    Ok(())
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// Writes the report into `dir` (the images must already be there).
+pub fn write(dir: &Path, report: &Report) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let save = |name: &str, value: &Value| -> Result<()> {
+        let path = dir.join(name);
+        std::fs::write(&path, serde_json::to_string_pretty(value)?)
+            .with_context(|| format!("writing {}", path.display()))
+    };
+    save("metrics.json", &metrics(report))?;
+    save("problem.json", &problem(report))?;
+    let series = |f: fn(&TracePoint) -> (f64, f64)| -> Vec<(&str, Vec<(f64, f64)>)> {
+        report
+            .rules
+            .iter()
+            .map(|r| (r.label.as_str(), r.result.trace.iter().map(f).collect()))
+            .collect()
+    };
+    plot(
+        &dir.join("excess-captures.svg"),
+        "true excess (G − G*)/G* against captures",
+        "captures",
+        "true excess",
+        &series(|p| (p.capture as f64, p.true_excess)),
+        true,
+    )?;
+    plot(
+        &dir.join("excess-time.svg"),
+        "true excess (G − G*)/G* against wall time",
+        "seconds",
+        "true excess",
+        &series(|p| (p.seconds, p.true_excess)),
+        true,
+    )?;
+    plot(
+        &dir.join("de00-captures.svg"),
+        "mean ΔE00 against captures",
+        "captures",
+        "mean ΔE00",
+        &series(|p| (p.capture as f64, p.mean_de00)),
+        false,
+    )?;
+    let path = dir.join("index.html");
+    std::fs::write(&path, html(report)).with_context(|| format!("writing {}", path.display()))
+}
+
+fn html(report: &Report) -> String {
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>roomlight: {room}</title>\
+<style>body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}}\
+img{{max-width:100%}}table{{border-collapse:collapse;margin:1em 0}}\
+td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}th{{background:#f4f4f4}}\
+.row{{display:flex;gap:8px}}.row figure{{flex:1;margin:0}}figcaption{{font-size:90%;text-align:center}}</style>\
+</head><body><h1>roomlight on the simulated room “{room}”</h1>\
+<p>Projectors replace the room's LED lights: the camera measures the charts under each LED preset, \
+the LEDs go off, and the projectors' node agents reproduce that light from the per-patch errors \
+the camera agent broadcasts. All numbers are against the simulator's ground truth; the whole demo \
+took {wall:.1} s (seed {seed}).</p>",
+        room = escape(&report.room),
+        wall = report.wall_seconds,
+        seed = report.seed
+    );
+    h.push_str("<h2>Calibration</h2><ul>");
+    for line in &report.calibration {
+        let _ = write!(h, "<li>{}</li>", escape(line));
+    }
+    let _ = write!(
+        h,
+        "</ul><p>{} captures in all.</p>",
+        report.calibration_captures
+    );
+    h.push_str(
+        "<h2>Lighting reproduction</h2><table><tr><th>preset</th><th>captures</th>\
+<th>mean ΔE00</th><th>max ΔE00</th><th>conventional mean ΔE00</th><th>true optimum mean ΔE00</th>\
+<th>excess over G* (measured model)</th><th>true excess</th></tr>",
+    );
+    for p in &report.presets {
+        let r = &p.result;
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2e}</td><td>{:.2e}</td></tr>",
+            escape(&p.name),
+            r.captures,
+            mean(&r.de00),
+            max(&r.de00),
+            mean(&r.conventional_de00),
+            r.best_mean_de00,
+            r.final_excess,
+            r.true_excess
+        );
+    }
+    h.push_str("</table>");
+    for p in &report.presets {
+        let _ = write!(
+            h,
+            "<h3>{name}</h3><div class=\"row\">\
+<figure><img src=\"{a}\" alt=\"under the LEDs\"><figcaption>target: the LEDs</figcaption></figure>\
+<figure><img src=\"{b}\" alt=\"conventional start\"><figcaption>conventional start, ΔE00 {cb:.2}</figcaption></figure>\
+<figure><img src=\"{c}\" alt=\"distributed result\"><figcaption>distributed result, ΔE00 {cc:.2}</figcaption></figure></div>\
+<table><tr><th>chart</th><th>result ΔE00</th><th>conventional ΔE00</th></tr>",
+            name = escape(&p.name),
+            a = escape(&p.images[0]),
+            b = escape(&p.images[1]),
+            c = escape(&p.images[2]),
+            cb = mean(&p.result.conventional_de00),
+            cc = mean(&p.result.de00)
+        );
+        for (c, de, conv) in p.per_chart() {
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{de:.2}</td><td>{conv:.2}</td></tr>",
+                escape(report.chart_names.get(c).map_or("?", String::as_str))
+            );
+        }
+        h.push_str("</table>");
+    }
+    h.push_str("<h2>Convergence</h2><p>On the first preset, from the conventional start, each rule until the \
+camera agent reports that G no longer moves beyond its noise (or the capture cap).</p>\
+<table><tr><th>rule</th><th>captures</th><th>seconds</th><th>true excess</th><th>mean ΔE00</th></tr>");
+    for r in &report.rules {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2e}</td><td>{:.2}</td></tr>",
+            escape(&r.label),
+            r.result.captures,
+            r.result.seconds,
+            r.result.true_excess,
+            mean(&r.result.de00)
+        );
+    }
+    h.push_str(
+        "</table><img src=\"excess-captures.svg\" alt=\"excess against captures\">\
+<img src=\"excess-time.svg\" alt=\"excess against time\">\
+<img src=\"de00-captures.svg\" alt=\"ΔE00 against captures\">\
+<p>Data: <a href=\"metrics.json\">metrics.json</a>, <a href=\"problem.json\">problem.json</a>.</p></body></html>",
+    );
+    h
+}
