@@ -158,7 +158,22 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             images,
         });
     }
+    let pm = match presets.first() {
+        Some(first) => {
+            let t = Instant::now();
+            let pm = crate::pm::run(&room, &cal, &first.result.x, 0, args.seed, dir, |line| {
+                println!("{line}")
+            })?;
+            println!(
+                "projection mapping and contrast: {:.1} s",
+                t.elapsed().as_secs_f64()
+            );
+            Some(pm)
+        }
+        None => None,
+    };
     let report = Report {
+        pm,
         room: name,
         seed: args.seed,
         chart_names: room.scene().charts.iter().map(|c| c.name.clone()).collect(),

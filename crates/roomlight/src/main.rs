@@ -7,6 +7,7 @@ mod bench_sim;
 mod demo;
 mod graycode_cmd;
 mod pipeline;
+mod pm;
 mod procs;
 mod report;
 

@@ -17,7 +17,7 @@ use roomlight_calib::attenuation::{Attenuation, Scheme, plan, solve};
 use roomlight_calib::charts::{
     ChartCorners, PatchSample, PatchStatus, SampleConfig, sample_charts,
 };
-use roomlight_calib::graycode::{Coding, DecodeConfig, Manifest, decode};
+use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig, Manifest, decode};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{NodeConfig as SplitConfig, segment};
 use roomlight_core::conventional::conventional_value;
@@ -69,6 +69,39 @@ pub struct Calibrated {
     pub columns: Vec<Vec<(u32, LinearRgb)>>,
     /// Captures used.
     pub captures: usize,
+    /// The decoded structured light of each luminaire (camera pixel → projector pixel).
+    pub correspondences: Vec<Correspondence>,
+    /// Room projector index of each decoded luminaire.
+    pub luminaires: Vec<usize>,
+}
+
+impl Calibrated {
+    /// The same nodes with another target kept dark (`mask`: camera pixels of the new target),
+    /// e.g. a contrast board put where the bust was. Fails if the nodes would change.
+    pub fn regions_with_mask(&self, mask: &[bool]) -> Result<Vec<NodeRegion>> {
+        let seg = segment(
+            &self.correspondences,
+            &self.corners,
+            Some(mask),
+            &SplitConfig::default(),
+        )?;
+        let charts: Vec<usize> = seg.nodes.iter().map(|nd| nd.chart).collect();
+        if charts != self.node_charts {
+            bail!(
+                "the new target changes the nodes ({} instead of {}); recalibrate",
+                charts.len(),
+                self.node_charts.len()
+            );
+        }
+        Ok(seg
+            .nodes
+            .iter()
+            .map(|nd| NodeRegion {
+                projector: self.luminaires[nd.projector],
+                weights: nd.weights.clone(),
+            })
+            .collect())
+    }
 }
 
 /// The model for one lighting target: the measured problem over the patches usable in every
@@ -212,6 +245,8 @@ pub fn calibrate(
         attenuation,
         columns,
         captures: captures.get(),
+        correspondences: corr,
+        luminaires,
     })
 }
 

@@ -51,6 +51,8 @@ pub struct Report {
     pub rules: Vec<RuleOutcome>,
     /// Wall time of the whole demo.
     pub wall_seconds: f64,
+    /// Projection mapping and contrast on the first preset.
+    pub pm: Option<crate::pm::PmResult>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -154,14 +156,33 @@ pub fn metrics(report: &Report) -> Value {
             )
         })
         .collect();
-    json!({
+    let mut m = json!({
         "room": report.room,
         "seed": report.seed,
         "calibration_captures": report.calibration_captures,
         "presets": presets,
         "rules": rules,
         "wall_seconds": report.wall_seconds,
-    })
+    });
+    if let Some(pm) = &report.pm {
+        let by_condition = |v: &[f64; 3]| -> Value {
+            crate::pm::CONDITIONS
+                .iter()
+                .zip(v)
+                .map(|(c, x)| ((*c).to_string(), json!(x)))
+                .collect::<serde_json::Map<_, _>>()
+                .into()
+        };
+        m["ansi_contrast"] = by_condition(&pm.ansi_contrast);
+        m["rms_contrast"] = pm
+            .rms_contrast
+            .iter()
+            .map(|(t, v)| (t.clone(), by_condition(v)))
+            .collect::<serde_json::Map<_, _>>()
+            .into();
+        m["pm_decoded_share"] = json!(pm.decoded_share);
+    }
+    m
 }
 
 fn channel(v: &[LinearRgb], c: usize) -> Vec<f64> {
@@ -421,6 +442,37 @@ took {wall:.1} s (seed {seed}).</p>",
             );
         }
         h.push_str("</table>");
+    }
+    if let Some(pm) = &report.pm {
+        let _ = write!(
+            h,
+            "<h2>Projection mapping</h2><p>The texture projector under three lightings: a dark \
+room, the LED preset, and the projectors' lighting (first preset). ANSI contrast of a 4×4 checker \
+on a 200 mm board in place of the bust: dark {:.0}:1, LED {:.0}:1, projector lighting {:.0}:1 \
+(the paper measured 180:1, 30:1 and 65:1).</p><table><tr><th>texture</th><th>RMS dark</th>\
+<th>RMS LED</th><th>RMS projector</th></tr>",
+            pm.ansi_contrast[0], pm.ansi_contrast[1], pm.ansi_contrast[2]
+        );
+        for (t, v) in &pm.rms_contrast {
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td></tr>",
+                escape(t),
+                v[0],
+                v[1],
+                v[2]
+            );
+        }
+        h.push_str("</table><div class=\"row\" style=\"flex-wrap:wrap\">");
+        for (file, caption) in &pm.images {
+            let _ = write!(
+                h,
+                "<figure style=\"flex:0 0 24%\"><img src=\"{}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>",
+                escape(file),
+                c = escape(caption)
+            );
+        }
+        h.push_str("</div>");
     }
     h.push_str("<h2>Convergence</h2><p>On the first preset, from the conventional start, each rule until the \
 camera agent reports that G no longer moves beyond its noise (or the capture cap).</p>\

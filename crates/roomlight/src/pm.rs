@@ -1,0 +1,476 @@
+//! Projection mapping under the three lightings (DESIGN §5): the texture projector warps
+//! generated textures onto the target through its decoded correspondences, compensating the
+//! target's albedo and the ambient light that reaches it; a 4×4 checker on a 200 mm board in
+//! place of the bust gives the ANSI contrast. Each is captured in a dark room, under the LED
+//! preset, and under the projectors' lighting, by an evaluation camera near the texture projector
+//! (the room camera sees the bust at about 25 pixels across).
+
+use crate::pipeline::{Calibrated, frames_for_values};
+use anyhow::{Context, Result, bail};
+use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig, Manifest, decode};
+use roomlight_calib::image_io::LinearImage;
+use roomlight_core::LinearRgb;
+use roomlight_core::metrics::{GrayImage, Rect, ansi_contrast, luminance, rms_contrast};
+use roomlight_sim::room::PngEncoding;
+use roomlight_sim::scene::{ObjectSpec, ProjectorRole, Scene, ShapeKind};
+use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room};
+use std::path::Path;
+
+/// The three lightings.
+pub const CONDITIONS: [&str; 3] = ["dark", "led", "projector"];
+
+/// The generated textures.
+pub const TEXTURES: [&str; 4] = ["crack", "camouflage", "radial", "tiles"];
+
+/// What projection mapping measured.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct PmResult {
+    /// ANSI contrast of the checker on the board, per condition (dark, led, projector).
+    pub ansi_contrast: [f64; 3],
+    /// RMS contrast of each texture on the bust, per condition.
+    pub rms_contrast: Vec<(String, [f64; 3])>,
+    /// Images written, with captions.
+    pub images: Vec<(String, String)>,
+    /// Share of the target's camera pixels the texture projector's decode reached.
+    pub decoded_share: f64,
+}
+
+/// The lab seen by an evaluation camera near the texture projector; with `board`, the bust
+/// replaced by a 200 × 200 mm white board facing the texture projector.
+fn evaluation_scene(base: &Scene, board: bool, room_camera: bool) -> Result<Scene> {
+    let mut scene = base.clone();
+    if board {
+        let (bust, rest): (Vec<ObjectSpec>, Vec<ObjectSpec>) =
+            scene.objects.into_iter().partition(|o| o.target);
+        let Some(first) = bust.first() else {
+            bail!("scene {} has no target to replace with a board", base.name);
+        };
+        // Standing on whatever the bust stood on: its lowest point.
+        let bottom = bust
+            .iter()
+            .map(|o| match o.shape {
+                ShapeKind::Sphere => o.center_mm[2] - o.radius_mm.unwrap_or(0.0),
+                ShapeKind::Cylinder => o.center_mm[2] - 0.5 * o.height_mm.unwrap_or(0.0),
+                _ => o.center_mm[2] - 0.5 * o.size_mm.map_or(0.0, |s| s[2]),
+            })
+            .fold(f64::INFINITY, f64::min);
+        scene.objects = rest;
+        scene.objects.push(ObjectSpec {
+            name: "contrast-board".into(),
+            shape: ShapeKind::Box,
+            center_mm: [first.center_mm[0], first.center_mm[1], bottom + 100.0],
+            size_mm: Some([200.0, 10.0, 200.0]),
+            radius_mm: None,
+            height_mm: None,
+            yaw_deg: 0.0,
+            albedo: [0.8, 0.8, 0.8],
+            target: true,
+        });
+    }
+    if !room_camera {
+        let texture = scene
+            .projectors
+            .iter()
+            .find(|p| p.role == ProjectorRole::Texture)
+            .with_context(|| format!("scene {} has no texture projector", base.name))?;
+        let target = texture.look_at_mm;
+        let from = texture.position_mm;
+        // Beside the texture projector, a little to the left, looking at the same point.
+        scene.camera.position_mm = [from[0] - 150.0, from[1] + 50.0, from[2] - 50.0];
+        scene.camera.look_at_mm = target;
+        scene.camera.up = [0.0, 0.0, 1.0];
+        scene.camera.fov_deg = 40.0;
+        scene.camera.resolution = [320, 240];
+        // A photometer rather than a camera: no clipping, so contrast is not capped by it.
+        scene.camera.saturation = 1e6;
+    }
+    Ok(scene)
+}
+
+fn image(c: &Capture) -> LinearImage {
+    LinearImage {
+        width: c.width,
+        height: c.height,
+        pixels: c.pixels.clone(),
+    }
+}
+
+/// Decodes the texture projector's structured light through the evaluation camera.
+fn decode_texture(room: &Room, k: usize, noise: &mut CameraNoise) -> Result<Correspondence> {
+    let n = room.projectors().len();
+    let p = &room.projectors()[k].pinhole;
+    let manifest = Manifest::with_coding(p.width, p.height, Coding::Gray)?;
+    let mut caps = Vec::with_capacity(manifest.patterns.len());
+    for pat in &manifest.patterns {
+        let img = manifest.pattern_image(pat.pattern);
+        let mut frames = vec![Frame::Black; n];
+        frames[k] = Frame::Image(ProjectorImage {
+            width: img.width,
+            height: img.height,
+            pixels: img.pixels,
+        });
+        caps.push(image(&noise.expose(&room.render(&frames, None)?)));
+    }
+    Ok(decode(&manifest, &DecodeConfig::default(), |f| {
+        Ok(&caps[manifest
+            .patterns
+            .iter()
+            .position(|p| p.file == f.file)
+            .unwrap_or(0)])
+    })?)
+}
+
+/// A texture in `[0, 1]` at normalised target coordinates `(s, t)` in `[0, 1]²`.
+fn texture(name: &str, s: f64, t: f64) -> f64 {
+    use std::f64::consts::TAU;
+    match name {
+        // Dark lines where two Voronoi cells meet.
+        "crack" => {
+            let seeds = (0..12).map(|i| {
+                let a = f64::from(i);
+                (
+                    (0.5 + 0.5 * (a * 12.9898).sin()).fract().abs(),
+                    (0.5 + 0.5 * (a * 78.233).cos()).fract().abs(),
+                )
+            });
+            let mut d: Vec<f64> = seeds.map(|(x, y)| (x - s).hypot(y - t)).collect();
+            d.sort_by(f64::total_cmp);
+            if d.len() > 1 && d[1] - d[0] < 0.02 {
+                0.05
+            } else {
+                0.9
+            }
+        }
+        // Three levels from a sum of waves.
+        "camouflage" => {
+            let v = (TAU * (2.0 * s + 0.5 * t)).sin()
+                + (TAU * (1.3 * t - 0.7 * s) + 1.0).sin()
+                + 0.7 * (TAU * 3.1 * (s + t)).sin();
+            if v > 0.6 {
+                0.9
+            } else if v > -0.6 {
+                0.5
+            } else {
+                0.1
+            }
+        }
+        "radial" => {
+            let a = (t - 0.5).atan2(s - 0.5);
+            0.5 + 0.45 * (12.0 * a).cos()
+        }
+        // Light tiles with dark grout.
+        _ => {
+            let (u, v) = ((6.0 * s).fract(), (6.0 * t).fract());
+            if u < 0.1 || v < 0.1 { 0.05 } else { 0.85 }
+        }
+    }
+}
+
+/// The target's bounding box in the camera image.
+fn bounds(mask: &[bool], width: u32) -> Option<(u32, u32, u32, u32)> {
+    let mut b: Option<(u32, u32, u32, u32)> = None;
+    for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+        let (x, y) = (i as u32 % width, i as u32 / width);
+        b = Some(b.map_or((x, y, x, y), |(a, c, d, e)| {
+            (a.min(x), c.min(y), d.max(x), e.max(y))
+        }));
+    }
+    b
+}
+
+/// The largest centred axis-aligned rectangle inside the mask, shrinking the bounding box.
+fn inner_rect(mask: &[bool], width: u32) -> Option<Rect> {
+    let (x0, y0, x1, y1) = bounds(mask, width)?;
+    let (mut a, mut b, mut c, mut d) = (x0, y0, x1, y1);
+    while a < c && b < d {
+        let full = (b..=d).all(|y| (a..=c).all(|x| mask[(y * width + x) as usize]));
+        if full {
+            return Some(Rect {
+                x: f64::from(a),
+                y: f64::from(b),
+                width: f64::from(c - a + 1),
+                height: f64::from(d - b + 1),
+            });
+        }
+        (a, b, c, d) = (a + 1, b + 1, c - 1, d - 1);
+    }
+    None
+}
+
+/// A projector frame showing camera-space values `want` (per camera pixel, `None`: nothing)
+/// through the decoded map; projector pixels no camera pixel reached take their nearest
+/// reached neighbour within a few pixels, else black.
+fn warp(corr: &Correspondence, want: impl Fn(usize) -> Option<f64>) -> ProjectorImage {
+    let (w, h) = (corr.projector_width, corr.projector_height);
+    let mut sum = vec![0.0f64; (w * h) as usize];
+    let mut count = vec![0u32; (w * h) as usize];
+    for (i, m) in corr.map.iter().enumerate() {
+        if let (Some((x, y)), Some(v)) = (m, want(i))
+            && *x < w
+            && *y < h
+        {
+            let j = (y * w + x) as usize;
+            sum[j] += v;
+            count[j] += 1;
+        }
+    }
+    let mut value: Vec<Option<f64>> = sum
+        .iter()
+        .zip(&count)
+        .map(|(s, &c)| (c > 0).then(|| s / f64::from(c)))
+        .collect();
+    // Fill the holes between reached pixels (the projector is finer than the camera).
+    for _ in 0..4 {
+        let prev = value.clone();
+        for y in 0..h {
+            for x in 0..w {
+                let j = (y * w + x) as usize;
+                if prev[j].is_some() {
+                    continue;
+                }
+                let mut acc = (0.0, 0);
+                for (dx, dy) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                    let (nx, ny) = (i64::from(x) + dx, i64::from(y) + dy);
+                    if nx >= 0
+                        && ny >= 0
+                        && nx < i64::from(w)
+                        && ny < i64::from(h)
+                        && let Some(v) = prev[(ny as u32 * w + nx as u32) as usize]
+                    {
+                        acc = (acc.0 + v, acc.1 + 1);
+                    }
+                }
+                if acc.1 > 0 {
+                    value[j] = Some(acc.0 / f64::from(acc.1));
+                }
+            }
+        }
+    }
+    ProjectorImage {
+        width: w,
+        height: h,
+        pixels: value
+            .iter()
+            .map(|v| {
+                let v = v.unwrap_or(0.0).clamp(0.0, 1.0) as f32;
+                [v, v, v]
+            })
+            .collect(),
+    }
+}
+
+fn lum(c: &Capture) -> Vec<f64> {
+    c.pixels
+        .iter()
+        .map(|p| luminance(LinearRgb(p.map(f64::from))))
+        .collect()
+}
+
+/// Runs projection mapping and the contrast measurements; `x` is the luminaires' result for
+/// `preset`, `room` the calibrated room. Writes its images into `dir`.
+pub fn run(
+    room: &Room,
+    cal: &Calibrated,
+    x: &[LinearRgb],
+    preset: usize,
+    seed: u64,
+    dir: &Path,
+    mut say: impl FnMut(String),
+) -> Result<PmResult> {
+    let base = room.scene();
+    let texture_k = base
+        .projectors
+        .iter()
+        .position(|p| p.role == ProjectorRole::Texture)
+        .with_context(|| format!("scene {} has no texture projector", base.name))?;
+    // The board seen by the room camera: the mask that keeps the luminaires off it.
+    let board_room = Room::build(evaluation_scene(base, true, true)?)
+        .context("building the room with the contrast board")?;
+    let board_mask: Vec<bool> = board_room.pixels().iter().map(|p| p.target).collect();
+    let board_regions = cal.regions_with_mask(&board_mask)?;
+    let mut result = PmResult {
+        ansi_contrast: [0.0; 3],
+        rms_contrast: Vec::new(),
+        images: Vec::new(),
+        decoded_share: 0.0,
+    };
+    for board in [true, false] {
+        let eval = Room::build(evaluation_scene(base, board, false)?)
+            .context("building the evaluation view")?;
+        let mut noise = CameraNoise::with_seed(&eval, seed);
+        let corr = decode_texture(&eval, texture_k, &mut noise)?;
+        let mask: Vec<bool> = eval.pixels().iter().map(|p| p.target).collect();
+        let width = eval.scene().camera.resolution[0];
+        let reached = mask
+            .iter()
+            .zip(&corr.map)
+            .filter(|(m, c)| **m && c.is_some())
+            .count();
+        let share = reached as f64 / mask.iter().filter(|m| **m).count().max(1) as f64;
+        let regions = if board { &board_regions } else { &cal.regions };
+        let n = eval.projectors().len();
+        // The lightings, texture projector black.
+        let lighting = |condition: usize| -> Vec<Frame> {
+            match condition {
+                2 => frames_for_values(&eval, regions, x),
+                _ => vec![Frame::Black; n],
+            }
+        };
+        let leds = |condition: usize| (condition == 1).then_some(preset);
+        let shoot =
+            |frames: &[Frame], condition: usize, noise: &mut CameraNoise| -> Result<Capture> {
+                Ok(noise.expose(&eval.render(frames, leds(condition))?))
+            };
+        let with_texture = |condition: usize, img: ProjectorImage| {
+            let mut frames = lighting(condition);
+            frames[texture_k] = Frame::Linear(img);
+            frames
+        };
+        if board {
+            let Some(rect) = inner_rect(&mask, width) else {
+                bail!("the board is not visible to the evaluation camera");
+            };
+            // The 4×4 checker, white at the top left, defined on the board's rectangle.
+            let cell = |i: usize| -> Option<f64> {
+                let (u, v) = ((i as u32 % width) as f64, (i as u32 / width) as f64);
+                let (s, t) = ((u - rect.x) / rect.width, (v - rect.y) / rect.height);
+                ((0.0..1.0).contains(&s) && (0.0..1.0).contains(&t)).then(|| {
+                    let (a, b) = ((s * 4.0) as u32, (t * 4.0) as u32);
+                    if (a + b) % 2 == 0 { 1.0 } else { 0.0 }
+                })
+            };
+            let checker = warp(&corr, |i| if mask[i] { cell(i) } else { None });
+            for (condition, label) in CONDITIONS.iter().enumerate() {
+                let cap = shoot(
+                    &with_texture(condition, checker.clone()),
+                    condition,
+                    &mut noise,
+                )?;
+                let l: Vec<f32> = lum(&cap).iter().map(|&v| v as f32).collect();
+                let a = ansi_contrast(
+                    GrayImage {
+                        width: cap.width as usize,
+                        height: cap.height as usize,
+                        pixels: &l,
+                    },
+                    rect,
+                    true,
+                )?;
+                result.ansi_contrast[condition] = a.ratio;
+                let file = format!("pm-checker-{label}.png");
+                save(&cap, dir, &file)?;
+                result
+                    .images
+                    .push((file, format!("checker, {label}: ANSI {:.0}:1", a.ratio)));
+            }
+            say(format!(
+                "ANSI contrast on the board: dark {:.0}:1, LED {:.0}:1, projector lighting {:.0}:1",
+                result.ansi_contrast[0], result.ansi_contrast[1], result.ansi_contrast[2]
+            ));
+            continue;
+        }
+        result.decoded_share = share;
+        // Compensation: the gain of the texture projector per camera pixel (white − black in
+        // the dark) and the ambient per condition; the texture asks for k·T + the brightest
+        // ambient, so every pixel can reach it where the gain allows.
+        let white = ProjectorImage {
+            width: corr.projector_width,
+            height: corr.projector_height,
+            pixels: vec![[1.0; 3]; (corr.projector_width * corr.projector_height) as usize],
+        };
+        let black = ProjectorImage {
+            pixels: vec![[0.0; 3]; white.pixels.len()],
+            ..white.clone()
+        };
+        let lit = lum(&shoot(&with_texture(0, white), 0, &mut noise)?);
+        let dark = lum(&shoot(&with_texture(0, black.clone()), 0, &mut noise)?);
+        let gain: Vec<f64> = lit
+            .iter()
+            .zip(&dark)
+            .map(|(a, b)| (a - b).max(0.0))
+            .collect();
+        let (x0, y0, x1, y1) =
+            bounds(&mask, width).context("the bust is not visible to the evaluation camera")?;
+        let percentile = |v: &mut Vec<f64>, q: f64| -> f64 {
+            v.sort_by(f64::total_cmp);
+            v.get(((v.len() as f64 - 1.0) * q) as usize)
+                .copied()
+                .unwrap_or(0.0)
+        };
+        let mut g: Vec<f64> = gain
+            .iter()
+            .zip(&mask)
+            .filter(|(_, m)| **m)
+            .map(|(g, _)| *g)
+            .collect();
+        let k = percentile(&mut g, 0.1);
+        for condition in 0..3 {
+            let ambient = lum(&shoot(
+                &with_texture(condition, black.clone()),
+                condition,
+                &mut noise,
+            )?);
+            let mut a: Vec<f64> = ambient
+                .iter()
+                .zip(&mask)
+                .filter(|(_, m)| **m)
+                .map(|(a, _)| *a)
+                .collect();
+            let floor = percentile(&mut a, 0.9);
+            let mut rms = Vec::new();
+            for name in TEXTURES {
+                let img = warp(&corr, |i| {
+                    if !mask[i] {
+                        return None;
+                    }
+                    let (u, v) = (i as u32 % width, i as u32 / width);
+                    let s = f64::from(u - x0) / f64::from((x1 - x0).max(1));
+                    let t = f64::from(v - y0) / f64::from((y1 - y0).max(1));
+                    let want = k * texture(name, s, t) + floor;
+                    // Zero gain (unreached): nothing to do there.
+                    (gain[i] > 0.0).then(|| (want - ambient[i]) / gain[i])
+                });
+                let cap = shoot(&with_texture(condition, img), condition, &mut noise)?;
+                let l: Vec<f64> = lum(&cap)
+                    .iter()
+                    .zip(&mask)
+                    .filter(|(_, m)| **m)
+                    .map(|(l, _)| *l)
+                    .collect();
+                rms.push(rms_contrast(&l)?);
+                let file = format!("pm-{name}-{}.png", CONDITIONS[condition]);
+                save(&cap, dir, &file)?;
+                result
+                    .images
+                    .push((file, format!("{name}, {}", CONDITIONS[condition])));
+            }
+            for (t, r) in TEXTURES.iter().zip(rms) {
+                match result.rms_contrast.iter_mut().find(|(n, _)| n == t) {
+                    Some((_, v)) => v[condition] = r,
+                    None => {
+                        let mut v = [0.0; 3];
+                        v[condition] = r;
+                        result.rms_contrast.push(((*t).to_string(), v));
+                    }
+                }
+            }
+        }
+        say(format!(
+            "projection mapping on the bust ({:.0}% of it decoded): RMS contrast {}",
+            100.0 * share,
+            result
+                .rms_contrast
+                .iter()
+                .map(|(t, v)| format!("{t} {:.2}/{:.2}/{:.2}", v[0], v[1], v[2]))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    Ok(result)
+}
+
+fn save(c: &Capture, dir: &Path, file: &str) -> Result<()> {
+    // One exposure for every projection-mapping image, so they compare by eye.
+    c.save_png(&dir.join(file), PngEncoding::Srgb8, 1.0)?;
+    Ok(())
+}
