@@ -58,8 +58,8 @@ fn evaluation_scene(base: &Scene, board: bool, room_camera: bool) -> Result<Scen
         scene.objects.push(ObjectSpec {
             name: "contrast-board".into(),
             shape: ShapeKind::Box,
-            center_mm: [first.center_mm[0], first.center_mm[1], bottom + 100.0],
-            size_mm: Some([200.0, 10.0, 200.0]),
+            center_mm: [first.center_mm[0], first.center_mm[1], bottom + 5.0],
+            size_mm: Some([200.0, 200.0, 10.0]),
             radius_mm: None,
             height_mm: None,
             yaw_deg: 0.0,

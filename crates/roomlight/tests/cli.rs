@@ -123,6 +123,24 @@ fn demo_quick_writes_a_report_whose_figures_meet_the_bars() {
             }
         }
     }
+    // Projection mapping: the dark room is best; the projectors' lighting keeps at least twice
+    // the LED lighting's ANSI contrast (the target gets no direct light), and every texture keeps
+    // more RMS contrast under it than under the LEDs.
+    let ansi = &metrics["ansi_contrast"];
+    let (dark, led, projector) = (
+        number(ansi, "dark"),
+        number(ansi, "led"),
+        number(ansi, "projector"),
+    );
+    assert!(dark > projector && projector >= 2.0 * led, "{ansi}");
+    let rms = metrics["rms_contrast"].as_object().expect("rms_contrast");
+    assert_eq!(rms.len(), 4, "{rms:?}");
+    for (texture, v) in rms {
+        assert!(
+            number(v, "projector") > number(v, "led") && number(v, "dark") > 0.0,
+            "{texture}: {v}"
+        );
+    }
     // Every rule's convergence, from the conventional start (capture 0) on.
     let rules = metrics["rules"].as_object().expect("rules");
     assert_eq!(rules.len(), 6, "{rules:?}");
