@@ -10,6 +10,7 @@ mod pipeline;
 mod pm;
 mod procs;
 mod report;
+mod shadow;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};

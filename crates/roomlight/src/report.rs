@@ -53,6 +53,8 @@ pub struct Report {
     pub wall_seconds: f64,
     /// Projection mapping and contrast on the first preset.
     pub pm: Option<crate::pm::PmResult>,
+    /// Large aperture against a standard projector (rooms without one: none).
+    pub shadows: Option<crate::shadow::ShadowComparison>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -181,6 +183,18 @@ pub fn metrics(report: &Report) -> Value {
             .collect::<serde_json::Map<_, _>>()
             .into();
         m["pm_decoded_share"] = json!(pm.decoded_share);
+    }
+    if let Some(s) = &report.shadows {
+        m["penumbra_mm"] = s
+            .kinds
+            .iter()
+            .map(|k| (k.kind.clone(), json!(k.penumbra_mm)))
+            .collect::<serde_json::Map<_, _>>()
+            .into();
+        m["peak_radiance_ratio"] = json!({
+            "standard_over_large_aperture": s.peak_radiance_ratio,
+            "standard_pupil_mm": crate::shadow::STANDARD_PUPIL_MM,
+        });
     }
     m
 }
@@ -367,6 +381,26 @@ pub fn write(dir: &Path, report: &Report) -> Result<()> {
         &series(|p| (p.capture as f64, p.mean_de00)),
         false,
     )?;
+    if let Some(s) = &report.shadows {
+        let series: Vec<(&str, Vec<(f64, f64)>)> = s
+            .kinds
+            .iter()
+            .map(|k| {
+                (
+                    k.kind.as_str(),
+                    k.profile.iter().map(|&(d, r)| (d + 160.0, r)).collect(),
+                )
+            })
+            .collect();
+        plot(
+            &dir.join("shadow.svg"),
+            "desk irradiance across the shadow's edge (occluded / open)",
+            "mm across the edge (+160 = the geometric edge)",
+            "ratio",
+            &series,
+            false,
+        )?;
+    }
     let path = dir.join("index.html");
     std::fs::write(&path, html(report)).with_context(|| format!("writing {}", path.display()))
 }
@@ -473,6 +507,23 @@ on a 200 mm board in place of the bust: dark {:.0}:1, LED {:.0}:1, projector lig
             );
         }
         h.push_str("</div>");
+    }
+    if let Some(s) = &report.shadows {
+        let _ = write!(
+            h,
+            "<h2>Large aperture against a standard projector</h2><p>A hand-sized box 200 mm over \
+the desk under the large-aperture projector, then under a standard (pinhole) projector in the \
+same place. Penumbra (10% to 90% of the open desk's direct irradiance): {}. For the same desk \
+irradiance a standard projector with a {:.0} mm exit pupil emits {:.0}× the peak radiance of the \
+large aperture (glare).</p><img src=\"shadow.svg\" alt=\"shadow profiles\">",
+            s.kinds
+                .iter()
+                .map(|k| format!("{} {:.0} mm", escape(&k.kind), k.penumbra_mm))
+                .collect::<Vec<_>>()
+                .join(", "),
+            crate::shadow::STANDARD_PUPIL_MM,
+            s.peak_radiance_ratio
+        );
     }
     h.push_str("<h2>Convergence</h2><p>On the first preset, from the conventional start, each rule until the \
 camera agent reports that G no longer moves beyond its noise (or the capture cap).</p>\

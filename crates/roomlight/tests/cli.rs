@@ -141,6 +141,19 @@ fn demo_quick_writes_a_report_whose_figures_meet_the_bars() {
             "{texture}: {v}"
         );
     }
+    // The large aperture's soft shadow against the standard projector's hard one, and the glare
+    // a standard projector needs for the same desk irradiance.
+    let penumbra = &metrics["penumbra_mm"];
+    let (soft, hard) = (
+        number(penumbra, "large_aperture"),
+        number(penumbra, "standard"),
+    );
+    assert!(hard <= 2.0 && soft >= 10.0 * hard, "{penumbra}");
+    let ratio = number(
+        &metrics["peak_radiance_ratio"],
+        "standard_over_large_aperture",
+    );
+    assert!(ratio > 10.0, "{ratio}");
     // Every rule's convergence, from the conventional start (capture 0) on.
     let rules = metrics["rules"].as_object().expect("rules");
     assert_eq!(rules.len(), 6, "{rules:?}");
