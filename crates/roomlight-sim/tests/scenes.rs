@@ -22,7 +22,7 @@ fn edited(from: &str, to: &str) -> String {
 #[test]
 fn embedded_scenes_parse_and_the_small_room_builds() {
     let lab = scenes::lab().expect("lab");
-    assert_eq!(lab.charts.len(), 10);
+    assert_eq!(lab.charts.len(), 12);
     assert_eq!(lab.presets.len(), 4);
     let luminaires = lab
         .projectors

@@ -60,10 +60,28 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let dir = &args.out;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut noise = roomlight_sim::CameraNoise::with_seed(&room, args.seed);
-    let cal = pipeline::calibrate(&room, &mut noise, |line| {
-        println!("{line}");
+    // Progress on stderr, only on a terminal (indicatif hides itself otherwise).
+    let bar = indicatif::ProgressBar::new(0).with_style(
+        indicatif::ProgressStyle::with_template("{msg:>16} [{bar:30}] {pos}/{len} {elapsed}")
+            .map_err(|e| anyhow::anyhow!("progress style: {e}"))?
+            .progress_chars("=> "),
+    );
+    let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| {
+        bar.println(&line);
+        if bar.is_hidden() {
+            println!("{line}");
+        }
         calibration.push(line);
     })?;
+    let live = |max: u64| {
+        bar.reset();
+        bar.set_length(max);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} capture {pos}/{len} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+        );
+        &bar
+    };
     let t = Instant::now();
     let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
     let transport = pipeline::Transport::new(basis, &cal.corners)?;
@@ -79,7 +97,16 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         captures += 1;
         let truth = pipeline::Truth::new(&room, &transport, &model, preset)?;
         let options = RunOptions::default_rule(args.seed + preset as u64);
-        let result = pipeline::run_agents(&room, &cal, &model, &transport, &truth, options)?;
+        let result = pipeline::run_agents(
+            &room,
+            &cal,
+            &model,
+            &transport,
+            &truth,
+            options,
+            live(options.max_captures),
+        )?;
+        bar.finish_and_clear();
         let r = &result;
         println!(
             "{}: {} captures{}, mean ΔE00 {:.2} (max {:.2}), conventional start {:.2}, true optimum {:.2}; excess over G* {:.1e} (true {:.1e}), {:.1} s",
@@ -131,8 +158,16 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                     stop_when_settled: false,
                     seed: args.seed,
                 };
-                let result =
-                    pipeline::run_agents(&room, &cal, &model, &transport, &truth, options)?;
+                let result = pipeline::run_agents(
+                    &room,
+                    &cal,
+                    &model,
+                    &transport,
+                    &truth,
+                    options,
+                    live(options.max_captures),
+                )?;
+                bar.finish_and_clear();
                 println!(
                     "  rule {label}: {} captures, {:.2} s, true excess {:.1e}, mean ΔE00 {:.2}",
                     result.captures,

@@ -142,6 +142,7 @@ pub fn frames_for_values(room: &Room, regions: &[NodeRegion], x: &[LinearRgb]) -
 pub fn calibrate(
     room: &Room,
     noise: &mut CameraNoise,
+    bar: &indicatif::ProgressBar,
     mut say: impl FnMut(String),
 ) -> Result<Calibrated> {
     let n = room.projectors().len();
@@ -153,13 +154,30 @@ pub fn calibrate(
         })
         .collect();
     let captures = std::cell::Cell::new(0usize);
+    let stage = |name: &str, len: usize| {
+        bar.reset();
+        bar.set_length(len as u64);
+        bar.set_message(name.to_string());
+    };
     let mut shoot = |frames: &[Frame]| -> Result<LinearImage> {
         captures.set(captures.get() + 1);
+        bar.inc(1);
         Ok(image(&noise.expose(&room.render(frames, None)?)))
     };
     // 1. Structured light, one projector at a time.
     let t = Instant::now();
     let mut corr = Vec::new();
+    stage(
+        "structured light",
+        luminaires
+            .iter()
+            .map(|&k| {
+                let p = &room.projectors()[k].pinhole;
+                Manifest::with_coding(p.width, p.height, Coding::Xor04)
+                    .map_or(0, |m| m.patterns.len())
+            })
+            .sum(),
+    );
     for &k in &luminaires {
         let p = &room.projectors()[k].pinhole;
         let manifest = Manifest::with_coding(p.width, p.height, Coding::Xor04)?;
@@ -221,6 +239,7 @@ pub fn calibrate(
     };
     let black = sample_charts(&shoot(&on_off(&vec![false; nodes]))?, &corners, &config)?;
     let rows = plan(nodes, Scheme::Hadamard);
+    stage("attenuation", rows.len());
     let mut measured: Vec<Vec<PatchSample>> = Vec::with_capacity(rows.len());
     for on in &rows {
         measured.push(sample_charts(&shoot(&on_off(on))?, &corners, &config)?);
@@ -573,6 +592,7 @@ pub fn run_agents(
     transport: &Transport,
     truth: &Truth,
     options: RunOptions,
+    bar: &indicatif::ProgressBar,
 ) -> Result<RunResult> {
     let hw = SimHardware {
         basis: transport.basis.clone(),
@@ -641,6 +661,20 @@ pub fn run_agents(
             loop {
                 status.changed().await?;
                 let s = status.borrow().clone();
+                if !bar.is_hidden() {
+                    // The live line: ΔE00 against the truth costs a render, so only when shown.
+                    let de = hw
+                        .noiseless(&hw.shown())
+                        .and_then(|v| Ok(patch_delta_e(&truth.target, &v)?.mean))
+                        .unwrap_or(f64::NAN);
+                    bar.set_position(s.captures);
+                    bar.set_message(format!(
+                        "round {} · G {:.3e} · excess {:.1e} · ΔE00 {de:.2}",
+                        s.round,
+                        s.measured_objective,
+                        best.excess(s.measured_objective)
+                    ));
+                }
                 if s.live_projectors == owners.len()
                     && (s.settled && options.stop_when_settled
                         || s.captures >= options.max_captures)
