@@ -46,8 +46,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         scene.camera.resolution = [640, 480];
     }
     let name = scene.name.clone();
-    let room =
-        roomlight_sim::Room::build(scene).with_context(|| format!("building the {name} room"))?;
+    let room = Arc::new(
+        roomlight_sim::Room::build(scene).with_context(|| format!("building the {name} room"))?,
+    );
     let mut calibration = vec![format!(
         "simulated room built in {:.1} s ({} projectors, {} charts, camera {}×{})",
         t0.elapsed().as_secs_f64(),
@@ -149,7 +150,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                 ),
             ];
             // The same capture budget for every rule, whether or not it would have settled.
-            let budget = if args.quick { 30 } else { 60 };
+            let budget = 30;
             for (label, rule, model_rounds) in compared {
                 let options = RunOptions {
                     rule,
@@ -279,11 +280,11 @@ fn preset_images(
     let captures = [
         room.render(&dark, Some(preset))?,
         room.render(
-            &pipeline::frames_for_values(room, &cal.regions, &model.conventional),
+            &pipeline::frames_for_values(room, &cal.regions, &cal.responses, &model.conventional),
             None,
         )?,
         room.render(
-            &pipeline::frames_for_values(room, &cal.regions, &result.x),
+            &pipeline::frames_for_values(room, &cal.regions, &cal.responses, &result.x),
             None,
         )?,
     ];

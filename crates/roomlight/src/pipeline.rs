@@ -1,13 +1,12 @@
-//! The whole method on a simulated room, as the system does it: structured light, nodes and
-//! feathering, Hadamard attenuation and the LED target measured from noisy captures through the
-//! charts, then the real agents over loopback gRPC. The simulator is touched only through
-//! captures, except (1) the target mask, which a real room configures by hand, (2) projector
-//! frames in linear light (a real node inverts its measured response), and (3) captures during
-//! the rounds are built from each node's light rendered once (light is linear, so this is the
-//! same image), then exposed with camera noise and sampled through the charts exactly as in
-//! calibration. Sampling matters: the simulator's own patch averages differ from what the chart
-//! sampling sees by enough to hold the loop 4–37% above the optimum, so the truth used for the
-//! metrics is the noiseless camera, sampled the same way.
+//! The whole method on a simulated room, as the system does it: structured light, projector
+//! responses, nodes and feathering, Hadamard attenuation and the LED target measured from noisy
+//! captures through the charts, then the real agents over loopback gRPC. The simulator is touched
+//! only through captures, except the target mask, which a real room configures by hand. Node
+//! values become projector codes through the measured responses (the simulator keeps its own
+//! gamma hidden), and every capture during the rounds is rendered, exposed with camera noise and
+//! sampled through the charts exactly as in calibration. The truth for the metrics is what a
+//! noiseless camera samples the same way: the simulator's own patch averages differ from that
+//! sampling by enough to hold a loop fed with them 4–37% above the optimum.
 
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::{self, CameraConfig, RoomModel};
@@ -20,6 +19,7 @@ use roomlight_calib::charts::{
 use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig, Manifest, decode};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{NodeConfig as SplitConfig, segment};
+use roomlight_calib::response::{Response, fit_response, ramp_codes};
 use roomlight_core::conventional::conventional_value;
 use roomlight_core::metrics::patch_delta_e;
 use roomlight_core::optimum::optimum;
@@ -73,7 +73,12 @@ pub struct Calibrated {
     pub correspondences: Vec<Correspondence>,
     /// Room projector index of each decoded luminaire.
     pub luminaires: Vec<usize>,
+    /// Each room projector's measured response (linear for those not calibrated).
+    pub responses: Vec<Response>,
 }
+
+/// Levels of the response ramp.
+const RAMP_LEVELS: usize = 9;
 
 impl Calibrated {
     /// The same nodes with another target kept dark (`mask`: camera pixels of the new target),
@@ -115,26 +120,83 @@ pub struct Model {
     pub conventional: Vec<LinearRgb>,
 }
 
-/// Node values as projector frames: each node's weights times its value, in linear light.
-pub fn frames_for_values(room: &Room, regions: &[NodeRegion], x: &[LinearRgb]) -> Vec<Frame> {
-    (0..room.projectors().len())
-        .map(|k| {
-            let p = &room.projectors()[k].pinhole;
-            let mut pixels = vec![[0.0f32; 3]; (p.width * p.height) as usize];
-            for (r, v) in regions.iter().zip(x).filter(|(r, _)| r.projector == k) {
-                for (px, w) in pixels.iter_mut().zip(&r.weights) {
-                    for (c, value) in px.iter_mut().zip(v.0) {
-                        *c += w * value as f32;
+/// Node values as projector frames: each pixel's linear light is the sum of its nodes' weights
+/// times their values, turned into a code through the projector's measured response (as a node
+/// agent does before it shows a frame).
+pub fn frames_for_values(
+    room: &Room,
+    regions: &[NodeRegion],
+    responses: &[Response],
+    x: &[LinearRgb],
+) -> Vec<Frame> {
+    FrameBuilder::new(room, regions, responses.to_vec()).frames(x)
+}
+
+/// A node's non-zero weights: `(node, [(pixel, weight)])`.
+type SparseNode = (usize, Vec<(u32, f32)>);
+
+/// Builds projector frames from node values, each node's weights kept sparse.
+pub struct FrameBuilder {
+    /// Per projector: width, height, and its nodes.
+    projectors: Vec<(u32, u32, Vec<SparseNode>)>,
+    responses: Vec<Response>,
+}
+
+impl FrameBuilder {
+    /// For `regions` of `room`'s projectors with their measured `responses`.
+    pub fn new(room: &Room, regions: &[NodeRegion], responses: Vec<Response>) -> Self {
+        let projectors = room
+            .projectors()
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let nodes = regions
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, r)| r.projector == k)
+                    .map(|(n, r)| {
+                        let weights = r
+                            .weights
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, w)| **w > 0.0)
+                            .map(|(i, w)| (i as u32, *w))
+                            .collect();
+                        (n, weights)
+                    })
+                    .collect();
+                (p.pinhole.width, p.pinhole.height, nodes)
+            })
+            .collect();
+        Self {
+            projectors,
+            responses,
+        }
+    }
+
+    /// The frames for node values `x` (a missing value counts as black).
+    pub fn frames(&self, x: &[LinearRgb]) -> Vec<Frame> {
+        let linear = Response::linear();
+        self.projectors
+            .iter()
+            .enumerate()
+            .map(|(k, (width, height, nodes))| {
+                let mut light = vec![LinearRgb::ZERO; (width * height) as usize];
+                for (n, weights) in nodes {
+                    let v = x.get(*n).copied().unwrap_or(LinearRgb::ZERO);
+                    for &(i, w) in weights {
+                        light[i as usize] += v * f64::from(w);
                     }
                 }
-            }
-            Frame::Linear(ProjectorImage {
-                width: p.width,
-                height: p.height,
-                pixels,
+                let response = self.responses.get(k).unwrap_or(&linear);
+                Frame::Image(ProjectorImage {
+                    width: *width,
+                    height: *height,
+                    pixels: light.into_iter().map(|l| response.to_code(l)).collect(),
+                })
             })
-        })
-        .collect()
+            .collect()
+    }
 }
 
 /// Calibrates the standard luminaires of `room`: structured light, nodes, black level and
@@ -206,7 +268,55 @@ pub fn calibrate(
         captures.get(),
         t.elapsed().as_secs_f64()
     ));
-    // 2. Nodes.
+    // 2. Responses: a ramp of uniform codes per luminaire, read on the chart patch it lights
+    // most (DESIGN §4.3); the hidden gamma is the simulator's, the fit is ours.
+    let t = Instant::now();
+    let codes = ramp_codes(RAMP_LEVELS)?;
+    stage("responses", luminaires.len() * codes.len());
+    let config = SampleConfig::default();
+    let mut responses = vec![Response::linear(); n];
+    for &k in &luminaires {
+        let mut ramp = Vec::with_capacity(codes.len());
+        for &c in &codes {
+            let mut frames = vec![Frame::Black; n];
+            frames[k] = Frame::Uniform([c as f32; 3]);
+            ramp.push(sample_charts(&shoot(&frames)?, &corners, &config)?);
+        }
+        let Some(top) = ramp.last() else {
+            bail!("empty ramp");
+        };
+        let patch = (0..top.len())
+            .filter(|&i| ramp.iter().all(|r| r[i].status == PatchStatus::Ok))
+            .max_by(|&a, &b| {
+                roomlight_core::metrics::luminance(top[a].mean)
+                    .total_cmp(&roomlight_core::metrics::luminance(top[b].mean))
+            })
+            .with_context(|| {
+                format!(
+                    "projector {}: no chart patch measurable over its whole ramp",
+                    room.projectors()[k].name
+                )
+            })?;
+        let measured: Vec<LinearRgb> = ramp.iter().map(|r| r[patch].mean).collect();
+        let noise: Vec<LinearRgb> = ramp.iter().map(|r| r[patch].std_error).collect();
+        responses[k] = fit_response(&codes, &measured, &noise)
+            .with_context(|| format!("response of {}", room.projectors()[k].name))?;
+    }
+    say(format!(
+        "responses: {} ramps of {} levels, γ {}, {:.1} s",
+        luminaires.len(),
+        codes.len(),
+        luminaires
+            .iter()
+            .map(|&k| {
+                let g = responses[k].gamma;
+                format!("{:.2}/{:.2}/{:.2}", g[0], g[1], g[2])
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+        t.elapsed().as_secs_f64()
+    ));
+    // 3. Nodes.
     let t = Instant::now();
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
     let seg = segment(&corr, &corners, Some(&mask), &SplitConfig::default())?;
@@ -225,17 +335,16 @@ pub fn calibrate(
         corners.len(),
         t.elapsed().as_secs_f64()
     ));
-    // 3. Black and attenuation (Hadamard), through the charts.
+    // 4. Black and attenuation (Hadamard), through the charts.
     let t = Instant::now();
     let before = captures.get();
-    let config = SampleConfig::default();
     let nodes = regions.len();
     let on_off = |on: &[bool]| {
         let x: Vec<LinearRgb> = on
             .iter()
             .map(|&o| if o { LinearRgb::ONE } else { LinearRgb::ZERO })
             .collect();
-        frames_for_values(room, &regions, &x)
+        frames_for_values(room, &regions, &responses, &x)
     };
     let black = sample_charts(&shoot(&on_off(&vec![false; nodes]))?, &corners, &config)?;
     let rows = plan(nodes, Scheme::Hadamard);
@@ -266,6 +375,7 @@ pub fn calibrate(
         captures: captures.get(),
         correspondences: corr,
         luminaires,
+        responses,
     })
 }
 
@@ -341,24 +451,27 @@ pub fn measure_target(
     })
 }
 
-/// The simulated projectors and camera behind the agents: node values in; out, the chart
-/// patches sampled from a rendered capture with camera noise, exactly as calibration measured
-/// them (each node's light is rendered once, so a capture costs one linear combination).
+/// The simulated projectors and camera behind the agents: node values in, turned into codes
+/// through the measured responses and rendered by the simulator (with its hidden gamma); out,
+/// the chart patches sampled from the capture with camera noise, exactly as calibration
+/// measured them.
 #[derive(Clone)]
 struct SimHardware {
-    basis: Arc<NodeBasis>,
+    room: Arc<Room>,
+    frames: Arc<FrameBuilder>,
     corners: Arc<Vec<ChartCorners>>,
     shown: Arc<Mutex<Vec<LinearRgb>>>,
     patches: Arc<Vec<usize>>,
     noise: Arc<Mutex<CameraNoise>>,
-    /// Every capture: when, the values shown, the noisy patch values returned.
+    /// Every capture: when, the noisy patch values returned and the noiseless ones.
     log: Arc<Mutex<Vec<CaptureLog>>>,
 }
 
 struct CaptureLog {
     at: Instant,
-    shown: Vec<LinearRgb>,
     measured: Vec<LinearRgb>,
+    /// What a noiseless camera saw of the same frame.
+    noiseless: Vec<LinearRgb>,
 }
 
 /// The chart patches of a capture, every room patch.
@@ -376,9 +489,13 @@ impl SimHardware {
         self.patches.iter().map(|&i| all[i]).collect()
     }
 
+    fn render(&self, x: &[LinearRgb]) -> Result<roomlight_sim::Capture> {
+        Ok(self.room.render(&self.frames.frames(x), None)?)
+    }
+
     /// What a noiseless camera would measure on the model's patches for node values `x`.
     fn noiseless(&self, x: &[LinearRgb]) -> Result<Vec<LinearRgb>> {
-        Ok(self.pick(&sample(&self.basis.capture(x), &self.corners)?))
+        Ok(self.pick(&sample(&self.render(x)?, &self.corners)?))
     }
 
     fn shown(&self) -> Vec<LinearRgb> {
@@ -390,7 +507,8 @@ impl SimHardware {
 
     fn measure(&self) -> Result<Vec<LinearRgb>> {
         let shown = self.shown();
-        let capture = self.basis.capture(&shown);
+        let capture = self.render(&shown)?;
+        let noiseless = self.pick(&sample(&capture, &self.corners)?);
         let noisy = self
             .noise
             .lock()
@@ -402,8 +520,8 @@ impl SimHardware {
             .unwrap_or_else(PoisonError::into_inner)
             .push(CaptureLog {
                 at: Instant::now(),
-                shown,
                 measured: measured.clone(),
+                noiseless,
             });
         Ok(measured)
     }
@@ -513,7 +631,6 @@ pub struct RunResult {
 /// The room as a noiseless camera sees it through the charts: every node's light at full
 /// white and the black level, on every room patch. Measured once per calibration.
 pub struct Transport {
-    basis: Arc<NodeBasis>,
     corners: Arc<Vec<ChartCorners>>,
     black: Vec<LinearRgb>,
     columns: Vec<Vec<LinearRgb>>,
@@ -536,7 +653,6 @@ impl Transport {
             })
             .collect::<Result<_>>()?;
         Ok(Self {
-            basis,
             corners: Arc::new(corners.to_vec()),
             black,
             columns,
@@ -554,6 +670,17 @@ pub struct Truth {
 }
 
 impl Truth {
+    /// `G` of what a noiseless camera measured against the true target.
+    pub fn objective(&self, values: &[LinearRgb]) -> f64 {
+        let errors: Vec<LinearRgb> = self
+            .target
+            .iter()
+            .zip(values)
+            .map(|(r, y)| *r - *y)
+            .collect();
+        roomlight_core::metrics::objective(&errors)
+    }
+
     /// The truth for `model`'s patches under `preset`.
     pub fn new(room: &Room, transport: &Transport, model: &Model, preset: usize) -> Result<Self> {
         let pick = |v: &[LinearRgb]| model.patches.iter().map(|&i| v[i]).collect::<Vec<_>>();
@@ -586,7 +713,7 @@ impl Truth {
 /// its conventional start until the camera agent reports settled (or `max_captures`), and
 /// measures the result against the simulator's truth.
 pub fn run_agents(
-    room: &Room,
+    room: &Arc<Room>,
     cal: &Calibrated,
     model: &Model,
     transport: &Transport,
@@ -595,7 +722,8 @@ pub fn run_agents(
     bar: &indicatif::ProgressBar,
 ) -> Result<RunResult> {
     let hw = SimHardware {
-        basis: transport.basis.clone(),
+        room: room.clone(),
+        frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
         corners: transport.corners.clone(),
         shown: Arc::new(Mutex::new(model.conventional.clone())),
         patches: Arc::new(model.patches.clone()),
@@ -702,17 +830,17 @@ pub fn run_agents(
         .lock()
         .unwrap_or_else(PoisonError::into_inner)
         .clone();
-    let de = patch_delta_e(&truth.target, &hw.noiseless(&x)?)?;
+    let final_values = hw.noiseless(&x)?;
+    let de = patch_delta_e(&truth.target, &final_values)?;
     // The room after k captures' rounds is what capture k + 1 saw; after the last, what it shows.
     let log = std::mem::take(&mut *hw.log.lock().unwrap_or_else(PoisonError::into_inner));
     let states = log
         .iter()
-        .map(|l| (l.at, &l.shown, Some(&l.measured)))
-        .chain(std::iter::once((end, &x, None)));
+        .map(|l| (l.at, &l.noiseless, Some(&l.measured)))
+        .chain(std::iter::once((end, &final_values, None)));
     let trace = states
         .enumerate()
-        .map(|(k, (at, shown, measured))| {
-            let values = hw.noiseless(shown)?;
+        .map(|(k, (at, values, measured))| {
             Ok(TracePoint {
                 capture: k as u64,
                 seconds: at.saturating_duration_since(t0).as_secs_f64(),
@@ -727,8 +855,8 @@ pub fn run_agents(
                             .collect::<Vec<_>>(),
                     ))
                 }),
-                true_excess: true_best.excess(truth.problem.objective(shown)),
-                mean_de00: patch_delta_e(&truth.target, &values)?.mean,
+                true_excess: true_best.excess(truth.objective(values)),
+                mean_de00: patch_delta_e(&truth.target, values)?.mean,
             })
         })
         .collect::<Result<Vec<_>>>()?;
@@ -741,7 +869,7 @@ pub fn run_agents(
         g,
         g_star: best.objective,
         final_excess: best.excess(g),
-        true_excess: true_best.excess(truth.problem.objective(&x)),
+        true_excess: true_best.excess(truth.objective(&final_values)),
         x,
         de00: de.per_patch,
         conventional_de00: de_conv.per_patch,

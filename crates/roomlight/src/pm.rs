@@ -312,7 +312,7 @@ pub fn run(
         // The lightings, texture projector black.
         let lighting = |condition: usize| -> Vec<Frame> {
             match condition {
-                2 => frames_for_values(&eval, regions, x),
+                2 => frames_for_values(&eval, regions, &cal.responses, x),
                 _ => vec![Frame::Black; n],
             }
         };
