@@ -150,7 +150,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                 ),
             ];
             // The same capture budget for every rule, whether or not it would have settled.
-            let budget = 30;
+            let budget = if args.quick { 15 } else { 30 };
             for (label, rule, model_rounds) in compared {
                 let options = RunOptions {
                     rule,

@@ -75,6 +75,108 @@ pub struct Calibrated {
     pub luminaires: Vec<usize>,
     /// Each room projector's measured response (linear for those not calibrated).
     pub responses: Vec<Response>,
+    /// Each large-aperture luminaire and its decoded structured light.
+    pub areas: Vec<(usize, Correspondence)>,
+}
+
+/// The mean camera value over the pixels a projector was decoded on, at each ramp level, with
+/// its standard error; pixels saturated at full white are left out.
+fn footprint_ramp(ramp: &[LinearImage], corr: &Correspondence) -> (Vec<LinearRgb>, Vec<LinearRgb>) {
+    let top = ramp.last();
+    let pixels: Vec<usize> = corr
+        .map
+        .iter()
+        .enumerate()
+        .filter(|(i, m)| {
+            m.is_some()
+                && top.is_some_and(|t| {
+                    t.pixels
+                        .get(*i)
+                        .is_some_and(|p| p.iter().all(|&v| v < 0.98))
+                })
+        })
+        .map(|(i, _)| i)
+        .collect();
+    // No pixel: zeros, which the fit refuses with a message naming the projector.
+    let count = pixels.len().max(1) as f64;
+    ramp.iter()
+        .map(|img| {
+            let mut sum = LinearRgb::ZERO;
+            let mut sq = LinearRgb::ZERO;
+            for &i in &pixels {
+                let v = LinearRgb(img.pixels[i].map(f64::from));
+                sum += v;
+                sq += v.hadamard(v);
+            }
+            let mean = sum * (1.0 / count);
+            let var = (sq * (1.0 / count) - mean.hadamard(mean)).map(|v| v.max(0.0));
+            (mean, var.map(|v| (v / count).sqrt()))
+        })
+        .unzip()
+}
+
+/// Projector pixels kept dark around the target for a large-aperture node: its light blurs
+/// away from the focus plane, and pixels its decode missed are dark only through this margin.
+const AREA_TARGET_MARGIN: f64 = 0.06;
+
+/// A large-aperture luminaire as one node: its whole frame except the pixels that land on the
+/// target (decoded, then dilated by a margin of 6% of the frame's width); its chart for the
+/// conventional start is the one it lights over the most camera pixels.
+fn area_node(
+    room: &Room,
+    k: usize,
+    corr: &Correspondence,
+    corners: &[ChartCorners],
+    target: &[bool],
+) -> Result<(NodeRegion, usize)> {
+    let (w, h) = (corr.projector_width, corr.projector_height);
+    let mut dark = vec![false; (w * h) as usize];
+    for (m, &t) in corr.map.iter().zip(target) {
+        if let (Some((x, y)), true) = (m, t)
+            && *x < w
+            && *y < h
+        {
+            dark[(y * w + x) as usize] = true;
+        }
+    }
+    let margin = (AREA_TARGET_MARGIN * f64::from(w)).ceil() as u32;
+    let dark = roomlight_calib::nodes::dilate(&dark, w as usize, h as usize, margin);
+    let weights: Vec<f32> = dark.iter().map(|&d| if d { 0.0 } else { 1.0 }).collect();
+    // The chart with the most camera pixels this projector was decoded on.
+    let width = corr.width as usize;
+    let mut counts = vec![0usize; corners.len()];
+    for (i, m) in corr.map.iter().enumerate() {
+        if m.is_none() {
+            continue;
+        }
+        let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
+        if let Some(c) = corners.iter().position(|c| inside(&c.corners, x, y)) {
+            counts[c] += 1;
+        }
+    }
+    let chart = (0..corners.len())
+        .max_by_key(|&c| counts[c])
+        .filter(|&c| counts[c] > 0)
+        .with_context(|| {
+            format!(
+                "large-aperture projector {} reaches no chart",
+                room.projectors()[k].name
+            )
+        })?;
+    Ok((
+        NodeRegion {
+            projector: k,
+            weights,
+        },
+        chart,
+    ))
+}
+
+/// Whether `(x, y)` lies inside the convex quadrilateral `q`.
+fn inside(q: &[[f64; 2]; 4], x: f64, y: f64) -> bool {
+    let side = |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0]);
+    let s: Vec<f64> = (0..4).map(|i| side(q[i], q[(i + 1) % 4])).collect();
+    s.iter().all(|&v| v >= 0.0) || s.iter().all(|&v| v <= 0.0)
 }
 
 /// Levels of the response ramp.
@@ -83,14 +185,27 @@ const RAMP_LEVELS: usize = 9;
 impl Calibrated {
     /// The same nodes with another target kept dark (`mask`: camera pixels of the new target),
     /// e.g. a contrast board put where the bust was. Fails if the nodes would change.
-    pub fn regions_with_mask(&self, mask: &[bool]) -> Result<Vec<NodeRegion>> {
+    pub fn regions_with_mask(&self, room: &Room, mask: &[bool]) -> Result<Vec<NodeRegion>> {
         let seg = segment(
             &self.correspondences,
             &self.corners,
             Some(mask),
             &SplitConfig::default(),
         )?;
-        let charts: Vec<usize> = seg.nodes.iter().map(|nd| nd.chart).collect();
+        let mut charts: Vec<usize> = seg.nodes.iter().map(|nd| nd.chart).collect();
+        let mut regions: Vec<NodeRegion> = seg
+            .nodes
+            .iter()
+            .map(|nd| NodeRegion {
+                projector: self.luminaires[nd.projector],
+                weights: nd.weights.clone(),
+            })
+            .collect();
+        for (k, c) in &self.areas {
+            let (region, chart) = area_node(room, *k, c, &self.corners, mask)?;
+            regions.push(region);
+            charts.push(chart);
+        }
         if charts != self.node_charts {
             bail!(
                 "the new target changes the nodes ({} instead of {}); recalibrate",
@@ -98,14 +213,7 @@ impl Calibrated {
                 self.node_charts.len()
             );
         }
-        Ok(seg
-            .nodes
-            .iter()
-            .map(|nd| NodeRegion {
-                projector: self.luminaires[nd.projector],
-                weights: nd.weights.clone(),
-            })
-            .collect())
+        Ok(regions)
     }
 }
 
@@ -215,6 +323,22 @@ pub fn calibrate(
                 && room.projectors()[k].kind == ProjectorKind::Standard
         })
         .collect();
+    // Large-aperture luminaires: decoded with plain Gray code (their defocus blurs XOR-04's fine
+    // stripes), each one node over its whole frame but the target.
+    let areas: Vec<usize> = (0..n)
+        .filter(|&k| {
+            room.scene().projectors[k].role == ProjectorRole::Luminaire
+                && room.projectors()[k].kind == ProjectorKind::LargeAperture
+        })
+        .collect();
+    let coding = |k: usize| {
+        if areas.contains(&k) {
+            Coding::Gray
+        } else {
+            Coding::Xor04
+        }
+    };
+    let decoded: Vec<usize> = luminaires.iter().chain(&areas).copied().collect();
     let captures = std::cell::Cell::new(0usize);
     let stage = |name: &str, len: usize| {
         bar.reset();
@@ -231,18 +355,17 @@ pub fn calibrate(
     let mut corr = Vec::new();
     stage(
         "structured light",
-        luminaires
+        decoded
             .iter()
             .map(|&k| {
                 let p = &room.projectors()[k].pinhole;
-                Manifest::with_coding(p.width, p.height, Coding::Xor04)
-                    .map_or(0, |m| m.patterns.len())
+                Manifest::with_coding(p.width, p.height, coding(k)).map_or(0, |m| m.patterns.len())
             })
             .sum(),
     );
-    for &k in &luminaires {
+    for &k in &decoded {
         let p = &room.projectors()[k].pinhole;
-        let manifest = Manifest::with_coding(p.width, p.height, Coding::Xor04)?;
+        let manifest = Manifest::with_coding(p.width, p.height, coding(k))?;
         let mut caps = Vec::with_capacity(manifest.patterns.len());
         for pat in &manifest.patterns {
             let img = manifest.pattern_image(pat.pattern);
@@ -262,9 +385,11 @@ pub fn calibrate(
                 .unwrap_or(0)])
         })?);
     }
+    let area_corr = corr.split_off(luminaires.len());
+    let areas: Vec<(usize, Correspondence)> = areas.into_iter().zip(area_corr).collect();
     say(format!(
         "structured light: {} projectors decoded, {} captures, {:.1} s",
-        luminaires.len(),
+        decoded.len(),
         captures.get(),
         t.elapsed().as_secs_f64()
     ));
@@ -272,41 +397,26 @@ pub fn calibrate(
     // most (DESIGN §4.3); the hidden gamma is the simulator's, the fit is ours.
     let t = Instant::now();
     let codes = ramp_codes(RAMP_LEVELS)?;
-    stage("responses", luminaires.len() * codes.len());
+    stage("responses", decoded.len() * codes.len());
     let config = SampleConfig::default();
     let mut responses = vec![Response::linear(); n];
-    for &k in &luminaires {
+    let all_corr: Vec<&Correspondence> = corr.iter().chain(areas.iter().map(|(_, c)| c)).collect();
+    for (&k, c) in decoded.iter().zip(all_corr) {
         let mut ramp = Vec::with_capacity(codes.len());
-        for &c in &codes {
+        for &code in &codes {
             let mut frames = vec![Frame::Black; n];
-            frames[k] = Frame::Uniform([c as f32; 3]);
-            ramp.push(sample_charts(&shoot(&frames)?, &corners, &config)?);
+            frames[k] = Frame::Uniform([code as f32; 3]);
+            ramp.push(shoot(&frames)?);
         }
-        let Some(top) = ramp.last() else {
-            bail!("empty ramp");
-        };
-        let patch = (0..top.len())
-            .filter(|&i| ramp.iter().all(|r| r[i].status == PatchStatus::Ok))
-            .max_by(|&a, &b| {
-                roomlight_core::metrics::luminance(top[a].mean)
-                    .total_cmp(&roomlight_core::metrics::luminance(top[b].mean))
-            })
-            .with_context(|| {
-                format!(
-                    "projector {}: no chart patch measurable over its whole ramp",
-                    room.projectors()[k].name
-                )
-            })?;
-        let measured: Vec<LinearRgb> = ramp.iter().map(|r| r[patch].mean).collect();
-        let noise: Vec<LinearRgb> = ramp.iter().map(|r| r[patch].std_error).collect();
+        let (measured, noise) = footprint_ramp(&ramp, c);
         responses[k] = fit_response(&codes, &measured, &noise)
             .with_context(|| format!("response of {}", room.projectors()[k].name))?;
     }
     say(format!(
         "responses: {} ramps of {} levels, γ {}, {:.1} s",
-        luminaires.len(),
+        decoded.len(),
         codes.len(),
-        luminaires
+        decoded
             .iter()
             .map(|&k| {
                 let g = responses[k].gamma;
@@ -320,7 +430,7 @@ pub fn calibrate(
     let t = Instant::now();
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
     let seg = segment(&corr, &corners, Some(&mask), &SplitConfig::default())?;
-    let regions: Vec<NodeRegion> = seg
+    let mut regions: Vec<NodeRegion> = seg
         .nodes
         .iter()
         .map(|nd| NodeRegion {
@@ -328,7 +438,21 @@ pub fn calibrate(
             weights: nd.weights.clone(),
         })
         .collect();
-    let node_charts: Vec<usize> = seg.nodes.iter().map(|nd| nd.chart).collect();
+    let mut node_charts: Vec<usize> = seg.nodes.iter().map(|nd| nd.chart).collect();
+    // A large aperture that reaches no chart cannot be measured through the charts: left out
+    // (it stays dark), and said so.
+    let mut kept = Vec::with_capacity(areas.len());
+    for (k, c) in areas {
+        match area_node(room, k, &c, &corners, &mask) {
+            Ok((region, chart)) => {
+                regions.push(region);
+                node_charts.push(chart);
+                kept.push((k, c));
+            }
+            Err(e) => say(format!("{}: left out: {e:#}", room.projectors()[k].name)),
+        }
+    }
+    let areas = kept;
     say(format!(
         "nodes: {} over {} charts, {:.1} s",
         regions.len(),
@@ -376,6 +500,7 @@ pub fn calibrate(
         correspondences: corr,
         luminaires,
         responses,
+        areas,
     })
 }
 
