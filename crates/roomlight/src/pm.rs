@@ -472,5 +472,7 @@ pub fn run(
 fn save(c: &Capture, dir: &Path, file: &str) -> Result<()> {
     // One exposure for every projection-mapping image, so they compare by eye.
     c.save_png(&dir.join(file), PngEncoding::Srgb8, 1.0)?;
+    let linear = file.replace(".png", ".linear16.png");
+    c.save_png(&dir.join(linear), PngEncoding::Linear16, 1.0)?;
     Ok(())
 }

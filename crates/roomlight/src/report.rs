@@ -195,6 +195,13 @@ pub fn metrics(report: &Report) -> Value {
             "standard_over_large_aperture": s.peak_radiance_ratio,
             "standard_pupil_mm": crate::shadow::STANDARD_PUPIL_MM,
         });
+        // Peak emitted radiance per unit desk irradiance (sr⁻¹ · m²/m²), each kind.
+        m["peak_radiance_per_irradiance"] = s
+            .kinds
+            .iter()
+            .map(|k| (k.kind.clone(), json!(k.radiance_per_irradiance)))
+            .collect::<serde_json::Map<_, _>>()
+            .into();
     }
     m
 }
