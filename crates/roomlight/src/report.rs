@@ -459,7 +459,13 @@ took {wall:.1} s (seed {seed}).</p>",
             r.true_excess
         );
     }
-    h.push_str("</table>");
+    h.push_str(
+        "</table><p>ΔE00 is measured by a noiseless camera sampling the charts as calibration \
+does. The excess over G* is on the measured model (what an installation can know). The true \
+excess is against the optimum of a linear model of the same nodes built from noiseless renders; \
+the charts' trimmed-mean sampling over patches crossed by soft light gradients makes the real room \
+slightly non-linear, so that reference can be beaten (negative values).</p>",
+    );
     for p in &report.presets {
         let _ = write!(
             h,
