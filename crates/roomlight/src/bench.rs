@@ -57,7 +57,7 @@ pub fn rules(problem: &Problem, budget: usize) -> Vec<(&'static str, LoopConfig)
 }
 
 /// Median wall time per node update, in µs, over `repeats` timed rounds of every node.
-fn us_per_node_update(problem: &Problem, rule: StepRule, start: &[LinearRgb]) -> Result<f64> {
+pub fn us_per_node_update(problem: &Problem, rule: StepRule, start: &[LinearRgb]) -> Result<f64> {
     let errors = problem.errors(start);
     let mut nodes: Vec<NodeState> = closed_loop::build_nodes(problem, rule, start)?;
     let local: Vec<Vec<LinearRgb>> = nodes

@@ -3,6 +3,7 @@
 mod bench;
 mod bench_calib;
 mod bench_net;
+mod bench_room;
 mod bench_sim;
 mod demo;
 mod graycode_cmd;
@@ -77,6 +78,18 @@ enum BenchCommand {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+    /// Speed against error on the simulated lab: every preset and rule through the agents.
+    Room {
+        /// The small test room, one preset, ten captures per rule (for tests).
+        #[arg(long)]
+        quick: bool,
+        /// Write the records as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Seed of the camera noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// Calibration on the embedded lab: structured-light accuracy against the simulator's truth,
     /// captures with and without simultaneous coding, decode speed.
     Calib {
@@ -113,6 +126,9 @@ fn main() -> Result<()> {
         Command::Bench {
             which: BenchCommand::Core { quick, json, seed },
         } => bench::core(quick, json.as_deref(), seed, &ALLOCATOR),
+        Command::Bench {
+            which: BenchCommand::Room { quick, json, seed },
+        } => bench_room::run(quick, json.as_deref(), seed),
         Command::Bench {
             which: BenchCommand::Net { quick },
         } => bench_net::run(quick, &ALLOCATOR),

@@ -594,6 +594,9 @@ struct SimHardware {
 
 struct CaptureLog {
     at: Instant,
+    /// How long the capture took (render, noise, sampling): the simulated camera's time.
+    took: Duration,
+    shown: Vec<LinearRgb>,
     measured: Vec<LinearRgb>,
     /// What a noiseless camera saw of the same frame.
     noiseless: Vec<LinearRgb>,
@@ -631,6 +634,7 @@ impl SimHardware {
     }
 
     fn measure(&self) -> Result<Vec<LinearRgb>> {
+        let started = Instant::now();
         let shown = self.shown();
         let capture = self.render(&shown)?;
         let noiseless = self.pick(&sample(&capture, &self.corners)?);
@@ -645,6 +649,8 @@ impl SimHardware {
             .unwrap_or_else(PoisonError::into_inner)
             .push(CaptureLog {
                 at: Instant::now(),
+                took: started.elapsed(),
+                shown,
                 measured: measured.clone(),
                 noiseless,
             });
@@ -718,6 +724,9 @@ pub struct TracePoint {
     /// `(G − G*)/G*` of the measured model from the camera's capture of these values (noisy;
     /// none for the final values, which no capture saw).
     pub measured_excess: Option<f64>,
+    /// `(G − G*)/G*` of the measured model for the values shown (noiseless: the quantity the
+    /// rules minimise).
+    pub model_excess: f64,
     /// The same on the true problem for the values shown after this capture's rounds.
     pub true_excess: f64,
     /// True mean ΔE00 against the LED target for those values.
@@ -751,6 +760,12 @@ pub struct RunResult {
     pub best_mean_de00: f64,
     /// Wall time of the run.
     pub seconds: f64,
+    /// Of which the simulated camera (render, noise, chart sampling).
+    pub capture_seconds: f64,
+    /// Rounds run (captures and model rounds).
+    pub rounds: u64,
+    /// Protobuf bytes between the agents, both ways, over the run.
+    pub bytes: u64,
 }
 
 /// The room as a noiseless camera sees it through the charts: every node's light at full
@@ -870,6 +885,7 @@ pub fn run_agents(
         .enable_all()
         .build()?;
     let t0 = Instant::now();
+    let mut bytes = 0u64;
     let last = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let endpoint = format!("http://{}", listener.local_addr()?);
@@ -914,6 +930,7 @@ pub fn run_agents(
             loop {
                 status.changed().await?;
                 let s = status.borrow().clone();
+                bytes += s.bytes_in + s.bytes_out;
                 if !bar.is_hidden() {
                     // The live line: ΔE00 against the truth costs a render, so only when shown.
                     let de = hw
@@ -959,13 +976,14 @@ pub fn run_agents(
     let de = patch_delta_e(&truth.target, &final_values)?;
     // The room after k captures' rounds is what capture k + 1 saw; after the last, what it shows.
     let log = std::mem::take(&mut *hw.log.lock().unwrap_or_else(PoisonError::into_inner));
+    let capture_seconds: f64 = log.iter().map(|l| l.took.as_secs_f64()).sum();
     let states = log
         .iter()
-        .map(|l| (l.at, &l.noiseless, Some(&l.measured)))
-        .chain(std::iter::once((end, &final_values, None)));
+        .map(|l| (l.at, &l.shown, &l.noiseless, Some(&l.measured)))
+        .chain(std::iter::once((end, &x, &final_values, None)));
     let trace = states
         .enumerate()
-        .map(|(k, (at, values, measured))| {
+        .map(|(k, (at, shown, values, measured))| {
             Ok(TracePoint {
                 capture: k as u64,
                 seconds: at.saturating_duration_since(t0).as_secs_f64(),
@@ -980,6 +998,7 @@ pub fn run_agents(
                             .collect::<Vec<_>>(),
                     ))
                 }),
+                model_excess: best.excess(model.problem.objective(shown)),
                 true_excess: true_best.excess(truth.objective(values)),
                 mean_de00: patch_delta_e(&truth.target, values)?.mean,
             })
@@ -1000,5 +1019,8 @@ pub fn run_agents(
         conventional_de00: de_conv.per_patch,
         best_mean_de00: de_best.mean,
         seconds: t0.elapsed().as_secs_f64(),
+        capture_seconds,
+        rounds: last.round,
+        bytes,
     })
 }

@@ -387,3 +387,61 @@ fn graycode_generate_then_decode_identity_and_refuse_bad_folders() {
         "{err}"
     );
 }
+
+/// Speed against error through the agents on the small room: every rule, the JSON keys, no
+/// divergence, and model rounds reaching 1% of G* within the budget where the paper's rule
+/// does not.
+#[test]
+fn bench_room_quick_records_every_rule_through_the_agents() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let json = dir.path().join("room.json");
+    let stdout = roomlight(&[
+        "bench",
+        "room",
+        "--quick",
+        "--json",
+        json.to_str().expect("utf-8 path"),
+    ]);
+    assert!(stdout.contains("captures to 1%"), "{stdout}");
+    let rows: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json written"))
+            .expect("valid json");
+    assert_eq!(rows.len(), 6, "{rows:?}");
+    let by_rule = |rule: &str| {
+        rows.iter()
+            .find(|r| r["rule"] == rule)
+            .unwrap_or_else(|| panic!("no {rule}"))
+    };
+    for row in &rows {
+        for key in [
+            "case",
+            "rule",
+            "captures_to_1pct",
+            "captures_to_0_1pct",
+            "final_excess",
+            "mean_de00",
+            "max_de00",
+            "compute_us_per_round",
+            "message_ms_per_round",
+            "bytes_per_round",
+            "diverged",
+        ] {
+            assert!(row.get(key).is_some(), "missing {key} in {row}");
+        }
+        assert_eq!(row["diverged"], false, "{row}");
+        assert!(
+            row["final_excess"].as_f64().is_some_and(f64::is_finite),
+            "{row}"
+        );
+    }
+    let model = by_rule("model-20");
+    assert!(
+        model["captures_to_1pct"].as_u64().is_some_and(|c| c <= 5),
+        "{model}"
+    );
+    let paper = by_rule("paper");
+    assert!(
+        paper["final_excess"].as_f64() > model["final_excess"].as_f64(),
+        "{paper} vs {model}"
+    );
+}
