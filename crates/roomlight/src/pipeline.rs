@@ -682,6 +682,35 @@ impl Camera for SimHardware {
     }
 }
 
+/// `model` with every attenuation entry kept (no 3σ cut-off), over the same patches: what the
+/// sparse supports are compared against.
+pub fn uncut_problem(cal: &Calibrated, model: &Model) -> Result<Problem> {
+    let index: HashMap<usize, PatchId> = model
+        .patches
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (i, k as PatchId))
+        .collect();
+    let columns = cal
+        .attenuation
+        .columns(0.0)?
+        .iter()
+        .map(|c| {
+            let (s, v): (Vec<PatchId>, Vec<LinearRgb>) = c
+                .iter()
+                .filter_map(|(i, p)| index.get(&(i as usize)).map(|&k| (k, p)))
+                .unzip();
+            AttenuationColumn::new(s, v)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Problem::new(
+        columns,
+        model.problem.black().to_vec(),
+        model.problem.target().to_vec(),
+        model.problem.noise().to_vec(),
+    )?)
+}
+
 /// How the agents run for one target.
 #[derive(Debug, Clone, Copy)]
 pub struct RunOptions {
