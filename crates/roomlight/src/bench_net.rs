@@ -22,18 +22,48 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<()> {
         .enable_all()
         .build()
         .context("starting the runtime")?;
-    let sizes: &[usize] = if quick { &[10, 100] } else { &[10, 100, 1000] };
+    let sizes: &[usize] = if quick {
+        &[10, 100]
+    } else {
+        &[10, 100, 1000, 5000]
+    };
     println!(
         "{:>6} {:>7} {:>13} {:>11} {:>15} {:>14} {:>18}",
         "nodes", "agents", "median ms", "p99 ms", "bytes out/rnd", "bytes in/rnd", "heap per agent"
     );
+    let mut points = Vec::new();
     for &n in sizes {
-        runtime.block_on(case(n, alloc))?;
+        let median = runtime.block_on(case(n, alloc))?;
+        points.push((n as f64, median));
+    }
+    // Least squares on log-log: round time ∝ nodes^b.
+    let logs: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(_, t)| *t > 0.0)
+        .map(|(n, t)| (n.ln(), t.ln()))
+        .collect();
+    if logs.len() >= 2 {
+        let k = logs.len() as f64;
+        let (mx, my) = (
+            logs.iter().map(|p| p.0).sum::<f64>() / k,
+            logs.iter().map(|p| p.1).sum::<f64>() / k,
+        );
+        let sxx: f64 = logs.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let sxy: f64 = logs.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        // sxx is 0 only when every size is the same: no exponent to report then.
+        if sxx > 0.0 {
+            println!(
+                "round time grows as nodes^{:.2} (least squares on log-log over {} sizes, supports of fixed size)",
+                sxy / sxx,
+                logs.len()
+            );
+        }
     }
     Ok(())
 }
 
-async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<()> {
+/// One size: prints its row and returns the median round time in ms.
+async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<f64> {
     let problem = synthetic_room(&SyntheticConfig::new(nodes, 1))?.problem;
     let agents = nodes.div_ceil(NODES_PER_AGENT);
     let owners: HashMap<String, Vec<u32>> = (0..agents)
@@ -81,7 +111,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<()> {
         };
         tokio::spawn(node::run(config, room.display(), cancel.child_token()));
     }
-    let ready = tokio::time::timeout(Duration::from_secs(60), async {
+    let ready = tokio::time::timeout(Duration::from_secs(180), async {
         loop {
             let s = status.borrow().clone();
             if s.live_projectors == agents && s.captures >= 2 {
@@ -93,7 +123,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<()> {
     .await;
     ready.context("the agents did not all join within 60 s")??;
     let heap_per_agent = alloc.current_usage().saturating_sub(before) as f64 / agents as f64 / 1e6;
-    let rounds = if nodes >= 1000 { 30 } else { 60 };
+    let rounds = if nodes >= 1000 { 20 } else { 60 };
     let mut times = Vec::with_capacity(rounds);
     let (mut out, mut inn) = (0u64, 0u64);
     let mut last = Instant::now();
@@ -120,5 +150,5 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<()> {
         inn / rounds as u64,
         heap_per_agent
     );
-    Ok(())
+    Ok(pct(0.5))
 }
