@@ -83,6 +83,9 @@ enum BenchCommand {
         /// The small test room, one preset, ten captures per rule (for tests).
         #[arg(long)]
         quick: bool,
+        /// The hard cases of DESIGN §9 (variants of the lab) instead of the lab's presets.
+        #[arg(long, conflicts_with = "quick")]
+        hard: bool,
         /// Write the records as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -127,8 +130,14 @@ fn main() -> Result<()> {
             which: BenchCommand::Core { quick, json, seed },
         } => bench::core(quick, json.as_deref(), seed, &ALLOCATOR),
         Command::Bench {
-            which: BenchCommand::Room { quick, json, seed },
-        } => bench_room::run(quick, json.as_deref(), seed),
+            which:
+                BenchCommand::Room {
+                    quick,
+                    hard,
+                    json,
+                    seed,
+                },
+        } => bench_room::run(quick, hard, json.as_deref(), seed),
         Command::Bench {
             which: BenchCommand::Net { quick },
         } => bench_net::run(quick, &ALLOCATOR),
