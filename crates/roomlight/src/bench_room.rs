@@ -94,7 +94,7 @@ fn scene_records(
     let bar = indicatif::ProgressBar::hidden();
     let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| println!("{line}"))?;
     let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
-    let transport = pipeline::Transport::new(basis, &cal.corners)?;
+    let transport = pipeline::Transport::new(basis, &cal.corners, pipeline::sample_config(&room))?;
     let mut records = Vec::new();
     for preset in 0..presets.min(room.scene().presets.len()) {
         let preset_name = room.scene().presets[preset].name.clone();

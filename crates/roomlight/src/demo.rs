@@ -85,7 +85,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     };
     let t = Instant::now();
     let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
-    let transport = pipeline::Transport::new(basis, &cal.corners)?;
+    let transport = pipeline::Transport::new(basis, &cal.corners, pipeline::sample_config(&room))?;
     println!(
         "simulated hardware: each node's light rendered once in {:.1} s",
         t.elapsed().as_secs_f64()

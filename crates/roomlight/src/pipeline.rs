@@ -60,7 +60,7 @@ pub struct Calibrated {
     /// Each node's projector and weights (for the simulated hardware).
     pub regions: Vec<NodeRegion>,
     /// Each node's own chart (room chart index).
-    pub node_charts: Vec<usize>,
+    pub node_charts: Vec<Option<usize>>,
     /// The charts' corners in the camera image.
     pub corners: Vec<ChartCorners>,
     /// Attenuation, black level and which patches it could measure.
@@ -69,10 +69,12 @@ pub struct Calibrated {
     pub columns: Vec<Vec<(u32, LinearRgb)>>,
     /// Captures used.
     pub captures: usize,
-    /// The decoded structured light of each luminaire (camera pixel → projector pixel).
+    /// The decoded structured light of each luminaire that lights a chart.
     pub correspondences: Vec<Correspondence>,
-    /// Room projector index of each decoded luminaire.
-    pub luminaires: Vec<usize>,
+    /// Room projector index of each of those.
+    pub charted: Vec<usize>,
+    /// Standard luminaires that light no chart, with their decoded structured light.
+    pub chartless: Vec<(usize, Correspondence)>,
     /// Each room projector's measured response (linear for those not calibrated).
     pub responses: Vec<Response>,
     /// Each large-aperture luminaire and its decoded structured light.
@@ -119,16 +121,15 @@ fn footprint_ramp(ramp: &[LinearImage], corr: &Correspondence) -> (Vec<LinearRgb
 /// away from the focus plane, and pixels its decode missed are dark only through this margin.
 const AREA_TARGET_MARGIN: f64 = 0.06;
 
-/// A large-aperture luminaire as one node: its whole frame except the pixels that land on the
-/// target (decoded, then dilated by a margin of 6% of the frame's width); its chart for the
-/// conventional start is the one it lights over the most camera pixels.
-fn area_node(
-    room: &Room,
+/// A projector as one node: its whole frame except the pixels that land on the target
+/// (decoded, then dilated by a margin of 6% of the frame's width); its chart for the
+/// conventional start is the one it lights over the most camera pixels, if any.
+fn whole_frame_node(
     k: usize,
     corr: &Correspondence,
     corners: &[ChartCorners],
     target: &[bool],
-) -> Result<(NodeRegion, usize)> {
+) -> (NodeRegion, Option<usize>) {
     let (w, h) = (corr.projector_width, corr.projector_height);
     let mut dark = vec![false; (w * h) as usize];
     for (m, &t) in corr.map.iter().zip(target) {
@@ -156,20 +157,14 @@ fn area_node(
     }
     let chart = (0..corners.len())
         .max_by_key(|&c| counts[c])
-        .filter(|&c| counts[c] > 0)
-        .with_context(|| {
-            format!(
-                "large-aperture projector {} reaches no chart",
-                room.projectors()[k].name
-            )
-        })?;
-    Ok((
+        .filter(|&c| counts[c] > 0);
+    (
         NodeRegion {
             projector: k,
             weights,
         },
         chart,
-    ))
+    )
 }
 
 /// Whether `(x, y)` lies inside the convex quadrilateral `q`.
@@ -185,24 +180,24 @@ const RAMP_LEVELS: usize = 9;
 impl Calibrated {
     /// The same nodes with another target kept dark (`mask`: camera pixels of the new target),
     /// e.g. a contrast board put where the bust was. Fails if the nodes would change.
-    pub fn regions_with_mask(&self, room: &Room, mask: &[bool]) -> Result<Vec<NodeRegion>> {
+    pub fn regions_with_mask(&self, mask: &[bool]) -> Result<Vec<NodeRegion>> {
         let seg = segment(
             &self.correspondences,
             &self.corners,
             Some(mask),
             &SplitConfig::default(),
         )?;
-        let mut charts: Vec<usize> = seg.nodes.iter().map(|nd| nd.chart).collect();
+        let mut charts: Vec<Option<usize>> = seg.nodes.iter().map(|nd| Some(nd.chart)).collect();
         let mut regions: Vec<NodeRegion> = seg
             .nodes
             .iter()
             .map(|nd| NodeRegion {
-                projector: self.luminaires[nd.projector],
+                projector: self.charted[nd.projector],
                 weights: nd.weights.clone(),
             })
             .collect();
-        for (k, c) in &self.areas {
-            let (region, chart) = area_node(room, *k, c, &self.corners, mask)?;
+        for (k, c) in self.chartless.iter().chain(&self.areas) {
+            let (region, chart) = whole_frame_node(*k, c, &self.corners, mask);
             regions.push(region);
             charts.push(chart);
         }
@@ -398,7 +393,7 @@ pub fn calibrate(
     let t = Instant::now();
     let codes = ramp_codes(RAMP_LEVELS)?;
     stage("responses", decoded.len() * codes.len());
-    let config = SampleConfig::default();
+    let config = sample_config(room);
     let mut responses = vec![Response::linear(); n];
     let all_corr: Vec<&Correspondence> = corr.iter().chain(areas.iter().map(|(_, c)| c)).collect();
     for (&k, c) in decoded.iter().zip(all_corr) {
@@ -429,28 +424,73 @@ pub fn calibrate(
     // 3. Nodes.
     let t = Instant::now();
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let seg = segment(&corr, &corners, Some(&mask), &SplitConfig::default())?;
+    // A luminaire that lights no chart cannot be split by charts: it becomes one node over its
+    // frame (but the target) with no chart, started from the fallback so the lights stay on.
+    let charted: Vec<bool> = corr
+        .iter()
+        .map(|c| {
+            segment(
+                std::slice::from_ref(c),
+                &corners,
+                Some(&mask),
+                &SplitConfig::default(),
+            )
+            .is_ok()
+        })
+        .collect();
+    let with_chart: Vec<Correspondence> = corr
+        .iter()
+        .zip(&charted)
+        .filter(|(_, c)| **c)
+        .map(|(c, _)| c.clone())
+        .collect();
+    let charted_index: Vec<usize> = luminaires
+        .iter()
+        .zip(&charted)
+        .filter(|(_, c)| **c)
+        .map(|(k, _)| *k)
+        .collect();
+    let seg = segment(&with_chart, &corners, Some(&mask), &SplitConfig::default())?;
     let mut regions: Vec<NodeRegion> = seg
         .nodes
         .iter()
         .map(|nd| NodeRegion {
-            projector: luminaires[nd.projector],
+            projector: charted_index[nd.projector],
             weights: nd.weights.clone(),
         })
         .collect();
-    let mut node_charts: Vec<usize> = seg.nodes.iter().map(|nd| nd.chart).collect();
+    let mut node_charts: Vec<Option<usize>> = seg.nodes.iter().map(|nd| Some(nd.chart)).collect();
+    let chartless: Vec<(usize, Correspondence)> = luminaires
+        .iter()
+        .zip(&corr)
+        .zip(&charted)
+        .filter(|(_, ok)| !**ok)
+        .map(|((&k, c), _)| (k, c.clone()))
+        .collect();
+    for (k, c) in &chartless {
+        let (k, c) = (*k, c);
+        let (region, _) = whole_frame_node(k, c, &corners, &mask);
+        say(format!(
+            "{}: lights no chart; one node over its frame, started from the fallback",
+            room.projectors()[k].name
+        ));
+        regions.push(region);
+        node_charts.push(None);
+    }
     // A large aperture that reaches no chart cannot be measured through the charts: left out
     // (it stays dark), and said so.
     let mut kept = Vec::with_capacity(areas.len());
     for (k, c) in areas {
-        match area_node(room, k, &c, &corners, &mask) {
-            Ok((region, chart)) => {
-                regions.push(region);
-                node_charts.push(chart);
-                kept.push((k, c));
-            }
-            Err(e) => say(format!("{}: left out: {e:#}", room.projectors()[k].name)),
+        let (region, chart) = whole_frame_node(k, &c, &corners, &mask);
+        if chart.is_none() {
+            say(format!(
+                "{}: reaches no chart; started from the fallback",
+                room.projectors()[k].name
+            ));
         }
+        regions.push(region);
+        node_charts.push(chart);
+        kept.push((k, c));
     }
     let areas = kept;
     say(format!(
@@ -497,8 +537,9 @@ pub fn calibrate(
         attenuation,
         columns,
         captures: captures.get(),
-        correspondences: corr,
-        luminaires,
+        correspondences: with_chart,
+        charted: charted_index,
+        chartless,
         responses,
         areas,
     })
@@ -514,7 +555,7 @@ pub fn measure_target(
 ) -> Result<Model> {
     let frames = vec![Frame::Black; room.projectors().len()];
     let capture = image(&noise.expose(&room.render(&frames, Some(preset))?));
-    let target = sample_charts(&capture, &cal.corners, &SampleConfig::default())?;
+    let target = sample_charts(&capture, &cal.corners, &sample_config(room))?;
     let att = &cal.attenuation;
     let patches: Vec<usize> = (0..target.len())
         .filter(|&i| att.usable[i] && target[i].status == PatchStatus::Ok)
@@ -549,10 +590,12 @@ pub fn measure_target(
     let charts: Vec<Vec<PatchId>> = cal
         .node_charts
         .iter()
-        .map(|&m| {
-            (0..patches_per_chart)
+        .map(|m| match m {
+            // No chart: an empty one, so the conventional start falls back (lights stay on).
+            None => Vec::new(),
+            Some(m) => (0..patches_per_chart)
                 .filter_map(|j| index.get(&(patches_per_chart * m + j)).copied())
-                .collect()
+                .collect(),
         })
         .collect();
     let conventional = problem
@@ -585,6 +628,7 @@ struct SimHardware {
     room: Arc<Room>,
     frames: Arc<FrameBuilder>,
     corners: Arc<Vec<ChartCorners>>,
+    config: SampleConfig,
     shown: Arc<Mutex<Vec<LinearRgb>>>,
     patches: Arc<Vec<usize>>,
     noise: Arc<Mutex<CameraNoise>>,
@@ -602,14 +646,28 @@ struct CaptureLog {
     noiseless: Vec<LinearRgb>,
 }
 
+/// How the charts are sampled: the camera's saturation and noise, as a real installation knows
+/// them from its sensor's characterisation (dark frames and flat fields).
+pub fn sample_config(room: &Room) -> SampleConfig {
+    let c = &room.scene().camera;
+    SampleConfig {
+        saturation: (0.98 * c.saturation) as f32,
+        read_noise: c.read_noise as f32,
+        shot_noise: c.shot_noise as f32,
+        ..SampleConfig::default()
+    }
+}
+
 /// The chart patches of a capture, every room patch.
-fn sample(capture: &roomlight_sim::Capture, corners: &[ChartCorners]) -> Result<Vec<LinearRgb>> {
-    Ok(
-        sample_charts(&image(capture), corners, &SampleConfig::default())?
-            .iter()
-            .map(|p| p.mean)
-            .collect(),
-    )
+fn sample(
+    capture: &roomlight_sim::Capture,
+    corners: &[ChartCorners],
+    config: &SampleConfig,
+) -> Result<Vec<LinearRgb>> {
+    Ok(sample_charts(&image(capture), corners, config)?
+        .iter()
+        .map(|p| p.mean)
+        .collect())
 }
 
 impl SimHardware {
@@ -623,7 +681,7 @@ impl SimHardware {
 
     /// What a noiseless camera would measure on the model's patches for node values `x`.
     fn noiseless(&self, x: &[LinearRgb]) -> Result<Vec<LinearRgb>> {
-        Ok(self.pick(&sample(&self.render(x)?, &self.corners)?))
+        Ok(self.pick(&sample(&self.render(x)?, &self.corners, &self.config)?))
     }
 
     fn shown(&self) -> Vec<LinearRgb> {
@@ -637,13 +695,13 @@ impl SimHardware {
         let started = Instant::now();
         let shown = self.shown();
         let capture = self.render(&shown)?;
-        let noiseless = self.pick(&sample(&capture, &self.corners)?);
+        let noiseless = self.pick(&sample(&capture, &self.corners, &self.config)?);
         let noisy = self
             .noise
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .expose(&capture);
-        let measured = self.pick(&sample(&noisy, &self.corners)?);
+        let measured = self.pick(&sample(&noisy, &self.corners, &self.config)?);
         self.log
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
@@ -801,20 +859,29 @@ pub struct RunResult {
 /// white and the black level, on every room patch. Measured once per calibration.
 pub struct Transport {
     corners: Arc<Vec<ChartCorners>>,
+    config: SampleConfig,
     black: Vec<LinearRgb>,
     columns: Vec<Vec<LinearRgb>>,
 }
 
 impl Transport {
     /// Renders each node alone at full white (and all black), noiselessly, and samples the charts.
-    pub fn new(basis: Arc<NodeBasis>, corners: &[ChartCorners]) -> Result<Self> {
+    pub fn new(
+        basis: Arc<NodeBasis>,
+        corners: &[ChartCorners],
+        config: SampleConfig,
+    ) -> Result<Self> {
         let nodes = basis.nodes();
-        let black = sample(&basis.capture(&vec![LinearRgb::ZERO; nodes]), corners)?;
+        let black = sample(
+            &basis.capture(&vec![LinearRgb::ZERO; nodes]),
+            corners,
+            &config,
+        )?;
         let columns = (0..nodes)
             .map(|n| {
                 let mut x = vec![LinearRgb::ZERO; nodes];
                 x[n] = LinearRgb::ONE;
-                Ok(sample(&basis.capture(&x), corners)?
+                Ok(sample(&basis.capture(&x), corners, &config)?
                     .iter()
                     .zip(&black)
                     .map(|(a, b)| (*a - *b).map(|v| v.max(0.0)))
@@ -823,6 +890,7 @@ impl Transport {
             .collect::<Result<_>>()?;
         Ok(Self {
             corners: Arc::new(corners.to_vec()),
+            config,
             black,
             columns,
         })
@@ -856,6 +924,7 @@ impl Truth {
         let target = pick(&sample(
             &room.render(&vec![Frame::Black; room.projectors().len()], Some(preset))?,
             &transport.corners,
+            &transport.config,
         )?);
         let columns = transport
             .columns
@@ -894,6 +963,7 @@ pub fn run_agents(
         room: room.clone(),
         frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
         corners: transport.corners.clone(),
+        config: transport.config,
         shown: Arc::new(Mutex::new(model.conventional.clone())),
         patches: Arc::new(model.patches.clone()),
         noise: Arc::new(Mutex::new(CameraNoise::with_seed(room, options.seed))),
