@@ -302,6 +302,36 @@ impl FrameBuilder {
     }
 }
 
+/// Shows one projector's structured light (every other projector black), captures each
+/// pattern with `shoot` and decodes the camera → projector map.
+pub fn decode_projector(
+    room: &Room,
+    k: usize,
+    coding: Coding,
+    mut shoot: impl FnMut(&[Frame]) -> Result<LinearImage>,
+) -> Result<Correspondence> {
+    let p = &room.projectors()[k].pinhole;
+    let manifest = Manifest::with_coding(p.width, p.height, coding)?;
+    let mut caps = Vec::with_capacity(manifest.patterns.len());
+    for pat in &manifest.patterns {
+        let img = manifest.pattern_image(pat.pattern);
+        let mut frames = vec![Frame::Black; room.projectors().len()];
+        frames[k] = Frame::Image(ProjectorImage {
+            width: img.width,
+            height: img.height,
+            pixels: img.pixels,
+        });
+        caps.push(shoot(&frames)?);
+    }
+    Ok(decode(&manifest, &DecodeConfig::default(), |f| {
+        Ok(&caps[manifest
+            .patterns
+            .iter()
+            .position(|p| p.file == f.file)
+            .unwrap_or(0)])
+    })?)
+}
+
 /// Calibrates the standard luminaires of `room`: structured light, nodes, black level and
 /// Hadamard attenuation, all from noisy captures through the charts.
 pub fn calibrate(
@@ -359,26 +389,7 @@ pub fn calibrate(
             .sum(),
     );
     for &k in &decoded {
-        let p = &room.projectors()[k].pinhole;
-        let manifest = Manifest::with_coding(p.width, p.height, coding(k))?;
-        let mut caps = Vec::with_capacity(manifest.patterns.len());
-        for pat in &manifest.patterns {
-            let img = manifest.pattern_image(pat.pattern);
-            let mut frames = vec![Frame::Black; n];
-            frames[k] = Frame::Image(ProjectorImage {
-                width: img.width,
-                height: img.height,
-                pixels: img.pixels,
-            });
-            caps.push(shoot(&frames)?);
-        }
-        corr.push(decode(&manifest, &DecodeConfig::default(), |f| {
-            Ok(&caps[manifest
-                .patterns
-                .iter()
-                .position(|p| p.file == f.file)
-                .unwrap_or(0)])
-        })?);
+        corr.push(decode_projector(room, k, coding(k), &mut shoot)?);
     }
     let area_corr = corr.split_off(luminaires.len());
     let areas: Vec<(usize, Correspondence)> = areas.into_iter().zip(area_corr).collect();

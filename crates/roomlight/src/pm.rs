@@ -7,7 +7,7 @@
 
 use crate::pipeline::{Calibrated, frames_for_values};
 use anyhow::{Context, Result, bail};
-use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig, Manifest, decode};
+use roomlight_calib::graycode::{Coding, Correspondence};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_core::LinearRgb;
 use roomlight_core::metrics::{GrayImage, Rect, ansi_contrast, luminance, rms_contrast};
@@ -97,27 +97,9 @@ fn image(c: &Capture) -> LinearImage {
 
 /// Decodes the texture projector's structured light through the evaluation camera.
 fn decode_texture(room: &Room, k: usize, noise: &mut CameraNoise) -> Result<Correspondence> {
-    let n = room.projectors().len();
-    let p = &room.projectors()[k].pinhole;
-    let manifest = Manifest::with_coding(p.width, p.height, Coding::Gray)?;
-    let mut caps = Vec::with_capacity(manifest.patterns.len());
-    for pat in &manifest.patterns {
-        let img = manifest.pattern_image(pat.pattern);
-        let mut frames = vec![Frame::Black; n];
-        frames[k] = Frame::Image(ProjectorImage {
-            width: img.width,
-            height: img.height,
-            pixels: img.pixels,
-        });
-        caps.push(image(&noise.expose(&room.render(&frames, None)?)));
-    }
-    Ok(decode(&manifest, &DecodeConfig::default(), |f| {
-        Ok(&caps[manifest
-            .patterns
-            .iter()
-            .position(|p| p.file == f.file)
-            .unwrap_or(0)])
-    })?)
+    crate::pipeline::decode_projector(room, k, Coding::Gray, |frames| {
+        Ok(image(&noise.expose(&room.render(frames, None)?)))
+    })
 }
 
 /// A texture in `[0, 1]` at normalised target coordinates `(s, t)` in `[0, 1]²`.
