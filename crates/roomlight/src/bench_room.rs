@@ -137,11 +137,7 @@ fn scene_records(
                 || r.trace.iter().any(|p| !p.model_excess.is_finite())
                 || final_excess > start.max(1.0);
             let de_max = r.de00.iter().copied().fold(0.0, f64::max);
-            let de_mean = if r.de00.is_empty() {
-                0.0
-            } else {
-                r.de00.iter().sum::<f64>() / r.de00.len() as f64
-            };
+            let de_mean = crate::report::mean(&r.de00);
             // Messages: what is left of the wall time after the camera and the node updates.
             let compute_s = compute_us_per_round * rounds * 1e-6;
             let message_ms_per_round =

@@ -3,7 +3,7 @@
 //! update rules on a synthetic room against the exact optimum. The report of issue 6 builds on it.
 
 use crate::pipeline::{self, RunOptions};
-use crate::report::{self, PresetOutcome, Report, RuleOutcome};
+use crate::report::{self, PresetOutcome, Report, RuleOutcome, mean};
 use anyhow::{Context, Result};
 use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
 use roomlight_core::conventional::conventional_start;
@@ -90,6 +90,20 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         "simulated hardware: each node's light rendered once in {:.1} s",
         t.elapsed().as_secs_f64()
     );
+    // The agents on one target, with the live line while they run.
+    let run = |model: &pipeline::Model, truth: &pipeline::Truth, options: RunOptions| {
+        let result = pipeline::run_agents(
+            &room,
+            &cal,
+            model,
+            &transport,
+            truth,
+            options,
+            live(options.max_captures),
+        );
+        bar.finish_and_clear();
+        result
+    };
     let mut presets = Vec::new();
     let mut rules = Vec::new();
     let mut captures = cal.captures;
@@ -98,16 +112,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         captures += 1;
         let truth = pipeline::Truth::new(&room, &transport, &model, preset)?;
         let options = RunOptions::default_rule(args.seed + preset as u64);
-        let result = pipeline::run_agents(
-            &room,
-            &cal,
-            &model,
-            &transport,
-            &truth,
-            options,
-            live(options.max_captures),
-        )?;
-        bar.finish_and_clear();
+        let result = run(&model, &truth, options)?;
         let r = &result;
         println!(
             "{}: {} captures{}, mean ΔE00 {:.2} (max {:.2}), conventional start {:.2}, true optimum {:.2}; excess over G* {:.1e} (true {:.1e}), {:.1} s",
@@ -159,16 +164,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                     stop_when_settled: false,
                     seed: args.seed,
                 };
-                let result = pipeline::run_agents(
-                    &room,
-                    &cal,
-                    &model,
-                    &transport,
-                    &truth,
-                    options,
-                    live(options.max_captures),
-                )?;
-                bar.finish_and_clear();
+                let result = run(&model, &truth, options)?;
                 println!(
                     "  rule {label}: {} captures, {:.2} s, true excess {:.1e}, mean ΔE00 {:.2}",
                     result.captures,
@@ -254,15 +250,6 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 /// Patches per colour chart.
 const PATCHES_PER_CHART: usize = 24;
 
-fn mean(v: &[f64]) -> f64 {
-    // Empty: 0 (nothing measured).
-    if v.is_empty() {
-        0.0
-    } else {
-        v.iter().sum::<f64>() / v.len() as f64
-    }
-}
-
 /// Renders the room under the LEDs, at the conventional start and with the result (noiseless,
 /// the same exposure for the three), as tone-mapped sRGB PNGs with linear 16-bit ones beside.
 fn preset_images(
@@ -277,16 +264,11 @@ fn preset_images(
     use roomlight_sim::Frame;
     use roomlight_sim::room::PngEncoding;
     let dark = vec![Frame::Black; room.projectors().len()];
+    let frames = pipeline::FrameBuilder::new(room, &cal.regions, cal.responses.clone());
     let captures = [
         room.render(&dark, Some(preset))?,
-        room.render(
-            &pipeline::frames_for_values(room, &cal.regions, &cal.responses, &model.conventional),
-            None,
-        )?,
-        room.render(
-            &pipeline::frames_for_values(room, &cal.regions, &cal.responses, &result.x),
-            None,
-        )?,
+        room.render(&frames.frames(&model.conventional), None)?,
+        room.render(&frames.frames(&result.x), None)?,
     ];
     // Exposure: the target's 99th percentile channel value maps to full scale.
     let mut levels: Vec<f32> = captures[0]

@@ -117,9 +117,10 @@ fn footprint_ramp(ramp: &[LinearImage], corr: &Correspondence) -> (Vec<LinearRgb
         .unzip()
 }
 
-/// Projector pixels kept dark around the target for a large-aperture node: its light blurs
-/// away from the focus plane, and pixels its decode missed are dark only through this margin.
-const AREA_TARGET_MARGIN: f64 = 0.06;
+/// Projector pixels kept dark around the target for a whole-frame node (large aperture, or a
+/// projector that lights no chart), as a share of the frame's width: a large aperture's light
+/// blurs away from the focus plane, and pixels the decode missed are dark only through this.
+const WHOLE_FRAME_TARGET_MARGIN: f64 = 0.06;
 
 /// A projector as one node: its whole frame except the pixels that land on the target
 /// (decoded, then dilated by a margin of 6% of the frame's width); its chart for the
@@ -140,7 +141,7 @@ fn whole_frame_node(
             dark[(y * w + x) as usize] = true;
         }
     }
-    let margin = (AREA_TARGET_MARGIN * f64::from(w)).ceil() as u32;
+    let margin = (WHOLE_FRAME_TARGET_MARGIN * f64::from(w)).ceil() as u32;
     let dark = roomlight_calib::nodes::dilate(&dark, w as usize, h as usize, margin);
     let weights: Vec<f32> = dark.iter().map(|&d| if d { 0.0 } else { 1.0 }).collect();
     // The chart with the most camera pixels this projector was decoded on.
@@ -223,22 +224,12 @@ pub struct Model {
     pub conventional: Vec<LinearRgb>,
 }
 
-/// Node values as projector frames: each pixel's linear light is the sum of its nodes' weights
-/// times their values, turned into a code through the projector's measured response (as a node
-/// agent does before it shows a frame).
-pub fn frames_for_values(
-    room: &Room,
-    regions: &[NodeRegion],
-    responses: &[Response],
-    x: &[LinearRgb],
-) -> Vec<Frame> {
-    FrameBuilder::new(room, regions, responses.to_vec()).frames(x)
-}
-
 /// A node's non-zero weights: `(node, [(pixel, weight)])`.
 type SparseNode = (usize, Vec<(u32, f32)>);
 
-/// Builds projector frames from node values, each node's weights kept sparse.
+/// Node values as projector frames: each pixel's linear light is the sum of its nodes' weights
+/// times their values, turned into a code through the projector's measured response (as a node
+/// agent does before it shows a frame). Each node's weights are kept sparse.
 pub struct FrameBuilder {
     /// Per projector: width, height, and its nodes.
     projectors: Vec<(u32, u32, Vec<SparseNode>)>,
@@ -514,12 +505,13 @@ pub fn calibrate(
     let t = Instant::now();
     let before = captures.get();
     let nodes = regions.len();
+    let builder = FrameBuilder::new(room, &regions, responses.clone());
     let on_off = |on: &[bool]| {
         let x: Vec<LinearRgb> = on
             .iter()
             .map(|&o| if o { LinearRgb::ONE } else { LinearRgb::ZERO })
             .collect();
-        frames_for_values(room, &regions, &responses, &x)
+        builder.frames(&x)
     };
     let black = sample_charts(&shoot(&on_off(&vec![false; nodes]))?, &corners, &config)?;
     let rows = plan(nodes, Scheme::Hadamard);

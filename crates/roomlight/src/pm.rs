@@ -5,7 +5,7 @@
 //! preset, and under the projectors' lighting, by an evaluation camera near the texture projector
 //! (the room camera sees the bust at about 25 pixels across).
 
-use crate::pipeline::{Calibrated, frames_for_values};
+use crate::pipeline::{Calibrated, FrameBuilder};
 use anyhow::{Context, Result, bail};
 use roomlight_calib::graycode::{Coding, Correspondence};
 use roomlight_calib::image_io::LinearImage;
@@ -292,9 +292,10 @@ pub fn run(
         let regions = if board { &board_regions } else { &cal.regions };
         let n = eval.projectors().len();
         // The lightings, texture projector black.
+        let luminaires = FrameBuilder::new(&eval, regions, cal.responses.clone());
         let lighting = |condition: usize| -> Vec<Frame> {
             match condition {
-                2 => frames_for_values(&eval, regions, &cal.responses, x),
+                2 => luminaires.frames(x),
                 _ => vec![Frame::Black; n],
             }
         };

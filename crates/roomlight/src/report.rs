@@ -57,7 +57,8 @@ pub struct Report {
     pub shadows: Option<crate::shadow::ShadowComparison>,
 }
 
-fn mean(v: &[f64]) -> f64 {
+/// Mean of `v`.
+pub fn mean(v: &[f64]) -> f64 {
     // Empty: 0, so an empty chart shows as "no patch" rather than NaN.
     if v.is_empty() {
         0.0

@@ -16,21 +16,25 @@ fn roomlight(args: &[&str]) -> String {
     stdout
 }
 
-#[test]
-fn bench_core_quick_writes_every_rule_and_case() {
+/// Runs `roomlight bench WHICH --quick --json FILE`, checks its table, returns the records.
+fn bench_quick_rows(which: &str) -> Vec<serde_json::Value> {
     let dir = tempfile::tempdir().expect("temp dir");
-    let json = dir.path().join("core.json");
+    let json = dir.path().join(format!("{which}.json"));
     let stdout = roomlight(&[
         "bench",
-        "core",
+        which,
         "--quick",
         "--json",
         json.to_str().expect("utf-8 path"),
     ]);
     assert!(stdout.contains("captures to 1%"), "{stdout}");
-    let rows: Vec<serde_json::Value> =
-        serde_json::from_str(&std::fs::read_to_string(&json).expect("json written"))
-            .expect("valid json");
+    serde_json::from_str(&std::fs::read_to_string(&json).expect("json written"))
+        .expect("valid json")
+}
+
+#[test]
+fn bench_core_quick_writes_every_rule_and_case() {
+    let rows = bench_quick_rows("core");
     let rules = [
         "paper",
         "global-oracle",
@@ -393,19 +397,7 @@ fn graycode_generate_then_decode_identity_and_refuse_bad_folders() {
 /// does not.
 #[test]
 fn bench_room_quick_records_every_rule_through_the_agents() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let json = dir.path().join("room.json");
-    let stdout = roomlight(&[
-        "bench",
-        "room",
-        "--quick",
-        "--json",
-        json.to_str().expect("utf-8 path"),
-    ]);
-    assert!(stdout.contains("captures to 1%"), "{stdout}");
-    let rows: Vec<serde_json::Value> =
-        serde_json::from_str(&std::fs::read_to_string(&json).expect("json written"))
-            .expect("valid json");
+    let rows = bench_quick_rows("room");
     assert_eq!(rows.len(), 6, "{rows:?}");
     let by_rule = |rule: &str| {
         rows.iter()
