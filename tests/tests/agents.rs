@@ -72,6 +72,7 @@ impl Sandbox {
             deadline: Duration::from_secs(2),
             model_rounds,
             calibration_epoch: 1,
+            stale_frames: 0,
         };
         let camera_cancel = cancel.child_token();
         let (status, handle) = camera::serve(

@@ -38,6 +38,10 @@ pub struct CameraConfig {
     pub model_rounds: usize,
     /// Calibration epoch (a node's persisted state is accepted only for the same epoch).
     pub calibration_epoch: u64,
+    /// Frames the camera hands over late (its latency, measured once at installation): before
+    /// each measured round the camera agent discards this many captures, so that the nodes
+    /// never act on errors of values they no longer show. Every capture is counted.
+    pub stale_frames: usize,
 }
 
 /// The calibrated room the camera agent holds: every node's attenuation, and which projector
@@ -513,6 +517,19 @@ pub fn serve(
                     continue;
                 }
                 wait_for(&shared, shared.config.deadline, all_shown).await;
+                let mut flushed = true;
+                for _ in 0..shared.config.stale_frames {
+                    if let Err(e) = camera.capture().await {
+                        tracing::warn!(error = %e, "capture failed");
+                        flushed = false;
+                        break;
+                    }
+                    captures += 1;
+                }
+                if !flushed {
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                    continue;
+                }
                 let y = match camera.capture().await {
                     Ok(y) => y,
                     Err(e) => {

@@ -33,6 +33,20 @@ impl StepRule {
         }
     }
 
+    /// The safe step for errors `delay` captures stale: θ at 70% of the largest the delay rule
+    /// allows, θ < 2 sin(π / (2(2τ + 1))) (τ = 0: 2, τ = 1: 1, τ = 2: 0.618), kept at most 1.
+    /// The margin covers a measured model whose curvature bound falls short of the room's: at
+    /// 90% the simulated small room still oscillated for ten captures with τ = 1 (its `h` is
+    /// about 10% under the room's). Momentum and model rounds have no such guarantee with
+    /// stale errors.
+    pub fn safe_for_delay(delay: usize) -> Self {
+        let tau = delay as f64;
+        let allowed = 2.0 * (std::f64::consts::PI / (2.0 * (2.0 * tau + 1.0))).sin();
+        Self::Safe {
+            theta: (0.7 * allowed).min(1.0),
+        }
+    }
+
     /// Checks the parameters: ε finite and ≥ 0; θ in `(0, 2)`.
     pub fn validate(&self) -> Result<(), ModelError> {
         match *self {

@@ -52,10 +52,15 @@ fn stale_errors_converge_with_the_allowed_theta() {
     let p = &room.problem;
     let best = optimum(p).expect("optimum");
     let x0 = start(&room);
-    for (delay, theta, limit) in [(1, 0.9, 1e-3), (2, 0.55, 1e-2)] {
+    for (delay, theta, limit) in [(1, 0.7, 1e-3), (2, 0.433, 1e-2)] {
+        let rule = StepRule::safe_for_delay(delay);
+        let StepRule::Safe { theta: chosen } = rule else {
+            panic!("safe_for_delay gave {rule:?}");
+        };
+        assert!((chosen - theta).abs() < 1e-3, "τ = {delay}: θ {chosen}");
         let config = LoopConfig {
             delay,
-            ..LoopConfig::new(StepRule::Safe { theta }, 100)
+            ..LoopConfig::new(rule, 100)
         };
         let (trace, _) = run(p, p, PlantConfig::default(), &x0, config);
         let excess = final_excess(&best, &trace);

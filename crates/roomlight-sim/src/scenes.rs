@@ -33,17 +33,21 @@ pub enum HardCase {
     HeavyNoise,
     /// Strong, unequal projector gammas (the system must measure and invert them).
     UncorrectedGamma,
+    /// The LED lights four times as bright: a target brighter than the projectors can give,
+    /// so the bounds are active at the optimum.
+    BrightTarget,
 }
 
 impl HardCase {
     /// All hard cases.
-    pub const ALL: [HardCase; 6] = [
+    pub const ALL: [HardCase; 7] = [
         Self::Reflective,
         Self::TwoOnOneWall,
         Self::DimProjector,
         Self::NodeWithoutChart,
         Self::HeavyNoise,
         Self::UncorrectedGamma,
+        Self::BrightTarget,
     ];
 
     /// A short name.
@@ -55,16 +59,33 @@ impl HardCase {
             Self::NodeWithoutChart => "node-without-chart",
             Self::HeavyNoise => "heavy-noise",
             Self::UncorrectedGamma => "uncorrected-gamma",
+            Self::BrightTarget => "bright-target",
         }
     }
 }
 
 /// The lab changed for one hard case.
 pub fn hard_case(case: HardCase) -> Result<Scene, SceneError> {
-    let mut scene = lab()?;
-    scene.name = format!("lab-{}", case.name());
-    let by_name =
-        |scene: &mut Scene, name: &str| scene.projectors.iter().position(|p| p.name == name);
+    hard_case_of(lab()?, case)
+}
+
+/// Any room changed for one hard case. The projector twinned or dimmed is the left-wall or
+/// front-wall one of the lab, or the first standard luminaire of another room; the chartless
+/// projector looks into the ceiling corner at the room's far right front.
+pub fn hard_case_of(mut scene: Scene, case: HardCase) -> Result<Scene, SceneError> {
+    scene.name = format!("{}-{}", scene.name, case.name());
+    let pick = |scene: &Scene, name: &str| {
+        scene
+            .projectors
+            .iter()
+            .position(|p| p.name == name)
+            .or_else(|| {
+                scene.projectors.iter().position(|p| {
+                    p.kind == ProjectorKind::Standard && p.role == ProjectorRole::Luminaire
+                })
+            })
+    };
+    let [width, _, height] = scene.room.size_mm;
     match case {
         HardCase::Reflective => {
             scene.room.wall_albedo = [0.9; 3];
@@ -72,16 +93,16 @@ pub fn hard_case(case: HardCase) -> Result<Scene, SceneError> {
             scene.room.ceiling_albedo = [0.9; 3];
         }
         HardCase::TwoOnOneWall => {
-            if let Some(k) = by_name(&mut scene, "wall-left") {
+            if let Some(k) = pick(&scene, "wall-left") {
                 let mut twin = scene.projectors[k].clone();
-                twin.name = "wall-left-twin".into();
+                twin.name = format!("{}-twin", twin.name);
                 twin.position_mm[1] += 250.0;
                 twin.look_at_mm[1] += 150.0;
                 scene.projectors.push(twin);
             }
         }
         HardCase::DimProjector => {
-            if let Some(k) = by_name(&mut scene, "wall-front") {
+            if let Some(k) = pick(&scene, "wall-front") {
                 scene.projectors[k].peak = scene.projectors[k].peak.map(|v| v * 0.1);
             }
         }
@@ -89,8 +110,8 @@ pub fn hard_case(case: HardCase) -> Result<Scene, SceneError> {
             name: "ceiling-corner".into(),
             kind: ProjectorKind::Standard,
             role: ProjectorRole::Luminaire,
-            position_mm: [2500.0, 300.0, 1200.0],
-            look_at_mm: [2750.0, 100.0, 2350.0],
+            position_mm: [width - 300.0, 300.0, height / 2.0],
+            look_at_mm: [width - 50.0, 100.0, height - 50.0],
             up: [0.0, 1.0, 0.0],
             fov_deg: 30.0,
             resolution: [320, 240],
@@ -109,6 +130,11 @@ pub fn hard_case(case: HardCase) -> Result<Scene, SceneError> {
         HardCase::UncorrectedGamma => {
             for p in &mut scene.projectors {
                 p.gamma = [2.6, 2.2, 1.8];
+            }
+        }
+        HardCase::BrightTarget => {
+            for light in &mut scene.lights {
+                light.intensity *= 4.0;
             }
         }
     }

@@ -38,6 +38,20 @@ fn embedded_scenes_parse_and_the_small_room_builds() {
         let scene = scenes::hard_case(case).expect("hard case");
         roomlight_sim::geometry::Geometry::build(&scene)
             .unwrap_or_else(|e| panic!("{}: {e}", case.name()));
+        // The same cases fit the small test room (the quick benchmark runs them there).
+        let small = scenes::hard_case_of(scenes::small().expect("small"), case)
+            .unwrap_or_else(|e| panic!("small {}: {e}", case.name()));
+        roomlight_sim::geometry::Geometry::build(&small)
+            .unwrap_or_else(|e| panic!("small {}: {e}", case.name()));
+        assert_eq!(small.name, format!("small-{}", case.name()));
+    }
+    let bright = scenes::hard_case(HardCase::BrightTarget).expect("bright");
+    for (a, b) in bright.lights.iter().zip(&lab.lights) {
+        assert!(
+            (a.intensity - 4.0 * b.intensity).abs() < 1e-12,
+            "light {}",
+            a.name
+        );
     }
     let room = Room::build(scenes::small().expect("small")).expect("small room");
     assert_eq!(room.patches(), 48);

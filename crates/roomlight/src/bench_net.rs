@@ -16,7 +16,39 @@ use tokio_util::sync::CancellationToken;
 
 const NODES_PER_AGENT: usize = 10;
 
-pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<()> {
+/// One size of the scaling run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct NetPoint {
+    pub nodes: usize,
+    pub agents: usize,
+    pub median_ms: f64,
+    pub p99_ms: f64,
+    pub bytes_out_per_round: u64,
+    pub bytes_in_per_round: u64,
+    /// Heap the node agents hold, over all of them.
+    pub heap_mb: f64,
+}
+
+/// Least squares on log-log: `y ∝ x^b` over the points with both positive; `None` with fewer
+/// than two such points or when every `x` is the same (no slope to fit).
+pub fn growth_exponent(points: &[(f64, f64)]) -> Option<f64> {
+    let logs: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(x, y)| *x > 0.0 && *y > 0.0)
+        .map(|(x, y)| (x.ln(), y.ln()))
+        .collect();
+    if logs.len() < 2 {
+        return None;
+    }
+    let k = logs.len() as f64;
+    let mx = logs.iter().map(|p| p.0).sum::<f64>() / k;
+    let my = logs.iter().map(|p| p.1).sum::<f64>() / k;
+    let sxx: f64 = logs.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = logs.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -33,37 +65,24 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<()> {
     );
     let mut points = Vec::new();
     for &n in sizes {
-        let median = runtime.block_on(case(n, alloc))?;
-        points.push((n as f64, median));
+        points.push(runtime.block_on(case(n, alloc))?);
     }
-    // Least squares on log-log: round time ∝ nodes^b.
-    let logs: Vec<(f64, f64)> = points
+    let time: Vec<(f64, f64)> = points
         .iter()
-        .filter(|(_, t)| *t > 0.0)
-        .map(|(n, t)| (n.ln(), t.ln()))
+        .map(|p| (p.nodes as f64, p.median_ms))
         .collect();
-    if logs.len() >= 2 {
-        let k = logs.len() as f64;
-        let (mx, my) = (
-            logs.iter().map(|p| p.0).sum::<f64>() / k,
-            logs.iter().map(|p| p.1).sum::<f64>() / k,
+    let heap: Vec<(f64, f64)> = points.iter().map(|p| (p.nodes as f64, p.heap_mb)).collect();
+    if let (Some(t), Some(m)) = (growth_exponent(&time), growth_exponent(&heap)) {
+        println!(
+            "round time grows as nodes^{t:.2}, node agents' heap as nodes^{m:.2} (least squares on log-log over {} sizes, supports of fixed size)",
+            points.len()
         );
-        let sxx: f64 = logs.iter().map(|p| (p.0 - mx).powi(2)).sum();
-        let sxy: f64 = logs.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
-        // sxx is 0 only when every size is the same: no exponent to report then.
-        if sxx > 0.0 {
-            println!(
-                "round time grows as nodes^{:.2} (least squares on log-log over {} sizes, supports of fixed size)",
-                sxy / sxx,
-                logs.len()
-            );
-        }
     }
-    Ok(())
+    Ok(points)
 }
 
-/// One size: prints its row and returns the median round time in ms.
-async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<f64> {
+/// One size: prints its row and returns it.
+async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
     let problem = synthetic_room(&SyntheticConfig::new(nodes, 1))?.problem;
     let agents = nodes.div_ceil(NODES_PER_AGENT);
     let owners: HashMap<String, Vec<u32>> = (0..agents)
@@ -86,6 +105,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<f64> {
         deadline: Duration::from_secs(5),
         model_rounds: 0,
         calibration_epoch: 1,
+        stale_frames: 0,
     };
     let (mut status, _camera) = camera::serve(
         config,
@@ -122,7 +142,8 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<f64> {
     })
     .await;
     ready.context("the agents did not all join within 60 s")??;
-    let heap_per_agent = alloc.current_usage().saturating_sub(before) as f64 / agents as f64 / 1e6;
+    let heap_mb = alloc.current_usage().saturating_sub(before) as f64 / 1e6;
+    let heap_per_agent = heap_mb / agents as f64;
     let rounds = if nodes >= 1000 { 20 } else { 60 };
     let mut times = Vec::with_capacity(rounds);
     let (mut out, mut inn) = (0u64, 0u64);
@@ -150,5 +171,13 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<f64> {
         inn / rounds as u64,
         heap_per_agent
     );
-    Ok(pct(0.5))
+    Ok(NetPoint {
+        nodes,
+        agents,
+        median_ms: pct(0.5),
+        p99_ms: pct(0.99),
+        bytes_out_per_round: out / rounds as u64,
+        bytes_in_per_round: inn / rounds as u64,
+        heap_mb,
+    })
 }

@@ -1,19 +1,51 @@
-//! `roomlight bench room`: speed against error on the simulated default room, every LED preset
-//! and every rule, through the real agents on loopback from the conventional start. Captures to
-//! 1% and 0.1% excess over the measured model's `G*`, final excess and ΔE00, and where the time
-//! goes: the simulated camera, the node updates (timed separately on the same problem), the
-//! messages (the rest). Timings are printed, never asserted.
+//! `roomlight bench` and `roomlight bench room`: speed against error, through the real agents on
+//! loopback from the conventional start, for every rule — on the simulated default room (each
+//! LED preset), on the hard cases of DESIGN §9, and on a synthetic room of a thousand nodes.
+//! Captures to 1% and 0.1% excess over the model's `G*`, final excess and ΔE00, and where the
+//! time goes: the simulated camera, the node updates (timed separately on the same problem),
+//! the messages (the rest). Every figure is the median of repeated runs (camera noise seeds)
+//! with its range. Timings are printed and compared, never asserted.
 
-use crate::pipeline::{self, RunOptions, RunResult};
-use anyhow::{Context, Result};
+use crate::pipeline::{self, Churn, RunOptions, RunResult};
+use anyhow::{Context, Result, bail};
 use comfy_table::{Table, presets::UTF8_FULL_CONDENSED};
-use roomlight_core::StepRule;
+use peak_alloc::PeakAlloc;
+use roomlight_agent::camera::{self, CameraConfig, RoomModel};
+use roomlight_agent::hardware::VirtualRoom;
+use roomlight_agent::node::{self, NodeConfig};
+use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
+use roomlight_core::conventional::conventional_start;
+use roomlight_core::metrics::patch_delta_e;
 use roomlight_core::optimum::{global_step, optimum};
+use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
+use roomlight_core::{LinearRgb, Problem, StepRule};
+use roomlight_sim::scenes::{HardCase, hard_case_of};
 use serde::Serialize;
-use std::path::Path;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio_util::sync::CancellationToken;
 
-/// One record of the table and of `--json`.
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// The small room, fewer captures and rules, a synthetic room of 100 nodes (seconds).
+    pub quick: bool,
+    /// The default room's presets.
+    pub presets: bool,
+    /// The hard cases.
+    pub hard: bool,
+    /// Round cost and memory against the number of nodes (`bench net`).
+    pub scaling: bool,
+    /// Runs per case and rule (camera noise seeds `seed..seed + repeats`).
+    pub repeats: usize,
+    pub seed: u64,
+    pub json: Option<PathBuf>,
+    pub out: Option<PathBuf>,
+}
+
+/// One record of the table and of `--json`: medians over the repeats.
 #[derive(Debug, Clone, Serialize)]
 pub struct Record {
     pub case: String,
@@ -27,150 +59,770 @@ pub struct Record {
     pub message_ms_per_round: f64,
     pub capture_ms: f64,
     pub bytes_per_round: f64,
+    /// True when any repeat diverged (a non-finite value, or ending above where it started).
     pub diverged: bool,
     pub captures: u64,
+    pub repeats: usize,
+    /// The smallest and largest value over the repeats.
+    pub spread: Spread,
 }
 
-fn first_below(result: &RunResult, level: f64) -> Option<u64> {
-    result
-        .trace
-        .iter()
-        .find(|p| p.model_excess <= level)
-        .map(|p| p.capture)
+/// `[min, max]` over the repeats (`None`: never reached).
+#[derive(Debug, Clone, Serialize)]
+pub struct Spread {
+    pub captures_to_1pct: [Option<u64>; 2],
+    pub final_excess: [f64; 2],
+    pub mean_de00: [f64; 2],
+    pub max_de00: [f64; 2],
+    pub message_ms_per_round: [f64; 2],
 }
 
-/// Runs the bench; `quick`: the small room, one preset, 10 captures per rule; `hard`: the hard
-/// cases of DESIGN §9 built on the lab, first preset, 15 captures per rule.
-pub fn run(quick: bool, hard: bool, json: Option<&Path>, seed: u64) -> Result<()> {
-    let mut records = Vec::new();
-    let budget = if quick {
-        10
-    } else if hard {
-        15
+/// One point of a run: after `capture` captures' rounds.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Point {
+    pub capture: u64,
+    pub seconds: f64,
+    pub excess: f64,
+    pub mean_de00: f64,
+}
+
+/// A rule's name and its median curve.
+pub type Curve = (String, Vec<Point>);
+
+/// One run of one case and rule.
+#[derive(Debug, Clone)]
+struct Run {
+    trace: Vec<Point>,
+    /// Captures to a level are counted from here on (the last join or leave).
+    settle_from: u64,
+    final_excess: f64,
+    mean_de00: f64,
+    max_de00: f64,
+    compute_us_per_round: f64,
+    message_ms_per_round: f64,
+    capture_ms: f64,
+    bytes_per_round: f64,
+    captures: u64,
+}
+
+impl Run {
+    fn first_below(&self, level: f64) -> Option<u64> {
+        self.trace
+            .iter()
+            .find(|p| p.capture >= self.settle_from && p.excess <= level)
+            .map(|p| p.capture)
+    }
+
+    /// A non-finite value anywhere, an end above the start, or an end far above the best the
+    /// run had reached (an oscillation that grew): ten times it and over 10% excess, so that
+    /// noise around a small excess does not count.
+    fn diverged(&self) -> bool {
+        let start = self.trace.first().map_or(f64::INFINITY, |p| p.excess);
+        let best = self
+            .trace
+            .iter()
+            .filter(|p| p.capture >= self.settle_from)
+            .map(|p| p.excess)
+            .fold(f64::INFINITY, f64::min);
+        !self.final_excess.is_finite()
+            || self
+                .trace
+                .iter()
+                .any(|p| !p.excess.is_finite() || !p.mean_de00.is_finite())
+            || self.final_excess > start
+            || (self.final_excess > 0.1 && self.final_excess > 10.0 * best)
+    }
+}
+
+/// Every case's records and median curves, for the table, the JSON and the page.
+#[derive(Debug, Default)]
+pub struct Outcome {
+    pub records: Vec<Record>,
+    /// Per case: per rule, the median curve over the repeats.
+    pub curves: Vec<(String, Vec<Curve>)>,
+    pub sparsity: Vec<Sparsity>,
+    pub scaling: Vec<crate::bench_net::NetPoint>,
+    /// Cases that could not run, and why (reported, not left out).
+    pub failed: Vec<(String, String)>,
+}
+
+/// A rule of the comparison: its name, the node rule, the model rounds per capture, and
+/// whether the camera agent discards its stale frames.
+type RuleSpec = (&'static str, StepRule, usize, bool);
+
+/// Every rule, or the quick subset; with stale errors also the safe step the delay allows.
+fn rules(problem: &Problem, quick_subset: bool, latency: usize) -> Vec<RuleSpec> {
+    let momentum = StepRule::Momentum { theta: 1.0 };
+    let mut all = vec![
+        ("paper", StepRule::paper(), 0, false),
+        (
+            "global-oracle",
+            StepRule::Fixed {
+                epsilon: global_step(problem),
+            },
+            0,
+            false,
+        ),
+        ("safe", StepRule::Safe { theta: 1.0 }, 0, false),
+        ("momentum", momentum, 0, false),
+        ("model-5", momentum, 5, false),
+        ("model-20", momentum, 20, false),
+    ];
+    if latency > 0 {
+        // Two answers to a late camera: damp the step as the delay rule requires, or discard
+        // the late frames and keep the fast rule.
+        all.push(("safe-delay", StepRule::safe_for_delay(latency), 0, false));
+        all.push(("model-20-discard", momentum, 20, true));
+    }
+    if quick_subset {
+        all.into_iter()
+            .filter(|(name, ..)| {
+                matches!(
+                    *name,
+                    "paper" | "momentum" | "model-20" | "safe-delay" | "model-20-discard"
+                )
+            })
+            .collect()
     } else {
-        30
+        all
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+fn range(v: &[f64]) -> [f64; 2] {
+    [
+        v.iter().copied().fold(f64::INFINITY, f64::min),
+        v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    ]
+}
+
+/// Median, min and max of "captures to a level" where never (`None`) counts as infinite.
+fn captures_stats(v: &[Option<u64>]) -> (Option<u64>, [Option<u64>; 2]) {
+    let mut sorted: Vec<Option<u64>> = v.to_vec();
+    sorted.sort_by_key(|c| c.unwrap_or(u64::MAX));
+    let pick = |k: usize| sorted.get(k).copied().flatten();
+    (
+        pick(sorted.len() / 2),
+        [pick(0), pick(sorted.len().saturating_sub(1))],
+    )
+}
+
+/// The record of the repeats of one case and rule, and the median curve.
+fn summarise(case: &str, rule: &str, runs: &[Run]) -> (Record, Vec<Point>) {
+    let values = |f: fn(&Run) -> f64| runs.iter().map(f).collect::<Vec<f64>>();
+    let (to_1, to_1_range) =
+        captures_stats(&runs.iter().map(|r| r.first_below(1e-2)).collect::<Vec<_>>());
+    let (to_01, _) = captures_stats(&runs.iter().map(|r| r.first_below(1e-3)).collect::<Vec<_>>());
+    let spread = Spread {
+        captures_to_1pct: to_1_range,
+        final_excess: range(&values(|r| r.final_excess)),
+        mean_de00: range(&values(|r| r.mean_de00)),
+        max_de00: range(&values(|r| r.max_de00)),
+        message_ms_per_round: range(&values(|r| r.message_ms_per_round)),
     };
-    if hard {
-        for case in roomlight_sim::scenes::HardCase::ALL {
-            let scene = roomlight_sim::scenes::hard_case(case)?;
-            println!("hard case {}:", case.name());
-            match scene_records(scene, case.name(), 1, budget, seed) {
-                Ok(r) => records.extend(r),
-                // A case the pipeline cannot calibrate is reported, not left out.
-                Err(e) => println!("  {}: could not run: {e:#}", case.name()),
+    let record = Record {
+        case: case.into(),
+        rule: rule.into(),
+        captures_to_1pct: to_1,
+        captures_to_0_1pct: to_01,
+        final_excess: median(&mut values(|r| r.final_excess)),
+        mean_de00: median(&mut values(|r| r.mean_de00)),
+        max_de00: median(&mut values(|r| r.max_de00)),
+        compute_us_per_round: median(&mut values(|r| r.compute_us_per_round)),
+        message_ms_per_round: median(&mut values(|r| r.message_ms_per_round)),
+        capture_ms: median(&mut values(|r| r.capture_ms)),
+        bytes_per_round: median(&mut values(|r| r.bytes_per_round)),
+        diverged: runs.iter().any(Run::diverged),
+        captures: runs.iter().map(|r| r.captures).max().unwrap_or(0),
+        repeats: runs.len(),
+        spread,
+    };
+    // The median curve: capture by capture over the runs that got that far.
+    let longest = runs.iter().map(|r| r.trace.len()).max().unwrap_or(0);
+    let curve = (0..longest)
+        .map(|k| {
+            let at: Vec<&Point> = runs.iter().filter_map(|r| r.trace.get(k)).collect();
+            Point {
+                capture: k as u64,
+                seconds: median(&mut at.iter().map(|p| p.seconds).collect::<Vec<_>>()),
+                excess: median(&mut at.iter().map(|p| p.excess).collect::<Vec<_>>()),
+                mean_de00: median(&mut at.iter().map(|p| p.mean_de00).collect::<Vec<_>>()),
             }
-        }
-    } else {
-        let mut scene = if quick {
+        })
+        .collect();
+    (record, curve)
+}
+
+/// Runs the plan: prints the tables, writes `--json` and `--out`.
+pub fn run(plan: &Plan, alloc: &PeakAlloc) -> Result<()> {
+    if plan.repeats == 0 {
+        bail!("--repeats must be at least 1");
+    }
+    let t0 = Instant::now();
+    let mut outcome = Outcome::default();
+    let budget: u64 = if plan.quick { 8 } else { 30 };
+    let hard_budget: u64 = if plan.quick { 8 } else { 15 };
+    let hard = |budget| Variant {
+        few_rules: plan.quick,
+        ..Variant::plain(budget)
+    };
+    if plan.presets || plan.hard {
+        let mut base = if plan.quick {
             roomlight_sim::scenes::small()?
         } else {
             roomlight_sim::scenes::lab()?
         };
-        if quick {
-            scene.camera.resolution = [640, 480];
+        if plan.quick {
+            base.camera.resolution = [640, 480];
         }
-        let presets = if quick { 1 } else { scene.presets.len() };
-        let name = scene.name.clone();
-        records = scene_records(scene, &name, presets, budget, seed)?;
+        let base_name = base.name.clone();
+        println!("calibrating {base_name}");
+        let bench = Bench::calibrate(base.clone(), plan.seed)?;
+        if plan.presets {
+            let presets = if plan.quick {
+                1
+            } else {
+                bench.room.scene().presets.len()
+            };
+            for preset in 0..presets {
+                let name = format!("{base_name}/{}", bench.room.scene().presets[preset].name);
+                let variant = Variant::plain(budget);
+                bench.case(&mut outcome, plan, &name, preset, variant, preset == 0)?;
+            }
+        }
+        if plan.hard {
+            // Errors one and two captures stale (camera latency), a projector leaving and
+            // another joining: the base room's first preset.
+            for latency in [1, 2] {
+                // Discarding late frames spends captures: a longer budget.
+                let variant = Variant {
+                    latency,
+                    ..hard(if plan.quick { 12 } else { 20 })
+                };
+                let name = format!("{base_name}/stale-{latency}");
+                bench.case(&mut outcome, plan, &name, 0, variant, false)?;
+            }
+            match bench.churn(plan.quick) {
+                Ok(churn) => {
+                    let variant = Variant {
+                        churn: Some(churn),
+                        ..hard(hard_budget.max(churn.join_at + 8))
+                    };
+                    let name = format!(
+                        "{base_name}/leave-{}-join-{}",
+                        churn.leave_at, churn.join_at
+                    );
+                    bench.case(&mut outcome, plan, &name, 0, variant, false)?;
+                }
+                Err(e) => outcome
+                    .failed
+                    .push((format!("{base_name}/leave-join"), format!("{e:#}"))),
+            }
+            for case in HardCase::ALL {
+                let scene = hard_case_of(base.clone(), case)?;
+                let name = scene.name.clone();
+                println!("hard case {name}: calibrating");
+                let attempt = Bench::calibrate(scene, plan.seed)
+                    .and_then(|b| b.case(&mut outcome, plan, &name, 0, hard(hard_budget), false));
+                if let Err(e) = attempt {
+                    // A case the pipeline cannot calibrate or run is reported, not left out.
+                    println!("  {name}: could not run: {e:#}");
+                    outcome.failed.push((name, format!("{e:#}")));
+                }
+            }
+            let nodes = if plan.quick { 100 } else { 1000 };
+            synthetic_case(&mut outcome, plan, nodes, hard_budget)?;
+        }
     }
-    print_table(&records, budget);
-    if let Some(path) = json {
-        std::fs::write(path, serde_json::to_string_pretty(&records)?)
+    if plan.scaling {
+        outcome.scaling = crate::bench_net::run(plan.quick, alloc)?;
+    }
+    print_table(&outcome.records);
+    for (case, why) in &outcome.failed {
+        println!("{case}: could not run: {why}");
+    }
+    println!(
+        "bench: {:.0} s, {} repeat(s) per case and rule",
+        t0.elapsed().as_secs_f64(),
+        plan.repeats
+    );
+    if let Some(path) = &plan.json {
+        std::fs::write(path, serde_json::to_string_pretty(&outcome.records)?)
             .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(dir) = &plan.out {
+        crate::bench_report::write(dir, &outcome)?;
+        println!("report: {}", dir.join("index.html").display());
     }
     Ok(())
 }
 
-/// Calibrates `scene` and runs every rule on its first `presets` presets.
-fn scene_records(
-    scene: roomlight_sim::scene::Scene,
-    name: &str,
-    presets: usize,
+/// How a case departs from a plain run.
+#[derive(Debug, Clone, Copy)]
+struct Variant {
     budget: u64,
-    seed: u64,
-) -> Result<Vec<Record>> {
-    let room = Arc::new(roomlight_sim::Room::build(scene).context("building the room")?);
-    let mut noise = roomlight_sim::CameraNoise::with_seed(&room, seed);
-    let bar = indicatif::ProgressBar::hidden();
-    let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| println!("{line}"))?;
-    let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
-    let transport = pipeline::Transport::new(basis, &cal.corners, pipeline::sample_config(&room))?;
-    let mut records = Vec::new();
-    for preset in 0..presets.min(room.scene().presets.len()) {
-        let preset_name = room.scene().presets[preset].name.clone();
-        let model = pipeline::measure_target(&room, &cal, preset, &mut noise)?;
-        let truth = pipeline::Truth::new(&room, &transport, &model, preset)?;
-        if preset == 0 {
-            sparsity(&cal, &model)?;
+    latency: usize,
+    churn: Option<Churn>,
+    /// Only the paper's rule, momentum and model-20 (the quick bench's hard cases).
+    few_rules: bool,
+}
+
+impl Variant {
+    fn plain(budget: u64) -> Self {
+        Self {
+            budget,
+            latency: 0,
+            churn: None,
+            few_rules: false,
         }
-        let rules = [
-            ("paper", StepRule::paper(), 0),
-            (
-                "global-oracle",
-                StepRule::Fixed {
-                    epsilon: global_step(&model.problem),
-                },
-                0,
-            ),
-            ("safe", StepRule::Safe { theta: 1.0 }, 0),
-            ("momentum", StepRule::Momentum { theta: 1.0 }, 0),
-            ("model-5", StepRule::Momentum { theta: 1.0 }, 5),
-            ("model-20", StepRule::Momentum { theta: 1.0 }, 20),
-        ];
-        for (rule_name, rule, model_rounds) in rules {
-            let options = RunOptions {
-                rule,
-                model_rounds,
-                max_captures: budget,
-                stop_when_settled: false,
-                seed,
-            };
-            let r = pipeline::run_agents(&room, &cal, &model, &transport, &truth, options, &bar)?;
-            let rounds = r.rounds.max(1) as f64;
+    }
+}
+
+/// A calibrated simulated room, ready to run cases on.
+struct Bench {
+    room: Arc<roomlight_sim::Room>,
+    cal: pipeline::Calibrated,
+    transport: pipeline::Transport,
+    noise: std::cell::RefCell<roomlight_sim::CameraNoise>,
+}
+
+impl Bench {
+    fn calibrate(scene: roomlight_sim::scene::Scene, seed: u64) -> Result<Self> {
+        let room = Arc::new(roomlight_sim::Room::build(scene).context("building the room")?);
+        let mut noise = roomlight_sim::CameraNoise::with_seed(&room, seed);
+        let bar = indicatif::ProgressBar::hidden();
+        let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| println!("  {line}"))?;
+        let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
+        let transport =
+            pipeline::Transport::new(basis, &cal.corners, pipeline::sample_config(&room))?;
+        Ok(Self {
+            room,
+            cal,
+            transport,
+            noise: std::cell::RefCell::new(noise),
+        })
+    }
+
+    /// The first standard luminaire leaves, the last one (off until then) joins: a third of
+    /// the way through the budget and two thirds (captures 5 and 10 of the full bench).
+    fn churn(&self, quick: bool) -> Result<Churn> {
+        let standard: Vec<usize> = self
+            .room
+            .projectors()
+            .iter()
+            .enumerate()
+            .filter(|(k, p)| {
+                p.kind == roomlight_sim::scene::ProjectorKind::Standard
+                    && self.cal.regions.iter().any(|r| r.projector == *k)
+            })
+            .map(|(k, _)| k)
+            .collect();
+        let (Some(&leaving), Some(&joining)) = (standard.first(), standard.last()) else {
+            bail!("the room has no standard luminaire with nodes");
+        };
+        if leaving == joining {
+            bail!("the room has a single standard luminaire: none to join after one left");
+        }
+        let (leave_at, join_at) = if quick { (2, 4) } else { (5, 10) };
+        Ok(Churn {
+            leaving,
+            leave_at,
+            joining,
+            join_at,
+        })
+    }
+
+    /// Every rule on `preset`, `plan.repeats` times each.
+    fn case(
+        &self,
+        outcome: &mut Outcome,
+        plan: &Plan,
+        name: &str,
+        preset: usize,
+        variant: Variant,
+        report_sparsity: bool,
+    ) -> Result<()> {
+        let model =
+            pipeline::measure_target(&self.room, &self.cal, preset, &mut self.noise.borrow_mut())?;
+        let truth = pipeline::Truth::new(&self.room, &self.transport, &model, preset)?;
+        if report_sparsity {
+            outcome
+                .sparsity
+                .push(scene_sparsity(name, &self.cal, &model)?);
+        }
+        let bar = indicatif::ProgressBar::hidden();
+        let mut curves = Vec::new();
+        for (rule_name, rule, model_rounds, discard_stale) in
+            rules(&model.problem, variant.few_rules, variant.latency)
+        {
             let compute_us_per_round =
                 crate::bench::us_per_node_update(&model.problem, rule, &model.conventional)?
                     * model.problem.nodes() as f64;
-            let last = r.trace.last();
-            let final_excess = last.map_or(f64::NAN, |p| p.model_excess);
-            let start = r.trace.first().map_or(f64::INFINITY, |p| p.model_excess);
-            let diverged = !final_excess.is_finite()
-                || r.trace.iter().any(|p| !p.model_excess.is_finite())
-                || final_excess > start.max(1.0);
-            let de_max = r.de00.iter().copied().fold(0.0, f64::max);
-            let de_mean = crate::report::mean(&r.de00);
-            // Messages: what is left of the wall time after the camera and the node updates.
-            let compute_s = compute_us_per_round * rounds * 1e-6;
-            let message_ms_per_round =
-                ((r.seconds - r.capture_seconds - compute_s).max(0.0) / rounds) * 1e3;
-            records.push(Record {
-                case: format!("{name}/{preset_name}"),
-                rule: rule_name.into(),
-                captures_to_1pct: first_below(&r, 1e-2),
-                captures_to_0_1pct: first_below(&r, 1e-3),
-                final_excess,
-                mean_de00: de_mean,
-                max_de00: de_max,
-                compute_us_per_round,
-                message_ms_per_round,
-                capture_ms: r.capture_seconds * 1e3 / r.captures.max(1) as f64,
-                bytes_per_round: r.bytes as f64 / rounds,
-                diverged,
-                captures: r.captures,
-            });
+            let mut runs = Vec::new();
+            for k in 0..plan.repeats {
+                let options = RunOptions {
+                    rule,
+                    model_rounds,
+                    max_captures: variant.budget,
+                    stop_when_settled: false,
+                    seed: plan.seed + k as u64,
+                    latency: variant.latency,
+                    discard_stale,
+                    churn: variant.churn,
+                };
+                let r = pipeline::run_agents(
+                    &self.room,
+                    &self.cal,
+                    &model,
+                    &self.transport,
+                    &truth,
+                    options,
+                    &bar,
+                )?;
+                let settle_from = variant.churn.map_or(0, |c| c.join_at.max(c.leave_at) + 1);
+                runs.push(scene_run(&r, compute_us_per_round, settle_from));
+            }
+            let (record, curve) = summarise(name, rule_name, &runs);
+            println!(
+                "  {name} {rule_name}: to 1% {}, final excess {:.1e}, mean ΔE00 {:.2}",
+                record
+                    .captures_to_1pct
+                    .map_or("never".into(), |c| c.to_string()),
+                record.final_excess,
+                record.mean_de00
+            );
+            outcome.records.push(record);
+            curves.push((rule_name.to_string(), curve));
         }
+        outcome.curves.push((name.to_string(), curves));
+        Ok(())
     }
-    Ok(records)
 }
 
-fn print_table(records: &[Record], budget: u64) {
+/// A run of the simulated room as the bench counts it: the measured model's excess (the
+/// quantity the rules minimise) against captures and wall time.
+fn scene_run(r: &RunResult, compute_us_per_round: f64, settle_from: u64) -> Run {
+    let rounds = r.rounds.max(1) as f64;
+    let compute_s = compute_us_per_round * rounds * 1e-6;
+    Run {
+        trace: r
+            .trace
+            .iter()
+            .map(|p| Point {
+                capture: p.capture,
+                seconds: p.seconds,
+                excess: p.model_excess,
+                mean_de00: p.mean_de00,
+            })
+            .collect(),
+        settle_from,
+        final_excess: r.trace.last().map_or(f64::NAN, |p| p.model_excess),
+        mean_de00: crate::report::mean(&r.de00),
+        max_de00: r.de00.iter().copied().fold(0.0, f64::max),
+        compute_us_per_round,
+        // Messages: what is left of the wall time after the camera and the node updates.
+        message_ms_per_round: ((r.seconds - r.capture_seconds - compute_s).max(0.0) / rounds) * 1e3,
+        capture_ms: r.capture_seconds * 1e3 / r.captures.max(1) as f64,
+        bytes_per_round: r.bytes_per_round,
+        captures: r.captures,
+    }
+}
+
+/// Nodes per node agent in the synthetic room (one agent per projector of ten nodes).
+const NODES_PER_AGENT: usize = 10;
+
+/// A synthetic room of `nodes` nodes and 24 patches each (no rendering: the transport is
+/// written down), with the camera's noise, through the agents on loopback for every rule.
+fn synthetic_case(outcome: &mut Outcome, plan: &Plan, nodes: usize, budget: u64) -> Result<()> {
+    let name = format!("synthetic-{nodes}");
+    let room = synthetic_room(&SyntheticConfig::new(nodes, plan.seed))?;
+    let problem = room.problem;
+    println!(
+        "{name}: {nodes} nodes over {} patches, optimum…",
+        problem.patches()
+    );
+    let best = optimum(&problem)?;
+    let start = conventional_start(&problem, &room.charts, LinearRgb::splat(0.5))?;
+    outcome
+        .sparsity
+        .push(synthetic_sparsity(&name, nodes, plan.seed)?);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the runtime")?;
+    let mut curves = Vec::new();
+    for (rule_name, rule, model_rounds, _) in rules(&problem, false, 0) {
+        let compute_us_per_round =
+            crate::bench::us_per_node_update(&problem, rule, &start)? * nodes as f64;
+        let mut runs = Vec::new();
+        for k in 0..plan.repeats {
+            let seed = plan.seed + k as u64;
+            let mut run = runtime.block_on(synthetic_run(
+                &problem,
+                &start,
+                (rule, model_rounds),
+                budget,
+                seed,
+            ))?;
+            run.compute_us_per_round = compute_us_per_round;
+            run.trace.iter_mut().for_each(|p| {
+                p.excess = best.excess(p.excess);
+            });
+            run.final_excess = run.trace.last().map_or(f64::NAN, |p| p.excess);
+            runs.push(run);
+        }
+        let (record, curve) = summarise(&name, rule_name, &runs);
+        println!(
+            "  {name} {rule_name}: to 1% {}, final excess {:.1e}",
+            record
+                .captures_to_1pct
+                .map_or("never".into(), |c| c.to_string()),
+            record.final_excess
+        );
+        outcome.records.push(record);
+        curves.push((rule_name.to_string(), curve));
+    }
+    outcome.curves.push((name, curves));
+    Ok(())
+}
+
+/// One run on the synthetic room; the trace holds the true `G` (the caller turns it into excess).
+async fn synthetic_run(
+    problem: &Problem,
+    start: &[LinearRgb],
+    (rule, model_rounds): (StepRule, usize),
+    budget: u64,
+    seed: u64,
+) -> Result<Run> {
+    let nodes = problem.nodes();
+    let plant = Plant::new(
+        problem.clone(),
+        PlantConfig {
+            noise_scale: 1.0,
+            seed,
+            ..PlantConfig::default()
+        },
+    )?;
+    let room = VirtualRoom::new(plant);
+    let agents = nodes.div_ceil(NODES_PER_AGENT);
+    let owners: HashMap<String, Vec<u32>> = (0..agents)
+        .map(|a| {
+            let first = a * NODES_PER_AGENT;
+            let nodes = (first as u32..(first + NODES_PER_AGENT).min(nodes) as u32).collect();
+            (format!("p{a}"), nodes)
+        })
+        .collect();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+    let endpoint = format!("http://{}", listener.local_addr()?);
+    let cancel = CancellationToken::new();
+    let config = CameraConfig {
+        room: "synthetic".into(),
+        token: "bench".into(),
+        heartbeat: Duration::from_secs(1),
+        deadline: Duration::from_secs(5),
+        model_rounds,
+        calibration_epoch: 1,
+        stale_frames: 0,
+    };
+    let (mut status, camera_task) = camera::serve(
+        config,
+        RoomModel {
+            problem: problem.clone(),
+            owners: owners.clone(),
+            start: Some(start.to_vec()),
+        },
+        room.camera(),
+        listener,
+        cancel.clone(),
+    );
+    let de = |x: &[LinearRgb]| -> Result<f64> {
+        Ok(patch_delta_e(problem.target(), &problem.response(x))?.mean)
+    };
+    let t0 = Instant::now();
+    let mut trace = vec![Point {
+        capture: 0,
+        seconds: 0.0,
+        excess: problem.objective(start),
+        mean_de00: de(start)?,
+    }];
+    let mut tasks = Vec::new();
+    for id in owners.keys() {
+        let config = NodeConfig {
+            endpoint: endpoint.clone(),
+            room: "synthetic".into(),
+            token: "bench".into(),
+            projector_id: id.clone(),
+            rule,
+            start: LinearRgb::splat(0.5),
+            state_file: None,
+        };
+        tasks.push(tokio::spawn(node::run(
+            config,
+            room.display(),
+            cancel.child_token(),
+        )));
+    }
+    let mut bytes = pipeline::PerRound::default();
+    let outcome = tokio::time::timeout(Duration::from_secs(300), async {
+        loop {
+            status.changed().await?;
+            let s = status.borrow().clone();
+            bytes.add(&s);
+            let x = room.shown();
+            trace.push(Point {
+                capture: s.captures,
+                seconds: t0.elapsed().as_secs_f64(),
+                excess: room.true_objective(),
+                mean_de00: de(&x)?,
+            });
+            if s.captures >= budget && s.live_projectors == agents {
+                return Ok::<_, anyhow::Error>(s);
+            }
+        }
+    })
+    .await;
+    let seconds = t0.elapsed().as_secs_f64();
+    cancel.cancel();
+    for task in tasks {
+        let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
+    }
+    let _ = tokio::time::timeout(Duration::from_secs(5), camera_task).await;
+    let last = outcome.context("the synthetic room's agents did not finish within 300 s")??;
+    let x = room.shown();
+    let de_final = patch_delta_e(problem.target(), &problem.response(&x))?;
+    let rounds = last.round.max(1) as f64;
+    Ok(Run {
+        trace,
+        settle_from: 0,
+        final_excess: f64::NAN,
+        mean_de00: de_final.mean,
+        max_de00: de_final.per_patch.iter().copied().fold(0.0, f64::max),
+        compute_us_per_round: 0.0,
+        message_ms_per_round: seconds * 1e3 / rounds,
+        capture_ms: 0.0,
+        bytes_per_round: bytes.bytes_per_round(),
+        captures: last.captures,
+    })
+}
+
+/// Model only what the scene needs: how much the 3σ cut-off keeps and what it costs.
+#[derive(Debug, Clone, Serialize)]
+pub struct Sparsity {
+    pub case: String,
+    pub nodes: usize,
+    pub patches: usize,
+    /// Attenuation entries kept in the supports, and all non-zero ones measured.
+    pub kept: usize,
+    pub nonzero: usize,
+    /// Bytes per round (errors out, contributions in: a patch id and three doubles each) with
+    /// supports, and with dense errors to every node.
+    pub sparse_bytes: usize,
+    pub dense_bytes: usize,
+    /// Excess on the uncut model of the cut model's optimum.
+    pub cutoff_cost: f64,
+    /// The closed loop (momentum and 20 model rounds, in memory, noiseless) on a room that
+    /// behaves like the uncut model, after as many captures: excess when the nodes hold the
+    /// cut model and when they hold the uncut one. The camera's errors see every entry, so
+    /// the loop recovers part of what the open-loop cut-off costs.
+    pub loop_captures: usize,
+    pub loop_excess_cut: f64,
+    pub loop_excess_uncut: f64,
+}
+
+impl Sparsity {
+    fn new(case: &str, cut: &Problem, uncut: &Problem, start: &[LinearRgb]) -> Result<Self> {
+        let kept: usize = cut.columns().iter().map(|c| c.len()).sum();
+        let nonzero: usize = uncut.columns().iter().map(|c| c.len()).sum();
+        let (nodes, patches) = (cut.nodes(), cut.patches());
+        let entry = 4 + 3 * 8;
+        let best_cut = optimum(cut)?;
+        let best_uncut = optimum(uncut)?;
+        let loop_captures = 15;
+        let closed = |model: &Problem| -> Result<f64> {
+            let mut plant = Plant::new(uncut.clone(), PlantConfig::default())?;
+            let config = LoopConfig {
+                model_rounds: 20,
+                ..LoopConfig::new(StepRule::Momentum { theta: 1.0 }, loop_captures)
+            };
+            let trace = closed_loop::run(model, &mut plant, start, &config)?;
+            Ok(best_uncut.excess(plant.true_objective(&trace.shown, loop_captures)))
+        };
+        let s = Self {
+            case: case.into(),
+            nodes,
+            patches,
+            kept,
+            nonzero,
+            sparse_bytes: 2 * kept * entry,
+            dense_bytes: 2 * nodes * patches * entry,
+            cutoff_cost: best_uncut.excess(uncut.objective(&best_cut.x)),
+            loop_captures,
+            loop_excess_cut: closed(cut)?,
+            loop_excess_uncut: closed(uncut)?,
+        };
+        println!("{}", s.line());
+        Ok(s)
+    }
+
+    /// The sentence the terminal and the page print.
+    pub fn line(&self) -> String {
+        format!(
+            "{}: model only what the scene needs: {} of {} non-zero attenuation entries kept ({:.1}%; {:.2}% of all {}×{}); {:.1} kB per round with supports against {:.1} kB with dense errors; the cut-off costs {:.1e} excess on the uncut model; in the closed loop ({} captures, momentum + 20 model rounds, the room behaving like the uncut model) {:.1e} with the cut model against {:.1e} with the uncut one",
+            self.case,
+            self.kept,
+            self.nonzero,
+            // nonzero is 0 only for a room without light: nothing kept of nothing.
+            100.0 * self.kept as f64 / self.nonzero.max(1) as f64,
+            100.0 * self.kept as f64 / (self.nodes * self.patches).max(1) as f64,
+            self.nodes,
+            self.patches,
+            self.sparse_bytes as f64 / 1000.0,
+            self.dense_bytes as f64 / 1000.0,
+            self.cutoff_cost,
+            self.loop_captures,
+            self.loop_excess_cut,
+            self.loop_excess_uncut,
+        )
+    }
+}
+
+fn scene_sparsity(
+    case: &str,
+    cal: &pipeline::Calibrated,
+    model: &pipeline::Model,
+) -> Result<Sparsity> {
+    let uncut = pipeline::uncut_problem(cal, model)?;
+    Sparsity::new(case, &model.problem, &uncut, &model.conventional)
+}
+
+/// The synthetic room with its 3σ cut-off against the same room with every entry the
+/// generator writes.
+fn synthetic_sparsity(case: &str, nodes: usize, seed: u64) -> Result<Sparsity> {
+    let room = synthetic_room(&SyntheticConfig::new(nodes, seed))?;
+    let start = conventional_start(&room.problem, &room.charts, LinearRgb::splat(0.5))?;
+    let cut = room.problem;
+    let uncut = synthetic_room(&SyntheticConfig {
+        cutoff_sigmas: 0.0,
+        ..SyntheticConfig::new(nodes, seed)
+    })?
+    .problem;
+    Sparsity::new(case, &cut, &uncut, &start)
+}
+
+fn print_table(records: &[Record]) {
     let mut table = Table::new();
     table.load_preset(UTF8_FULL_CONDENSED).set_header([
         "case",
         "rule",
         "to 1%",
         "to 0.1%",
-        "final excess",
-        "mean ΔE00",
+        "final excess (range)",
+        "mean ΔE00 (range)",
         "max ΔE00",
         "compute µs/round",
         "message ms/round",
@@ -178,15 +830,20 @@ fn print_table(records: &[Record], budget: u64) {
         "bytes/round",
         "diverged",
     ]);
-    let opt = |v: Option<u64>| v.map_or(format!("> {budget}"), |c| c.to_string());
     for r in records {
         table.add_row([
             r.case.clone(),
             r.rule.clone(),
-            opt(r.captures_to_1pct),
-            opt(r.captures_to_0_1pct),
-            format!("{:.1e}", r.final_excess),
-            format!("{:.2}", r.mean_de00),
+            captures_cell(r.captures_to_1pct, r.spread.captures_to_1pct, r.captures),
+            captures_cell(r.captures_to_0_1pct, [None, None], r.captures),
+            format!(
+                "{:.1e} ({:.1e}…{:.1e})",
+                r.final_excess, r.spread.final_excess[0], r.spread.final_excess[1]
+            ),
+            format!(
+                "{:.2} ({:.2}…{:.2})",
+                r.mean_de00, r.spread.mean_de00[0], r.spread.mean_de00[1]
+            ),
             format!("{:.2}", r.max_de00),
             format!("{:.1}", r.compute_us_per_round),
             format!("{:.2}", r.message_ms_per_round),
@@ -196,32 +853,42 @@ fn print_table(records: &[Record], budget: u64) {
         ]);
     }
     println!(
-        "captures to 1% / 0.1% excess over the measured model's G*, from the conventional start (capture 0), through the agents on loopback"
+        "medians over the repeats (range in brackets); captures to 1% / 0.1% excess over the model's G*, from the conventional start (capture 0), through the agents on loopback; after a leave and a join they count from the join"
     );
     println!("{table}");
 }
 
-/// Model only what the scene needs: the share of attenuation entries the 3σ cut-off keeps, the
-/// bytes per round with supports against dense errors, and what the cut-off costs in accuracy
-/// (the sparse model's optimum evaluated on the uncut model).
-fn sparsity(cal: &pipeline::Calibrated, model: &pipeline::Model) -> Result<()> {
-    let uncut = pipeline::uncut_problem(cal, model)?;
-    let kept: usize = model.problem.columns().iter().map(|c| c.len()).sum();
-    let all: usize = uncut.columns().iter().map(|c| c.len()).sum();
-    let (nodes, patches) = (model.problem.nodes(), model.problem.patches());
-    // Per round: errors out and contributions in, a patch id (4 bytes) and three doubles each.
-    let entry = 4 + 3 * 8;
-    let sparse_bytes = 2 * kept * entry;
-    let dense_bytes = 2 * nodes * patches * entry;
-    let best_cut = optimum(&model.problem)?;
-    let best_uncut = optimum(&uncut)?;
-    let cost = best_uncut.excess(uncut.objective(&best_cut.x));
-    println!(
-        "model only what the scene needs: {kept} of {all} non-zero attenuation entries kept ({:.1}%; {:.1}% of all {nodes}×{patches}); {:.1} kB per round with supports against {:.1} kB with dense errors; the cut-off costs {cost:.1e} excess on the uncut model",
-        100.0 * kept as f64 / all.max(1) as f64,
-        100.0 * kept as f64 / (nodes * patches).max(1) as f64,
-        sparse_bytes as f64 / 1000.0,
-        dense_bytes as f64 / 1000.0,
-    );
-    Ok(())
+/// "3" or "3 (2…5)" or "> 30".
+pub fn captures_cell(median: Option<u64>, range: [Option<u64>; 2], budget: u64) -> String {
+    let one = |c: Option<u64>| c.map_or(format!("> {budget}"), |c| c.to_string());
+    if range[0] == range[1] || range == [None, None] {
+        one(median)
+    } else {
+        format!("{} ({}…{})", one(median), one(range[0]), one(range[1]))
+    }
+}
+
+/// `roomlight bench room`: the presets (or the hard cases) only.
+pub fn room_only(
+    quick: bool,
+    hard: bool,
+    repeats: usize,
+    json: Option<&Path>,
+    out: Option<&Path>,
+    seed: u64,
+    alloc: &PeakAlloc,
+) -> Result<()> {
+    run(
+        &Plan {
+            quick,
+            presets: !hard,
+            hard,
+            scaling: false,
+            repeats,
+            seed,
+            json: json.map(Path::to_path_buf),
+            out: out.map(Path::to_path_buf),
+        },
+        alloc,
+    )
 }

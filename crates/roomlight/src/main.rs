@@ -3,6 +3,7 @@
 mod bench;
 mod bench_calib;
 mod bench_net;
+mod bench_report;
 mod bench_room;
 mod bench_sim;
 mod demo;
@@ -57,11 +58,34 @@ enum Command {
         #[command(subcommand)]
         which: graycode_cmd::GraycodeCommand,
     },
-    /// Benchmarks: speed against error.
-    Bench {
-        #[command(subcommand)]
-        which: BenchCommand,
-    },
+    /// Benchmarks: speed against error. Without a subcommand: the whole evidence — the default
+    /// room's presets, the hard cases, a thousand-node room, sparsity and scaling — as a table,
+    /// `--json` and an HTML page (`--out`).
+    Bench(BenchArgs),
+}
+
+#[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true)]
+struct BenchArgs {
+    #[command(subcommand)]
+    which: Option<BenchCommand>,
+    /// The small room, fewer captures, a subset of rules on the hard cases, 100 synthetic nodes
+    /// (under a minute).
+    #[arg(long)]
+    quick: bool,
+    /// Runs per case and rule, each with its own camera noise; figures are their medians.
+    /// Default: 3, or 1 with --quick.
+    #[arg(long)]
+    repeats: Option<usize>,
+    /// Write one record per case and rule as JSON to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write the plots (SVG), bench.json and index.html to this folder.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Seed of the camera noise (repeats use the following seeds).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
 }
 
 #[derive(Debug, Subcommand)]
@@ -80,15 +104,22 @@ enum BenchCommand {
     },
     /// Speed against error on the simulated lab: every preset and rule through the agents.
     Room {
-        /// The small test room, one preset, ten captures per rule (for tests).
+        /// The small test room, one preset, eight captures per rule (seconds).
         #[arg(long)]
         quick: bool,
-        /// The hard cases of DESIGN §9 (variants of the lab) instead of the lab's presets.
-        #[arg(long, conflicts_with = "quick")]
+        /// The hard cases of DESIGN §9 (variants of the room, stale errors, a projector
+        /// leaving and another joining, a synthetic room) instead of the presets.
+        #[arg(long)]
         hard: bool,
         /// Write the records as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Write the plots, bench.json and index.html to this folder.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Runs per case and rule (camera noise seeds from --seed on); figures are medians.
+        #[arg(long, default_value_t = 1)]
+        repeats: usize,
         /// Seed of the camera noise.
         #[arg(long, default_value_t = 1)]
         seed: u64,
@@ -126,26 +157,46 @@ fn main() -> Result<()> {
         Command::Camera { config } => procs::camera(&config),
         Command::Node { config } => procs::node(&config),
         Command::Graycode { which } => graycode_cmd::run(which),
-        Command::Bench {
-            which: BenchCommand::Core { quick, json, seed },
-        } => bench::core(quick, json.as_deref(), seed, &ALLOCATOR),
-        Command::Bench {
-            which:
-                BenchCommand::Room {
-                    quick,
-                    hard,
-                    json,
-                    seed,
-                },
-        } => bench_room::run(quick, hard, json.as_deref(), seed),
-        Command::Bench {
-            which: BenchCommand::Net { quick },
-        } => bench_net::run(quick, &ALLOCATOR),
-        Command::Bench {
-            which: BenchCommand::Calib { quick },
-        } => bench_calib::run(quick),
-        Command::Bench {
-            which: BenchCommand::Sim { quick, out },
-        } => bench_sim::run(quick, out.as_deref(), &ALLOCATOR),
+        Command::Bench(args) => bench(args),
+    }
+}
+
+fn bench(args: BenchArgs) -> Result<()> {
+    match args.which {
+        None => bench_room::run(
+            &bench_room::Plan {
+                quick: args.quick,
+                presets: true,
+                hard: true,
+                scaling: true,
+                repeats: args.repeats.unwrap_or(if args.quick { 1 } else { 3 }),
+                seed: args.seed,
+                json: args.json,
+                out: args.out,
+            },
+            &ALLOCATOR,
+        ),
+        Some(BenchCommand::Core { quick, json, seed }) => {
+            bench::core(quick, json.as_deref(), seed, &ALLOCATOR)
+        }
+        Some(BenchCommand::Room {
+            quick,
+            hard,
+            json,
+            out,
+            repeats,
+            seed,
+        }) => bench_room::room_only(
+            quick,
+            hard,
+            repeats,
+            json.as_deref(),
+            out.as_deref(),
+            seed,
+            &ALLOCATOR,
+        ),
+        Some(BenchCommand::Net { quick }) => bench_net::run(quick, &ALLOCATOR).map(|_| ()),
+        Some(BenchCommand::Calib { quick }) => bench_calib::run(quick),
+        Some(BenchCommand::Sim { quick, out }) => bench_sim::run(quick, out.as_deref(), &ALLOCATOR),
     }
 }

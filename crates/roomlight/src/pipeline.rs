@@ -26,7 +26,7 @@ use roomlight_core::optimum::optimum;
 use roomlight_core::{AttenuationColumn, LinearRgb, PatchId, Problem, StepRule};
 use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Frame, NodeBasis, NodeRegion, ProjectorImage, Room};
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 use tokio_util::sync::CancellationToken;
@@ -637,6 +637,10 @@ struct SimHardware {
     noise: Arc<Mutex<CameraNoise>>,
     /// Every capture: when, the noisy patch values returned and the noiseless ones.
     log: Arc<Mutex<Vec<CaptureLog>>>,
+    /// A camera with this many captures of latency hands the camera agent the image taken that
+    /// many captures earlier (the first one while there is none that old): stale errors.
+    latency: usize,
+    delayed: Arc<Mutex<VecDeque<Vec<LinearRgb>>>>,
 }
 
 struct CaptureLog {
@@ -705,6 +709,14 @@ impl SimHardware {
             .unwrap_or_else(PoisonError::into_inner)
             .expose(&capture);
         let measured = self.pick(&sample(&noisy, &self.corners, &self.config)?);
+        let handed = {
+            let mut delayed = self.delayed.lock().unwrap_or_else(PoisonError::into_inner);
+            delayed.push_back(measured.clone());
+            while delayed.len() > self.latency + 1 {
+                delayed.pop_front();
+            }
+            delayed.front().cloned().unwrap_or_else(|| measured.clone())
+        };
         self.log
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
@@ -712,10 +724,10 @@ impl SimHardware {
                 at: Instant::now(),
                 took: started.elapsed(),
                 shown,
-                measured: measured.clone(),
+                measured,
                 noiseless,
             });
-        Ok(measured)
+        Ok(handed)
     }
 }
 
@@ -786,6 +798,24 @@ pub struct RunOptions {
     pub stop_when_settled: bool,
     /// Seed of the capture noise.
     pub seed: u64,
+    /// Captures of camera latency: the errors the nodes act on are this many captures stale.
+    pub latency: usize,
+    /// The camera agent knows the latency and discards that many captures before each measured
+    /// round (fresh errors, more captures).
+    pub discard_stale: bool,
+    /// A projector leaving and another joining mid-run.
+    pub churn: Option<Churn>,
+}
+
+/// A projector leaving the room (switched off, its node agent stopped) once `leave_at`
+/// captures are taken, and another, off from the start, whose node agent joins after
+/// `join_at` captures. Projectors are indices into the room's projectors.
+#[derive(Debug, Clone, Copy)]
+pub struct Churn {
+    pub leaving: usize,
+    pub leave_at: u64,
+    pub joining: usize,
+    pub join_at: u64,
 }
 
 impl RunOptions {
@@ -800,6 +830,9 @@ impl RunOptions {
             max_captures: 60,
             stop_when_settled: true,
             seed,
+            latency: 0,
+            discard_stale: false,
+            churn: None,
         }
     }
 }
@@ -854,8 +887,9 @@ pub struct RunResult {
     pub capture_seconds: f64,
     /// Rounds run (captures and model rounds).
     pub rounds: u64,
-    /// Protobuf bytes between the agents, both ways, over the run.
-    pub bytes: u64,
+    /// Protobuf bytes between the agents, both ways, per round once the agents are attached (the first capture's traffic, which
+    /// carries every node's attenuation, left out).
+    pub bytes_per_round: f64,
 }
 
 /// The room as a noiseless camera sees it through the charts: every node's light at full
@@ -962,19 +996,60 @@ pub fn run_agents(
     options: RunOptions,
     bar: &indicatif::ProgressBar,
 ) -> Result<RunResult> {
+    let nodes_of = |projector: usize| -> Vec<usize> {
+        (0..cal.regions.len())
+            .filter(|&n| cal.regions[n].projector == projector)
+            .collect()
+    };
+    let name_of = |projector: usize| -> Result<String> {
+        room.projectors()
+            .get(projector)
+            .map(|p| p.name.clone())
+            .with_context(|| format!("churn: the room has no projector {projector}"))
+    };
+    // With a projector leaving, the room it leaves behind is the reference: its optimum is what
+    // the others can reach without it.
+    let (gone, joining) = match options.churn {
+        Some(c) => {
+            if c.join_at >= options.max_captures || c.leave_at >= options.max_captures {
+                bail!(
+                    "churn at captures {} and {} does not fit a budget of {} captures",
+                    c.leave_at,
+                    c.join_at,
+                    options.max_captures
+                );
+            }
+            let (gone, joining) = (nodes_of(c.leaving), nodes_of(c.joining));
+            if gone.is_empty() || joining.is_empty() || c.leaving == c.joining {
+                bail!(
+                    "churn: projectors {} and {} must be two luminaires with nodes",
+                    name_of(c.leaving)?,
+                    name_of(c.joining)?
+                );
+            }
+            (gone, joining)
+        }
+        None => (Vec::new(), Vec::new()),
+    };
+    let mut initial = model.conventional.clone();
+    for &n in &joining {
+        initial[n] = LinearRgb::ZERO;
+    }
     let hw = SimHardware {
         room: room.clone(),
         frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
         corners: transport.corners.clone(),
         config: transport.config,
-        shown: Arc::new(Mutex::new(model.conventional.clone())),
+        shown: Arc::new(Mutex::new(initial.clone())),
         patches: Arc::new(model.patches.clone()),
         noise: Arc::new(Mutex::new(CameraNoise::with_seed(room, options.seed))),
         log: Arc::new(Mutex::new(Vec::new())),
+        latency: options.latency,
+        delayed: Arc::new(Mutex::new(VecDeque::new())),
     };
-    let best = optimum(&model.problem)?;
-    let true_best = optimum(&truth.problem)?;
-    let de_conv = patch_delta_e(&truth.target, &hw.noiseless(&model.conventional)?)?;
+    let best = optimum(&model.problem.without_nodes(&gone))?;
+    let true_best = optimum(&truth.problem.without_nodes(&gone))?;
+    let de_conv = patch_delta_e(&truth.target, &hw.noiseless(&initial)?)?;
     let mut owners: HashMap<String, Vec<u32>> = HashMap::new();
     for (n, r) in cal.regions.iter().enumerate() {
         owners
@@ -987,7 +1062,7 @@ pub fn run_agents(
         .enable_all()
         .build()?;
     let t0 = Instant::now();
-    let mut bytes = 0u64;
+    let mut steady = PerRound::default();
     let last = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let endpoint = format!("http://{}", listener.local_addr()?);
@@ -999,6 +1074,11 @@ pub fn run_agents(
             deadline: Duration::from_secs(2),
             model_rounds: options.model_rounds,
             calibration_epoch: 1,
+            stale_frames: if options.discard_stale {
+                options.latency
+            } else {
+                0
+            },
         };
         let (mut status, camera_task) = camera::serve(
             config,
@@ -1011,28 +1091,35 @@ pub fn run_agents(
             listener,
             cancel.clone(),
         );
-        let mut node_tasks = Vec::new();
-        for id in owners.keys() {
+        let spawn = |id: &str| {
             let config = NodeConfig {
                 endpoint: endpoint.clone(),
                 room: "lab".into(),
                 token: "demo".into(),
-                projector_id: id.clone(),
+                projector_id: id.to_string(),
                 rule: options.rule,
                 start: LinearRgb::splat(0.5),
                 state_file: None,
             };
-            node_tasks.push(tokio::spawn(node::run(
-                config,
-                hw.clone(),
-                cancel.child_token(),
-            )));
-        }
+            let token = cancel.child_token();
+            let task = tokio::spawn(node::run(config, hw.clone(), token.clone()));
+            (id.to_string(), (token, task))
+        };
+        let (leaving, joining) = match options.churn {
+            Some(c) => (Some(name_of(c.leaving)?), Some(name_of(c.joining)?)),
+            None => (None, None),
+        };
+        let mut node_tasks: HashMap<_, _> = owners
+            .keys()
+            .filter(|id| Some(*id) != joining.as_ref())
+            .map(|id| spawn(id))
+            .collect();
+        let (mut left, mut joined) = (false, joining.is_none());
         let outcome = tokio::time::timeout(Duration::from_secs(120), async {
             loop {
                 status.changed().await?;
                 let s = status.borrow().clone();
-                bytes += s.bytes_in + s.bytes_out;
+                steady.add(&s);
                 if !bar.is_hidden() {
                     // The live line: ΔE00 against the truth costs a render, so only when shown.
                     let de = hw
@@ -1047,17 +1134,39 @@ pub fn run_agents(
                         best.excess(s.measured_objective)
                     ));
                 }
-                if s.live_projectors == owners.len()
-                    && (s.settled && options.stop_when_settled
-                        || s.captures >= options.max_captures)
+                if let (Some(c), Some(id)) = (options.churn, &leaving)
+                    && !left
+                    && s.captures >= c.leave_at
                 {
+                    // The projector is switched off: its agent stops, its light is gone.
+                    if let Some((token, task)) = node_tasks.remove(id) {
+                        token.cancel();
+                        let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
+                    }
+                    let mut shown = hw.shown.lock().unwrap_or_else(PoisonError::into_inner);
+                    for &n in &gone {
+                        shown[n] = LinearRgb::ZERO;
+                    }
+                    left = true;
+                }
+                if let (Some(c), Some(id)) = (options.churn, &joining)
+                    && !joined
+                    && s.captures >= c.join_at
+                {
+                    let (id, handles) = spawn(id);
+                    node_tasks.insert(id, handles);
+                    joined = true;
+                }
+                let settled_or_done =
+                    s.settled && options.stop_when_settled || s.captures >= options.max_captures;
+                if s.live_projectors == node_tasks.len() && joined && settled_or_done {
                     return Ok::<_, anyhow::Error>(s);
                 }
             }
         })
         .await;
         cancel.cancel();
-        for task in node_tasks {
+        for (_, (_, task)) in node_tasks {
             let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
         }
         let _ = tokio::time::timeout(Duration::from_secs(5), camera_task).await;
@@ -1123,6 +1232,39 @@ pub fn run_agents(
         seconds: t0.elapsed().as_secs_f64(),
         capture_seconds,
         rounds: last.round,
-        bytes,
+        bytes_per_round: steady.bytes_per_round(),
     })
+}
+
+/// Bytes per round from the camera agent's status, the first status (attachment, attenuation)
+/// left out.
+#[derive(Debug, Default)]
+pub struct PerRound {
+    first_round: Option<u64>,
+    last_round: u64,
+    bytes: u64,
+    all_bytes: u64,
+}
+
+impl PerRound {
+    pub fn add(&mut self, s: &camera::RoomStatus) {
+        let b = s.bytes_in + s.bytes_out;
+        self.all_bytes += b;
+        if self.first_round.is_some() {
+            self.bytes += b;
+        } else {
+            self.first_round = Some(s.round);
+        }
+        self.last_round = s.round;
+    }
+
+    /// Over the rounds after the first status; with none, over all (0 before any round).
+    pub fn bytes_per_round(&self) -> f64 {
+        match self.first_round {
+            Some(first) if self.last_round > first => {
+                self.bytes as f64 / (self.last_round - first) as f64
+            }
+            _ => self.all_bytes as f64 / self.last_round.max(1) as f64,
+        }
+    }
 }

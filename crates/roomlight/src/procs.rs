@@ -64,6 +64,8 @@ struct CameraFile {
     model_rounds: usize,
     #[serde(default = "epoch_default")]
     calibration_epoch: u64,
+    #[serde(default)]
+    stale_frames: usize,
 }
 
 #[derive(Debug, Deserialize)]
@@ -230,6 +232,7 @@ pub fn camera(path: &Path) -> Result<()> {
         deadline: Duration::from_millis(file.deadline_ms.max(10)),
         model_rounds: file.model_rounds,
         calibration_epoch: file.calibration_epoch,
+        stale_frames: file.stale_frames,
     };
     runtime()?.block_on(async {
         let camera = RemoteCamera::connect(file.hardware.clone()).await.with_context(|| format!("connecting to the camera at {}", file.hardware))?;

@@ -264,7 +264,7 @@ pub fn problem(report: &Report) -> Value {
 }
 
 /// A log-scale plot of `y(point)` against `x(point)` for each rule, as SVG.
-fn plot(
+pub(crate) fn plot(
     path: &Path,
     title: &str,
     x_label: &str,
@@ -341,7 +341,7 @@ fn plot(
     Ok(())
 }
 
-fn escape(s: &str) -> String {
+pub(crate) fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
