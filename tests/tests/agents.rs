@@ -41,7 +41,13 @@ struct Sandbox {
 impl Sandbox {
     /// A 12-node synthetic room owned by three projectors of four nodes each.
     async fn start(model_rounds: usize) -> Self {
-        Self::start_with(model_rounds, None, PlantConfig::default(), |c| c).await
+        Self::start_with(model_rounds, None, PlantConfig::default(), |c, _| c).await
+    }
+
+    /// The room with `hot` unknown to the camera agent (its columns empty in the camera's
+    /// model) until it joins and is measured.
+    async fn start_hot(model_rounds: usize, hot: &str, plant: PlantConfig) -> Self {
+        Self::start_full(model_rounds, None, plant, Some(hot), |c, _| c).await
     }
 
     /// The same room with a start handed out by the camera agent, a plant of one's own and the
@@ -50,7 +56,17 @@ impl Sandbox {
         model_rounds: usize,
         start: Option<Vec<LinearRgb>>,
         plant: PlantConfig,
-        wrap: impl FnOnce(VirtualCamera) -> C,
+        wrap: impl FnOnce(VirtualCamera, VirtualRoom) -> C,
+    ) -> Self {
+        Self::start_full(model_rounds, start, plant, None, wrap).await
+    }
+
+    async fn start_full<C: Camera + Send + 'static>(
+        model_rounds: usize,
+        start: Option<Vec<LinearRgb>>,
+        plant: PlantConfig,
+        hot: Option<&str>,
+        wrap: impl FnOnce(VirtualCamera, VirtualRoom) -> C,
     ) -> Self {
         let problem = synthetic_room(&SyntheticConfig::new(12, 4))
             .expect("room")
@@ -75,14 +91,41 @@ impl Sandbox {
             stale_frames: 0,
         };
         let camera_cancel = cancel.child_token();
+        // What the camera agent knows: a hot projector's columns are empty until measured.
+        let known = match hot {
+            Some(id) => {
+                let columns = problem
+                    .columns()
+                    .iter()
+                    .enumerate()
+                    .map(|(n, c)| {
+                        if owners[id].contains(&(n as u32)) {
+                            roomlight_core::AttenuationColumn::new(Vec::new(), Vec::new())
+                                .expect("empty column")
+                        } else {
+                            c.clone()
+                        }
+                    })
+                    .collect();
+                Problem::new(
+                    columns,
+                    problem.black().to_vec(),
+                    problem.target().to_vec(),
+                    problem.noise().to_vec(),
+                )
+                .expect("camera's model")
+            }
+            None => problem.clone(),
+        };
         let (status, handle) = camera::serve(
             config.clone(),
             RoomModel {
-                problem: problem.clone(),
+                problem: known,
                 owners: owners.clone(),
                 start: start.clone(),
+                hot: hot.into_iter().map(String::from).collect(),
             },
-            wrap(room.camera()),
+            wrap(room.camera(), room.clone()),
             listener,
             camera_cancel.clone(),
         );
@@ -121,6 +164,7 @@ impl Sandbox {
             problem: self.problem.clone(),
             owners: self.owners.clone(),
             start: None,
+            hot: Default::default(),
         };
         let (status, handle) = camera::serve(
             self.config.clone(),
@@ -263,6 +307,53 @@ async fn a_projector_that_joins_later_enters_the_next_rounds() {
     assert!(excess < 1e-2, "after the join the excess is {excess}");
 }
 
+/// A projector the camera agent has never measured joins mid-run: it is calibrated hot (its
+/// nodes at black, then each alone at white, by differential captures while the others keep
+/// their values), gets its attenuation, and the room converges to the optimum with it. Without
+/// the measurement its nodes would have empty columns and could not help.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_projector_joining_hot_is_measured_and_the_room_converges_to_the_new_optimum() {
+    let plant = PlantConfig {
+        noise_scale: 1.0,
+        seed: 5,
+        ..PlantConfig::default()
+    };
+    let mut sb = Sandbox::start_hot(5, "p2", plant).await;
+    sb.join("p0");
+    sb.join("p1");
+    let both = sb
+        .wait(Duration::from_secs(30), |s| s.live_projectors == 2)
+        .await
+        .captures;
+    let before = sb
+        .wait(Duration::from_secs(30), |s| s.captures >= both + 6)
+        .await;
+    assert_eq!(before.calibrated_hot, 0);
+    let dark: Vec<usize> = sb.owners["p2"].iter().map(|&n| n as usize).collect();
+    let without = sb.problem.without_nodes(&dark);
+    let alone = sb.excess(&without);
+    assert!(
+        alone < 1e-2,
+        "before the join the others reach their own optimum: excess {alone}"
+    );
+    sb.join("p2");
+    let measured = sb
+        .wait(Duration::from_secs(30), |s| s.calibrated_hot == 1)
+        .await;
+    // One capture with its nodes at black and one per node at white.
+    assert!(
+        measured.captures >= before.captures + 5,
+        "{before:?} → {measured:?}"
+    );
+    sb.wait(Duration::from_secs(30), |s| {
+        s.live_projectors == 3 && s.captures >= measured.captures + 10
+    })
+    .await;
+    let full = sb.problem.clone();
+    let excess = sb.excess(&full);
+    assert!(excess < 1e-2, "after the hot join the excess is {excess}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_wrong_token_another_room_or_version_is_refused_with_a_clear_status() {
     use roomlight_proto::v1;
@@ -338,20 +429,34 @@ async fn a_duplicate_projector_is_refused_and_a_silent_one_leaves_within_two_sec
     // p1 says hello, then goes silent with its stream open: no heartbeats, no acknowledgements.
     let (tx, rx) = tokio::sync::mpsc::channel(4);
     tx.send(hello("p1")).await.expect("queue hello");
-    let _inbound = client
+    let mut inbound = client
         .attach(tokio_stream::wrappers::ReceiverStream::new(rx))
         .await
-        .expect("admitted");
+        .expect("admitted")
+        .into_inner();
     let joined = tokio::time::Instant::now();
-    sb.wait(Duration::from_secs(5), |s| s.live_projectors == 2)
-        .await;
-    sb.wait(Duration::from_secs(5), |s| s.live_projectors == 1)
-        .await;
+    // Its welcome and attenuation arrive; once it is dropped for silence its stream ends. (A
+    // status with two projectors may never be published: the rounds wait for its
+    // acknowledgement meanwhile.)
+    let mut received = 0;
+    loop {
+        match tokio::time::timeout(Duration::from_secs(5), inbound.message()).await {
+            Ok(Ok(Some(_))) => received += 1,
+            Ok(Ok(None) | Err(_)) => break,
+            Err(_) => panic!("the silent projector's stream still open after 5 s"),
+        }
+    }
+    assert!(
+        received >= 2,
+        "welcome and assignment expected, got {received}"
+    );
     assert!(
         joined.elapsed() < Duration::from_secs(2),
         "left after {:?}",
         joined.elapsed()
     );
+    sb.wait(Duration::from_secs(5), |s| s.live_projectors == 1)
+        .await;
     // The room went on with p0 meanwhile.
     let before = sb.status.borrow().captures;
     sb.wait(Duration::from_secs(10), |s| s.captures >= before + 3)
@@ -373,7 +478,10 @@ async fn malformed_contributions_are_refused_without_disturbing_the_others() {
     let (tx, rx) = tokio::sync::mpsc::channel(64);
     tx.send(hello("p2")).await.expect("queue hello");
     tx.send(v1::NodeMessage {
-        body: Some(v1::node_message::Body::Shown(v1::Shown { seq: 0 })),
+        body: Some(v1::node_message::Body::Shown(v1::Shown {
+            seq: 0,
+            pattern: false,
+        })),
     })
     .await
     .expect("queue");
@@ -403,7 +511,10 @@ async fn malformed_contributions_are_refused_without_disturbing_the_others() {
                     }
                 }
                 let shown = v1::NodeMessage {
-                    body: Some(v1::node_message::Body::Shown(v1::Shown { seq: e.round })),
+                    body: Some(v1::node_message::Body::Shown(v1::Shown {
+                        seq: e.round,
+                        pattern: false,
+                    })),
                 };
                 let _ = tx.send(shown).await;
             }
@@ -526,19 +637,20 @@ async fn a_restarted_node_relights_from_its_state_file_before_it_reconnects() {
 }
 
 /// Records every capture it passes on.
+/// A camera that records, for every capture, what each node showed.
 struct Recording {
     inner: VirtualCamera,
-    captures: std::sync::Arc<std::sync::Mutex<Vec<Vec<LinearRgb>>>>,
+    room: VirtualRoom,
+    shown: std::sync::Arc<std::sync::Mutex<Vec<Vec<LinearRgb>>>>,
 }
 
 impl Camera for Recording {
     async fn capture(&mut self) -> Result<Vec<LinearRgb>, roomlight_agent::AgentError> {
-        let y = self.inner.capture().await?;
-        self.captures
+        self.shown
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .push(y.clone());
-        Ok(y)
+            .push(self.room.shown());
+        self.inner.capture().await
     }
 }
 
@@ -549,8 +661,8 @@ async fn nodes_start_from_the_camera_agents_start_and_the_room_reports_settled_a
     let start: Vec<LinearRgb> = (0..12)
         .map(|n| LinearRgb([0.1 + 0.05 * n as f64, 0.2, 0.9 - 0.05 * n as f64]))
         .collect();
-    let captures = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-    let recorded = captures.clone();
+    let shown = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let recorded = shown.clone();
     let mut sb = Sandbox::start_with(
         0,
         Some(start.clone()),
@@ -559,9 +671,10 @@ async fn nodes_start_from_the_camera_agents_start_and_the_room_reports_settled_a
             seed: 3,
             ..PlantConfig::default()
         },
-        move |inner| Recording {
+        move |inner, room| Recording {
             inner,
-            captures: recorded,
+            room,
+            shown: recorded,
         },
     )
     .await;
@@ -569,39 +682,23 @@ async fn nodes_start_from_the_camera_agents_start_and_the_room_reports_settled_a
         sb.join(p);
     }
     let status = sb.wait(Duration::from_secs(60), |s| s.settled).await;
-    // The first capture saw the start (to within the camera noise), not the nodes' own 0.5.
-    let first = captures
+    // Every node's first light the camera saw was the camera agent's start, not its own 0.5
+    // (the nodes attach one by one: each is checked at the first capture it was lit in).
+    let shown = shown
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
-        .first()
-        .cloned()
-        .expect("a capture");
-    let expected = sb.problem.response(&start);
-    let own_default = sb.problem.response(&vec![LinearRgb::splat(0.5); 12]);
-    let distance = |a: &[LinearRgb], b: &[LinearRgb]| -> f64 {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (*x - *y).norm_squared())
-            .sum::<f64>()
-            .sqrt()
-    };
-    let noise = sb
-        .problem
-        .noise()
-        .iter()
-        .map(|s| s.norm_squared())
-        .sum::<f64>()
-        .sqrt();
-    assert!(
-        distance(&first, &expected) < 5.0 * noise,
-        "first capture {:.3e} from the start's response (noise {noise:.3e})",
-        distance(&first, &expected)
-    );
-    assert!(
-        distance(&own_default, &expected) > 10.0 * noise,
-        "the start must be told apart from 0.5: {:.3e} vs noise {noise:.3e}",
-        distance(&own_default, &expected)
-    );
+        .clone();
+    for (n, expected) in start.iter().enumerate() {
+        let first = shown
+            .iter()
+            .map(|x| x[n])
+            .find(|x| *x != LinearRgb::ZERO)
+            .unwrap_or_else(|| panic!("node {n} never lit in {} captures", shown.len()));
+        assert!(
+            (first - *expected).max_abs() < 1e-12,
+            "node {n} first showed {first:?}, the camera's start is {expected:?}"
+        );
+    }
     // Settled means at the noise floor: close to the optimum, and reached in a few captures.
     let excess = sb.excess(&sb.problem.clone());
     assert!(excess < 1e-2, "settled with excess {excess}");

@@ -8,10 +8,10 @@ use crate::hardware::Camera;
 use prost::Message;
 use roomlight_core::aggregator::{ErrorAggregator, ErrorKind, RoundSummary};
 use roomlight_core::closed_loop::objective_noise;
-use roomlight_core::{LinearRgb, Problem};
+use roomlight_core::{AttenuationColumn, LinearRgb, Problem};
 use roomlight_proto::convert::{from_sparse, to_rgb, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
@@ -55,6 +55,10 @@ pub struct RoomModel {
     /// Each node's start when it brings no value of its own (the conventional start); `None`:
     /// the node agents' own default. Clamped to [0, 1]; a non-finite entry is not sent.
     pub start: Option<Vec<LinearRgb>>,
+    /// Projectors whose attenuation is measured when they join (DESIGN §4, hot calibration):
+    /// each of their nodes at white against all at black, by differential captures while the
+    /// other projectors keep their values. Their columns in `problem` are not used before.
+    pub hot: HashSet<String>,
 }
 
 /// What the round loop has done so far (for tests, logs and the demo).
@@ -75,6 +79,8 @@ pub struct RoomStatus {
     /// The measured `G` moved less than its noise (3√2 σ_G) over each of the last two captures
     /// (DESIGN §3.6): further rounds only chase camera noise.
     pub settled: bool,
+    /// Projectors calibrated hot so far.
+    pub calibrated_hot: u64,
 }
 
 #[derive(Debug)]
@@ -86,6 +92,11 @@ struct Peer {
     shown: Option<u64>,
     /// The last round sent to it.
     awaiting: Option<u64>,
+    /// False until its attenuation is known (a hot projector before its calibration): it takes
+    /// part in no round.
+    calibrated: bool,
+    /// The last Show pattern it has on its display.
+    pattern_shown: Option<u64>,
 }
 
 #[derive(Debug, Default)]
@@ -101,10 +112,21 @@ struct Contribution {
     delta: Vec<(u32, LinearRgb)>,
 }
 
+/// What hot calibration changes: the attenuation and `s`, and which projectors are still to be
+/// measured.
+struct Live {
+    problem: Problem,
+    white: Vec<LinearRgb>,
+    uncalibrated: HashSet<String>,
+}
+
 struct Shared {
     config: CameraConfig,
-    model: RoomModel,
-    white: Vec<LinearRgb>,
+    owners: HashMap<String, Vec<u32>>,
+    start: Option<Vec<LinearRgb>>,
+    live: std::sync::RwLock<Live>,
+    /// Sequence numbers of Show patterns.
+    pattern_seq: AtomicU64,
     registry: Mutex<Registry>,
     changed: Notify,
     contributions: mpsc::Sender<Contribution>,
@@ -117,6 +139,37 @@ struct Shared {
 impl Shared {
     fn registry(&self) -> std::sync::MutexGuard<'_, Registry> {
         self.registry.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn live(&self) -> std::sync::RwLockReadGuard<'_, Live> {
+        self.live.read().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Each of `nodes`' attenuation, `s` on its support and start, as messages.
+    fn attenuation_messages(&self, nodes: &[u32]) -> Vec<Result<v1::RoomMessage, Status>> {
+        let live = self.live();
+        nodes
+            .iter()
+            .filter_map(|&n| {
+                let column = live.problem.columns().get(n as usize)?;
+                let s = live
+                    .problem
+                    .white_response_on_support(&live.white, n as usize);
+                Some(room_message(v1::room_message::Body::Attenuation(
+                    v1::Attenuation {
+                        node: n,
+                        p: Some(to_sparse(column.support(), column.values())),
+                        s: Some(to_sparse(column.support(), &s)),
+                        start: self
+                            .start
+                            .as_ref()
+                            .and_then(|v| v.get(n as usize))
+                            .filter(|x| x.is_finite())
+                            .map(|x| to_rgb(x.clamp_unit())),
+                    },
+                )))
+            })
+            .collect()
     }
 }
 
@@ -168,7 +221,7 @@ impl v1::room_server::Room for Service {
             tracing::warn!(projector = %hello.projector_id, "refused: wrong room token");
             return Err(Status::unauthenticated("wrong room token"));
         }
-        let Some(nodes) = shared.model.owners.get(&hello.projector_id).cloned() else {
+        let Some(nodes) = shared.owners.get(&hello.projector_id).cloned() else {
             return Err(Status::not_found(format!(
                 "projector {:?} is not calibrated in room {:?}",
                 hello.projector_id, shared.config.room
@@ -184,7 +237,9 @@ impl v1::room_server::Room for Service {
             )));
         }
         let (tx, rx) = mpsc::channel(256);
-        // Welcome, the node list, then each node's column and s on its support.
+        // Welcome, the node list, then each node's column and s on its support (for a hot
+        // projector not yet measured: after its calibration).
+        let calibrated = !shared.live().uncalibrated.contains(&hello.projector_id);
         let mut hello_msgs = vec![
             room_message(v1::room_message::Body::Welcome(v1::Welcome {
                 protocol_version: PROTOCOL_VERSION,
@@ -205,26 +260,8 @@ impl v1::room_server::Room for Service {
                     .collect(),
             })),
         ];
-        for &n in &nodes {
-            let column = &shared.model.problem.columns()[n as usize];
-            let s = shared
-                .model
-                .problem
-                .white_response_on_support(&shared.white, n as usize);
-            hello_msgs.push(room_message(v1::room_message::Body::Attenuation(
-                v1::Attenuation {
-                    node: n,
-                    p: Some(to_sparse(column.support(), column.values())),
-                    s: Some(to_sparse(column.support(), &s)),
-                    start: shared
-                        .model
-                        .start
-                        .as_ref()
-                        .and_then(|v| v.get(n as usize))
-                        .filter(|x| x.is_finite())
-                        .map(|x| to_rgb(x.clamp_unit())),
-                },
-            )));
+        if calibrated {
+            hello_msgs.extend(shared.attenuation_messages(&nodes));
         }
         for m in hello_msgs {
             tx.send(m)
@@ -244,6 +281,8 @@ impl v1::room_server::Room for Service {
                     nodes: nodes.clone(),
                     shown: None,
                     awaiting: None,
+                    calibrated,
+                    pattern_shown: None,
                 },
             );
             connection
@@ -294,7 +333,12 @@ async fn read_node(
                     .get_mut(&projector)
                     .filter(|p| p.connection == connection)
                 {
-                    peer.shown = Some(peer.shown.map_or(s.seq, |old| old.max(s.seq)));
+                    if s.pattern {
+                        peer.pattern_shown =
+                            Some(peer.pattern_shown.map_or(s.seq, |old| old.max(s.seq)));
+                    } else {
+                        peer.shown = Some(peer.shown.map_or(s.seq, |old| old.max(s.seq)));
+                    }
                 }
                 shared.changed.notify_waiters();
             }
@@ -349,10 +393,11 @@ async fn read_node(
     shared.changed.notify_waiters();
 }
 
-/// True when every attached projector shows the last frame it was sent.
+/// True when every attached, calibrated projector shows the last frame it was sent.
 fn all_shown(r: &Registry) -> bool {
     r.peers
         .values()
+        .filter(|p| p.calibrated)
         .all(|p| p.shown.is_some() && p.awaiting.is_none_or(|a| p.shown.is_some_and(|s| s >= a)))
 }
 
@@ -379,7 +424,8 @@ async fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary
     let mut outbox = Vec::new();
     {
         let mut reg = shared.registry();
-        for (projector, peer) in reg.peers.iter_mut() {
+        let live = shared.live();
+        for (projector, peer) in reg.peers.iter_mut().filter(|(_, p)| p.calibrated) {
             let ready = peer.shown.is_some()
                 && peer
                     .awaiting
@@ -390,7 +436,7 @@ async fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary
             }
             peer.awaiting = Some(summary.round);
             for &n in &peer.nodes {
-                let column = &shared.model.problem.columns()[n as usize];
+                let column = &live.problem.columns()[n as usize];
                 let e: Vec<LinearRgb> = column
                     .support()
                     .iter()
@@ -465,6 +511,190 @@ async fn collect(
     }
 }
 
+/// One capture the nodes can act on: the camera's stale frames discarded first (every frame
+/// counted). `None` when the camera failed or handed over the wrong number of patches (logged).
+async fn capture_fresh(
+    shared: &Shared,
+    camera: &mut impl Camera,
+    captures: &mut u64,
+) -> Option<Vec<LinearRgb>> {
+    let mut last = None;
+    for _ in 0..=shared.config.stale_frames {
+        match camera.capture().await {
+            Ok(y) => {
+                *captures += 1;
+                last = Some(y);
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "capture failed");
+                return None;
+            }
+        }
+    }
+    let y = last?;
+    let patches = shared.live().problem.patches();
+    if y.len() != patches {
+        tracing::error!(
+            got = y.len(),
+            expected = patches,
+            "capture has the wrong number of patches"
+        );
+        return None;
+    }
+    Some(y)
+}
+
+/// Shows `lit` at white and the projector's other nodes at black (all black for `None`), waits
+/// for the projector to acknowledge the pattern, and captures.
+async fn show_and_capture(
+    shared: &Shared,
+    camera: &mut impl Camera,
+    projector: &str,
+    (tx, nodes): (&mpsc::Sender<Result<v1::RoomMessage, Status>>, &[u32]),
+    lit: Option<u32>,
+    captures: &mut u64,
+) -> Option<Vec<LinearRgb>> {
+    let seq = shared.pattern_seq.fetch_add(1, Ordering::Relaxed) + 1;
+    let values = nodes
+        .iter()
+        .map(|&n| v1::NodeState {
+            node: n,
+            x: Some(to_rgb(if lit == Some(n) {
+                LinearRgb::ONE
+            } else {
+                LinearRgb::ZERO
+            })),
+            attenuation: None,
+        })
+        .collect();
+    let show = v1::Show {
+        seq,
+        pattern: Some(v1::show::Pattern::Nodes(v1::NodeValues { values })),
+    };
+    shared
+        .bytes_out
+        .fetch_add(show.encoded_len() as u64, Ordering::Relaxed);
+    tx.send(room_message(v1::room_message::Body::Show(show)))
+        .await
+        .ok()?;
+    let shown = wait_for(shared, shared.config.deadline, |r| {
+        r.peers
+            .get(projector)
+            .is_some_and(|p| p.pattern_shown.is_some_and(|s| s >= seq))
+    })
+    .await;
+    if !shown {
+        tracing::warn!(%projector, seq, "pattern not shown within the deadline");
+        return None;
+    }
+    capture_fresh(shared, camera, captures).await
+}
+
+/// Measures a hot projector's attenuation (DESIGN §4): its nodes all at black, then each alone
+/// at white, one capture each, while every other projector keeps its values (no errors are
+/// sent meanwhile). `p = max(y_white − y_black, 0)`, entries at or below 3√2 σ (the noise of a
+/// difference of two captures) dropped. Then the projector gets its attenuation and every
+/// attached projector its `s` anew (the new light changes it). False when the projector left,
+/// did not show a pattern in time, or the camera failed: it stays uncalibrated and is tried
+/// again.
+async fn calibrate_hot(
+    shared: &Shared,
+    camera: &mut impl Camera,
+    projector: &str,
+    captures: &mut u64,
+) -> bool {
+    let Some((tx, nodes)) = shared
+        .registry()
+        .peers
+        .get(projector)
+        .map(|p| (p.tx.clone(), p.nodes.clone()))
+    else {
+        return false;
+    };
+    tracing::info!(%projector, nodes = nodes.len(), "hot calibration");
+    let Some(black) =
+        show_and_capture(shared, camera, projector, (&tx, &nodes), None, captures).await
+    else {
+        return false;
+    };
+    let threshold: Vec<LinearRgb> = shared
+        .live()
+        .problem
+        .noise()
+        .iter()
+        .map(|s| *s * (3.0 * std::f64::consts::SQRT_2))
+        .collect();
+    let mut measured = Vec::with_capacity(nodes.len());
+    for &n in &nodes {
+        let Some(white) =
+            show_and_capture(shared, camera, projector, (&tx, &nodes), Some(n), captures).await
+        else {
+            return false;
+        };
+        let dense: Vec<LinearRgb> = white
+            .iter()
+            .zip(&black)
+            .map(|(w, b)| (*w - *b).map(|v| v.max(0.0)))
+            .collect();
+        match AttenuationColumn::from_dense_with_cutoff(&dense, &threshold) {
+            Ok(column) => measured.push((n, column)),
+            Err(e) => {
+                tracing::error!(%projector, node = n, error = %e, "hot calibration refused");
+                return false;
+            }
+        }
+    }
+    {
+        let mut live = shared.live.write().unwrap_or_else(PoisonError::into_inner);
+        let mut columns = live.problem.columns().to_vec();
+        for (n, column) in measured {
+            if let Some(slot) = columns.get_mut(n as usize) {
+                *slot = column;
+            }
+        }
+        let problem = match Problem::new(
+            columns,
+            live.problem.black().to_vec(),
+            live.problem.target().to_vec(),
+            live.problem.noise().to_vec(),
+        ) {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::error!(%projector, error = %e, "hot calibration refused");
+                return false;
+            }
+        };
+        live.white = problem.white_response();
+        live.problem = problem;
+        live.uncalibrated.remove(projector);
+    }
+    // Its attenuation to the new projector, `s` anew to everyone; then it joins the rounds.
+    let outbox: Vec<_> = shared
+        .registry()
+        .peers
+        .values()
+        .map(|p| (p.tx.clone(), p.nodes.clone()))
+        .collect();
+    for (tx, nodes) in outbox {
+        for m in shared.attenuation_messages(&nodes) {
+            if let Ok(msg) = &m {
+                shared
+                    .bytes_out
+                    .fetch_add(msg.encoded_len() as u64, Ordering::Relaxed);
+            }
+            if tx.send(m).await.is_err() {
+                break;
+            }
+        }
+    }
+    if let Some(peer) = shared.registry().peers.get_mut(projector) {
+        peer.calibrated = true;
+    }
+    tracing::info!(%projector, "hot calibration done");
+    shared.changed.notify_waiters();
+    true
+}
+
 /// Serves the Room service on `listener` and runs rounds until `cancel`. Returns the status
 /// watch and the task's handle.
 pub fn serve(
@@ -481,8 +711,14 @@ pub fn serve(
     let white = model.problem.white_response();
     let shared = Arc::new(Shared {
         config,
-        model,
-        white,
+        owners: model.owners,
+        start: model.start,
+        live: std::sync::RwLock::new(Live {
+            problem: model.problem,
+            white,
+            uncalibrated: model.hot,
+        }),
+        pattern_seq: AtomicU64::new(0),
         registry: Mutex::new(Registry::default()),
         changed: Notify::new(),
         contributions: contrib_tx,
@@ -503,60 +739,48 @@ pub fn serve(
                 server_cancel.cancelled_owned(),
             );
         let rounds = async {
-            let mut aggregator = ErrorAggregator::new(shared.model.problem.patches());
+            let (target, sigma) = {
+                let live = shared.live();
+                (
+                    live.problem.target().to_vec(),
+                    live.problem.noise().to_vec(),
+                )
+            };
+            let mut aggregator = ErrorAggregator::new(target.len());
             let mut captures = 0u64;
+            let mut calibrated_hot = 0u64;
             let mut previous: Option<f64> = None;
             let mut quiet = 0u32;
             loop {
-                // Someone must be there, and have shown its last frame.
+                // Someone must be there, and have shown its last frame (or wait to be measured).
                 if !wait_for(&shared, Duration::from_secs(3600), |r| {
-                    r.peers.values().any(|p| p.shown.is_some())
+                    r.peers.values().any(|p| p.shown.is_some() || !p.calibrated)
                 })
                 .await
                 {
                     continue;
                 }
-                wait_for(&shared, shared.config.deadline, all_shown).await;
-                let mut flushed = true;
-                for _ in 0..shared.config.stale_frames {
-                    if let Err(e) = camera.capture().await {
-                        tracing::warn!(error = %e, "capture failed");
-                        flushed = false;
-                        break;
-                    }
-                    captures += 1;
-                }
-                if !flushed {
-                    tokio::time::sleep(Duration::from_millis(200)).await;
-                    continue;
-                }
-                let y = match camera.capture().await {
-                    Ok(y) => y,
-                    Err(e) => {
-                        // The camera is unreachable: the lights stay as they are; try again.
-                        tracing::warn!(error = %e, "capture failed");
-                        tokio::time::sleep(Duration::from_millis(200)).await;
-                        continue;
-                    }
-                };
-                if y.len() != shared.model.problem.patches() {
-                    tracing::error!(
-                        got = y.len(),
-                        expected = shared.model.problem.patches(),
-                        "capture has the wrong number of patches"
-                    );
-                    tokio::time::sleep(Duration::from_millis(200)).await;
-                    continue;
-                }
-                captures += 1;
-                let errors: Vec<LinearRgb> = shared
-                    .model
-                    .problem
-                    .target()
+                let hot = shared
+                    .registry()
+                    .peers
                     .iter()
-                    .zip(&y)
-                    .map(|(r, y)| *r - *y)
-                    .collect();
+                    .find(|(_, p)| !p.calibrated)
+                    .map(|(id, _)| id.clone());
+                if let Some(projector) = hot {
+                    if calibrate_hot(&shared, &mut camera, &projector, &mut captures).await {
+                        calibrated_hot += 1;
+                    } else {
+                        tokio::time::sleep(Duration::from_millis(200)).await;
+                    }
+                    continue;
+                }
+                wait_for(&shared, shared.config.deadline, all_shown).await;
+                let Some(y) = capture_fresh(&shared, &mut camera, &mut captures).await else {
+                    // The camera is unreachable: the lights stay as they are; try again.
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                    continue;
+                };
+                let errors: Vec<LinearRgb> = target.iter().zip(&y).map(|(r, y)| *r - *y).collect();
                 let summary = match aggregator.measured(errors) {
                     Ok(s) => s,
                     Err(e) => {
@@ -566,7 +790,7 @@ pub fn serve(
                 };
                 let mut round = summary.round;
                 let measured_objective = summary.objective;
-                let noise = objective_noise(aggregator.errors(), shared.model.problem.noise());
+                let noise = objective_noise(aggregator.errors(), &sigma);
                 quiet = match previous {
                     // A noiseless camera: settled when G stops changing to rounding.
                     Some(g)
@@ -598,6 +822,7 @@ pub fn serve(
                     bytes_out: shared.bytes_out.swap(0, Ordering::Relaxed),
                     bytes_in: shared.bytes_in.swap(0, Ordering::Relaxed),
                     settled: quiet >= 2,
+                    calibrated_hot,
                 });
             }
         };

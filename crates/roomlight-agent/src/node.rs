@@ -324,9 +324,11 @@ async fn session(
                         None
                     }
                 };
-                let start = memory
+                // A node already running (new `s` after a projector joined) keeps its value.
+                let start = nodes
                     .get(&a.node)
-                    .copied()
+                    .map(NodeState::shown)
+                    .or_else(|| memory.get(&a.node).copied())
                     .or(offered)
                     .unwrap_or(config.start);
                 let state = NodeState::new(column, &white, config.rule, start)?;
@@ -339,7 +341,10 @@ async fn session(
                     started = true;
                     send(
                         &tx,
-                        message(v1::node_message::Body::Shown(v1::Shown { seq: 0 })),
+                        message(v1::node_message::Body::Shown(v1::Shown {
+                            seq: 0,
+                            pattern: false,
+                        })),
                     )
                     .await?;
                 }
@@ -386,7 +391,10 @@ async fn session(
                     keeper.maybe(*epoch, memory);
                     send(
                         &tx,
-                        message(v1::node_message::Body::Shown(v1::Shown { seq: e.round })),
+                        message(v1::node_message::Body::Shown(v1::Shown {
+                            seq: e.round,
+                            pattern: false,
+                        })),
                     )
                     .await?;
                 }
@@ -395,7 +403,38 @@ async fn session(
                 tracing::info!(reason = %g.reason, "the camera agent said goodbye");
                 return Ok(SessionEnd::Closed);
             }
-            Some(v1::room_message::Body::Show(_)) | None => {}
+            Some(v1::room_message::Body::Show(show)) => {
+                // A calibration pattern: node values shown as they are, without touching the
+                // node states; values for nodes it does not own, or not finite, are refused.
+                let Some(v1::show::Pattern::Nodes(values)) = show.pattern else {
+                    tracing::warn!(seq = show.seq, "unsupported Show pattern: ignored");
+                    continue;
+                };
+                for v in &values.values {
+                    if !assigned.contains(&v.node) {
+                        tracing::warn!(
+                            node = v.node,
+                            "Show for a node this projector does not own: ignored"
+                        );
+                        continue;
+                    }
+                    match from_rgb("show value", v.x.as_ref()) {
+                        Ok(x) => display.show(v.node, x.clamp_unit()),
+                        Err(e) => {
+                            tracing::warn!(node = v.node, error = %e, "malformed Show value: ignored")
+                        }
+                    }
+                }
+                send(
+                    &tx,
+                    message(v1::node_message::Body::Shown(v1::Shown {
+                        seq: show.seq,
+                        pattern: true,
+                    })),
+                )
+                .await?;
+            }
+            None => {}
         }
     }
 }

@@ -23,6 +23,8 @@ pub struct NetPoint {
     pub agents: usize,
     pub median_ms: f64,
     pub p99_ms: f64,
+    /// Of a round: every node's update timed alone (the rest is messages and waiting).
+    pub compute_ms: f64,
     pub bytes_out_per_round: u64,
     pub bytes_in_per_round: u64,
     /// Heap the node agents hold, over all of them.
@@ -60,8 +62,15 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
         &[10, 100, 1000, 5000]
     };
     println!(
-        "{:>6} {:>7} {:>13} {:>11} {:>15} {:>14} {:>18}",
-        "nodes", "agents", "median ms", "p99 ms", "bytes out/rnd", "bytes in/rnd", "heap per agent"
+        "{:>6} {:>7} {:>13} {:>11} {:>11} {:>15} {:>14} {:>18}",
+        "nodes",
+        "agents",
+        "median ms",
+        "p99 ms",
+        "compute ms",
+        "bytes out/rnd",
+        "bytes in/rnd",
+        "heap per agent"
     );
     let mut points = Vec::new();
     for &n in sizes {
@@ -72,9 +81,17 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
         .map(|p| (p.nodes as f64, p.median_ms))
         .collect();
     let heap: Vec<(f64, f64)> = points.iter().map(|p| (p.nodes as f64, p.heap_mb)).collect();
-    if let (Some(t), Some(m)) = (growth_exponent(&time), growth_exponent(&heap)) {
+    let compute: Vec<(f64, f64)> = points
+        .iter()
+        .map(|p| (p.nodes as f64, p.compute_ms))
+        .collect();
+    if let (Some(t), Some(c), Some(m)) = (
+        growth_exponent(&time),
+        growth_exponent(&compute),
+        growth_exponent(&heap),
+    ) {
         println!(
-            "round time grows as nodes^{t:.2}, node agents' heap as nodes^{m:.2} (least squares on log-log over {} sizes, supports of fixed size)",
+            "round time grows as nodes^{t:.2} (its compute as nodes^{c:.2}), node agents' heap as nodes^{m:.2} (least squares on log-log over {} sizes, supports of fixed size)",
             points.len()
         );
     }
@@ -84,6 +101,11 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
 /// One size: prints its row and returns it.
 async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
     let problem = synthetic_room(&SyntheticConfig::new(nodes, 1))?.problem;
+    let rule = StepRule::Safe { theta: 1.0 };
+    let compute_ms =
+        crate::bench::us_per_node_update(&problem, rule, &vec![LinearRgb::splat(0.5); nodes])?
+            * nodes as f64
+            / 1e3;
     let agents = nodes.div_ceil(NODES_PER_AGENT);
     let owners: HashMap<String, Vec<u32>> = (0..agents)
         .map(|a| {
@@ -113,6 +135,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
             problem,
             owners: owners.clone(),
             start: None,
+            hot: Default::default(),
         },
         room.camera(),
         listener,
@@ -125,7 +148,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
             room: "bench".into(),
             token: "t".into(),
             projector_id: id.clone(),
-            rule: StepRule::Safe { theta: 1.0 },
+            rule,
             start: LinearRgb::splat(0.5),
             state_file: None,
         };
@@ -164,9 +187,10 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
     times.sort_by(f64::total_cmp);
     let pct = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
     println!(
-        "{nodes:>6} {agents:>7} {:>13.3} {:>11.3} {:>15} {:>14} {:>15.2} MB",
+        "{nodes:>6} {agents:>7} {:>13.3} {:>11.3} {:>11.3} {:>15} {:>14} {:>15.2} MB",
         pct(0.5),
         pct(0.99),
+        compute_ms,
         out / rounds as u64,
         inn / rounds as u64,
         heap_per_agent
@@ -176,6 +200,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
         agents,
         median_ms: pct(0.5),
         p99_ms: pct(0.99),
+        compute_ms,
         bytes_out_per_round: out / rounds as u64,
         bytes_in_per_round: inn / rounds as u64,
         heap_mb,

@@ -127,11 +127,12 @@ fn html(outcome: &Outcome, figures: &str) -> String {
         for p in &outcome.scaling {
             let _ = write!(
                 rows,
-                "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{:.2}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{:.2}</td></tr>",
                 p.nodes,
                 p.agents,
                 p.median_ms,
                 p.p99_ms,
+                p.compute_ms,
                 p.bytes_out_per_round,
                 p.bytes_in_per_round,
                 p.heap_mb
@@ -147,11 +148,14 @@ fn html(outcome: &Outcome, figures: &str) -> String {
         };
         scaling = format!(
             "<h2>How cost grows</h2><p>One round over loopback gRPC (errors out, update, contribution and \
-acknowledgement back; a virtual camera), supports of fixed size, ten nodes per node agent. Round time grows as \
-nodes<sup>{}</sup>, the node agents' heap as nodes<sup>{}</sup> (least squares on log-log).</p>\
-<table><tr><th>nodes</th><th>agents</th><th>median ms</th><th>p99 ms</th><th>bytes out/round</th>\
+acknowledgement back; a virtual camera), supports of fixed size, ten nodes per node agent; compute is every \
+node's update timed alone, the rest of a round is messages and waiting. Round time grows as \
+nodes<sup>{}</sup>, its compute as nodes<sup>{}</sup>, the node agents' heap as nodes<sup>{}</sup> \
+(least squares on log-log).</p>\
+<table><tr><th>nodes</th><th>agents</th><th>median ms</th><th>p99 ms</th><th>compute ms</th><th>bytes out/round</th>\
 <th>bytes in/round</th><th>node agents' heap MB</th></tr>{rows}</table>",
             fit(|p| p.median_ms),
+            fit(|p| p.compute_ms),
             fit(|p| p.heap_mb)
         );
     }

@@ -301,7 +301,7 @@ pub fn run(plan: &Plan, alloc: &PeakAlloc) -> Result<()> {
                 // Discarding late frames spends captures: a longer budget.
                 let variant = Variant {
                     latency,
-                    ..hard(if plan.quick { 12 } else { 20 })
+                    ..hard(if plan.quick { 10 } else { 20 })
                 };
                 let name = format!("{base_name}/stale-{latency}");
                 bench.case(&mut outcome, plan, &name, 0, variant, false)?;
@@ -635,6 +635,7 @@ async fn synthetic_run(
             problem: problem.clone(),
             owners: owners.clone(),
             start: Some(start.to_vec()),
+            hot: Default::default(),
         },
         room.camera(),
         listener,

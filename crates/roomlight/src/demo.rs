@@ -450,7 +450,7 @@ fn agents_over_grpc(
         let endpoint = format!("http://{}", listener.local_addr()?);
         let cancel = CancellationToken::new();
         let config = CameraConfig { room: "demo".into(), token: "demo".into(), heartbeat: Duration::from_millis(500), deadline: Duration::from_secs(2), model_rounds: 5, calibration_epoch: 1, stale_frames: 0 };
-        let (mut status, _handle) = camera::serve(config, RoomModel { problem: problem.clone(), owners: owners.clone(), start: None }, room.camera(), listener, cancel.clone());
+        let (mut status, _handle) = camera::serve(config, RoomModel { problem: problem.clone(), owners: owners.clone(), start: None, hot: Default::default() }, room.camera(), listener, cancel.clone());
         for id in owners.keys() {
             let config = NodeConfig { endpoint: endpoint.clone(), room: "demo".into(), token: "demo".into(), projector_id: id.clone(), rule: StepRule::Momentum { theta: 1.0 }, start: LinearRgb::splat(0.5), state_file: None };
             tokio::spawn(node::run(config, room.display(), cancel.child_token()));

@@ -1086,6 +1086,7 @@ pub fn run_agents(
                 problem: model.problem.clone(),
                 owners: owners.clone(),
                 start: Some(model.conventional.clone()),
+                hot: Default::default(),
             },
             hw.clone(),
             listener,

@@ -240,7 +240,7 @@ pub fn camera(path: &Path) -> Result<()> {
         announce("camera", listener.local_addr()?);
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
-        let (mut status, handle) = camera::serve(config, RoomModel { problem, owners: model.owners, start: None }, camera, listener, cancel.clone());
+        let (mut status, handle) = camera::serve(config, RoomModel { problem, owners: model.owners, start: None, hot: Default::default() }, camera, listener, cancel.clone());
         loop {
             tokio::select! {
                 () = cancel.cancelled() => break,
