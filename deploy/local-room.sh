@@ -18,13 +18,17 @@ trap stop INT TERM EXIT
 cd "$work"
 "$bin" sim --synthetic $((projectors * 10)) --projectors "$projectors" --listen 127.0.0.1:50050 --model-out room-model.json > sim.log 2>&1 &
 pids+=($!)
-sed -e 's/^listen = .*/listen = "127.0.0.1:50051"/' "$here/deploy/camera.toml" > camera.toml
+# The node agents find the camera agent over mDNS, on loopback and a port of this room's own.
+sed -e 's/^listen = .*/listen = "127.0.0.1:50051"/' -e 's/^mdns_port = .*/mdns_port = 53530/' \
+    -e 's/^mdns_loopback_only = .*/mdns_loopback_only = true/' "$here/deploy/camera.toml" > camera.toml
 until grep -q "listening on" sim.log; do sleep 0.1; done
 "$bin" camera --config camera.toml &
 pids+=($!)
 sleep 0.5
 for ((k = 0; k < projectors; k++)); do
-    sed -e "s/^projector = .*/projector = \"p$k\"/" -e "s/^state_file = .*/state_file = \"p$k.state.json\"/" "$here/deploy/node.toml" > "p$k.toml"
+    sed -e "s/^projector = .*/projector = \"p$k\"/" -e "s/^state_file = .*/state_file = \"p$k.state.json\"/" \
+        -e 's/^camera = .*/camera = "mdns"/' -e 's/^mdns_port = .*/mdns_port = 53530/' \
+        -e 's/^mdns_loopback_only = .*/mdns_loopback_only = true/' "$here/deploy/node.toml" > "p$k.toml"
     "$bin" node --config "p$k.toml" > "p$k.log" 2>&1 &
     pids+=($!)
 done

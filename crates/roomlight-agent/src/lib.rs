@@ -6,10 +6,14 @@
 //! - [`node`]: a node agent: owns its nodes' values, updates them from the errors it receives,
 //!   drives its display, acknowledges frames and reports contributions.
 //!
-//! This first slice runs measured and model rounds over loopback gRPC with joins and leaves;
-//! discovery, reconnection, state files and calibration over the wire come next.
+//! - [`discovery`]: the camera agent advertised over mDNS, and node agents finding it.
+//!
+//! Measured and model rounds run over gRPC with joins (a projector not yet measured is
+//! calibrated hot) and leaves, reconnection and state files; calibration of a whole room over
+//! the wire comes next.
 
 pub mod camera;
+pub mod discovery;
 pub mod hardware;
 pub mod node;
 pub mod remote;

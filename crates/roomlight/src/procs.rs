@@ -4,6 +4,7 @@
 
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::{self, CameraConfig, RoomModel};
+use roomlight_agent::discovery::{self, MdnsConfig};
 use roomlight_agent::hardware::VirtualRoom;
 use roomlight_agent::node::{self, NodeConfig};
 use roomlight_agent::remote::{RemoteCamera, RemoteDisplay, serve_hardware};
@@ -66,6 +67,14 @@ struct CameraFile {
     calibration_epoch: u64,
     #[serde(default)]
     stale_frames: usize,
+    /// Advertise the camera agent over mDNS.
+    #[serde(default = "mdns_default")]
+    mdns: bool,
+    #[serde(default = "mdns_port_default")]
+    mdns_port: u16,
+    /// mDNS on the loopback interface only (one machine).
+    #[serde(default)]
+    mdns_loopback_only: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -73,7 +82,15 @@ struct CameraFile {
 struct NodeFile {
     room: String,
     token: String,
+    /// The camera agent's endpoint, or "mdns" to find the agent of `room` over mDNS.
     camera: String,
+    #[serde(default = "mdns_port_default")]
+    mdns_port: u16,
+    #[serde(default)]
+    mdns_loopback_only: bool,
+    /// How long to look for the camera agent over mDNS, in seconds.
+    #[serde(default = "mdns_wait_default")]
+    mdns_wait_s: u64,
     hardware: String,
     projector: String,
     #[serde(default)]
@@ -86,6 +103,15 @@ struct NodeFile {
     start: f64,
 }
 
+fn mdns_default() -> bool {
+    true
+}
+fn mdns_port_default() -> u16 {
+    5353
+}
+fn mdns_wait_default() -> u64 {
+    30
+}
 fn heartbeat_default() -> u64 {
     500
 }
@@ -226,7 +252,7 @@ pub fn camera(path: &Path) -> Result<()> {
         }
     }
     let config = CameraConfig {
-        room: file.room,
+        room: file.room.clone(),
         token: file.token,
         heartbeat: Duration::from_millis(file.heartbeat_ms.max(50)),
         deadline: Duration::from_millis(file.deadline_ms.max(10)),
@@ -238,6 +264,13 @@ pub fn camera(path: &Path) -> Result<()> {
         let camera = RemoteCamera::connect(file.hardware.clone()).await.with_context(|| format!("connecting to the camera at {}", file.hardware))?;
         let listener = tokio::net::TcpListener::bind(&file.listen).await.with_context(|| format!("binding {}", file.listen))?;
         announce("camera", listener.local_addr()?);
+        // Advertised for as long as the agent runs (withdrawn when dropped).
+        let _advertisement = if file.mdns {
+            let mdns = MdnsConfig { port: file.mdns_port, loopback_only: file.mdns_loopback_only };
+            Some(discovery::advertise(&file.room, listener.local_addr()?, &mdns).with_context(|| format!("advertising room {:?} over mDNS (mdns = false turns it off)", file.room))?)
+        } else {
+            None
+        };
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
         let (mut status, handle) = camera::serve(config, RoomModel { problem, owners: model.owners, start: None, hot: Default::default() }, camera, listener, cancel.clone());
@@ -280,6 +313,19 @@ pub fn node(path: &Path) -> Result<()> {
             file.start
         );
     }
+    let endpoint = if file.camera == "mdns" {
+        let mdns = MdnsConfig {
+            port: file.mdns_port,
+            loopback_only: file.mdns_loopback_only,
+        };
+        let found =
+            discovery::find_camera(&file.room, &mdns, Duration::from_secs(file.mdns_wait_s))
+                .with_context(|| format!("{}: camera = \"mdns\"", path.display()))?;
+        tracing::info!(camera = %found, room = %file.room, "found over mDNS");
+        found
+    } else {
+        file.camera.clone()
+    };
     runtime()?.block_on(async {
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
@@ -287,7 +333,7 @@ pub fn node(path: &Path) -> Result<()> {
             .await
             .with_context(|| format!("connecting to the display at {}", file.hardware))?;
         let config = NodeConfig {
-            endpoint: file.camera,
+            endpoint,
             room: file.room,
             token: file.token,
             projector_id: file.projector,

@@ -111,7 +111,10 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
     let sim = address(&wait_line(&sim_out, Duration::from_secs(30), |l| {
         l.starts_with("sim listening on")
     }));
-    std::fs::write(d.join("camera.toml"), format!("room = \"lab\"\ntoken = \"t0k3n\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://{sim}\"\nmodel = \"model.json\"\nheartbeat_ms = 200\nmodel_rounds = 5\n")).expect("camera config");
+    // The camera agent advertises itself over mDNS on loopback, on a port of this test's own;
+    // the replacement node below finds it that way.
+    let mdns_port = 20_000 + (std::process::id() % 20_000);
+    std::fs::write(d.join("camera.toml"), format!("room = \"lab\"\ntoken = \"t0k3n\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://{sim}\"\nmodel = \"model.json\"\nheartbeat_ms = 200\nmodel_rounds = 5\nmdns = true\nmdns_port = {mdns_port}\nmdns_loopback_only = true\n")).expect("camera config");
     let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
     let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
         l.starts_with("camera listening on")
@@ -131,12 +134,20 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
         status(l).is_some_and(|(c, g, live)| live == 3 && c >= 10 && best.excess(g) < 1e-3)
     };
     wait_line(&cam_out, Duration::from_secs(60), converged);
-    // kill -9 p2 and start a replacement for the same projector: it resumes from p2's state file.
+    // kill -9 p2 and start a replacement for the same projector: it finds the camera agent over
+    // mDNS and resumes from p2's state file.
     procs.kill("p2");
     wait_line(&cam_out, Duration::from_secs(30), |l| {
         status(l).is_some_and(|(_, _, live)| live == 2)
     });
-    procs.spawn("p2-new", &["node", "--config", "p2.toml"], d);
+    let p2 = std::fs::read_to_string(d.join("p2.toml")).expect("p2 config");
+    let p2 = p2.replace(
+        &format!("camera = \"http://{camera}\""),
+        &format!("camera = \"mdns\"\nmdns_port = {mdns_port}\nmdns_loopback_only = true"),
+    );
+    assert!(p2.contains("\"mdns\""), "{p2}");
+    std::fs::write(d.join("p2-mdns.toml"), p2).expect("p2 config over mDNS");
+    procs.spawn("p2-new", &["node", "--config", "p2-mdns.toml"], d);
     wait_line(&cam_out, Duration::from_secs(60), |l| {
         status(l).is_some_and(|(_, g, live)| live == 3 && best.excess(g) < 1e-3)
     });
