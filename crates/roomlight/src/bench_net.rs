@@ -98,6 +98,97 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
     Ok(points)
 }
 
+/// A synthetic room served by a camera agent over loopback gRPC, with a virtual camera, and
+/// its node agents (ten nodes each).
+pub struct SyntheticAgents {
+    pub room: VirtualRoom,
+    pub status: tokio::sync::watch::Receiver<camera::RoomStatus>,
+    pub agents: usize,
+    owners: HashMap<String, Vec<u32>>,
+    endpoint: String,
+    cancel: CancellationToken,
+    tasks: Vec<tokio::task::JoinHandle<Result<(), roomlight_agent::AgentError>>>,
+}
+
+impl SyntheticAgents {
+    /// The camera agent alone (node agents come with [`Self::spawn_nodes`]).
+    pub async fn camera(
+        problem: &roomlight_core::Problem,
+        plant: PlantConfig,
+        start: Option<Vec<LinearRgb>>,
+        model_rounds: usize,
+    ) -> Result<Self> {
+        let nodes = problem.nodes();
+        let agents = nodes.div_ceil(NODES_PER_AGENT);
+        let owners: HashMap<String, Vec<u32>> = (0..agents)
+            .map(|a| {
+                let first = a * NODES_PER_AGENT;
+                let ids = (first as u32..(first + NODES_PER_AGENT).min(nodes) as u32).collect();
+                (format!("p{a}"), ids)
+            })
+            .collect();
+        let room = VirtualRoom::new(Plant::new(problem.clone(), plant)?);
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+        let endpoint = format!("http://{}", listener.local_addr()?);
+        let cancel = CancellationToken::new();
+        let config = CameraConfig {
+            room: "bench".into(),
+            token: "t".into(),
+            heartbeat: Duration::from_secs(1),
+            deadline: Duration::from_secs(5),
+            model_rounds,
+            calibration_epoch: 1,
+            stale_frames: 0,
+        };
+        let (status, camera_task) = camera::serve(
+            config,
+            RoomModel {
+                problem: problem.clone(),
+                owners: owners.clone(),
+                start,
+                hot: Default::default(),
+            },
+            room.camera(),
+            listener,
+            cancel.clone(),
+        );
+        Ok(Self {
+            room,
+            status,
+            agents,
+            owners,
+            endpoint,
+            cancel,
+            tasks: vec![camera_task],
+        })
+    }
+
+    /// One node agent per projector, every node on `rule`.
+    pub fn spawn_nodes(&mut self, rule: StepRule) {
+        for id in self.owners.keys() {
+            let config = NodeConfig {
+                endpoint: self.endpoint.clone(),
+                room: "bench".into(),
+                token: "t".into(),
+                projector_id: id.clone(),
+                rule,
+                start: LinearRgb::splat(0.5),
+                state_file: None,
+            };
+            let task = node::run(config, self.room.display(), self.cancel.child_token());
+            self.tasks.push(tokio::spawn(task));
+        }
+    }
+
+    /// Stops every agent and waits (5 s at most each) until they are gone.
+    pub async fn stop(self) {
+        self.cancel.cancel();
+        for task in self.tasks {
+            let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
+        }
+    }
+}
+
 /// One size: prints its row and returns it.
 async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
     let problem = synthetic_room(&SyntheticConfig::new(nodes, 1))?.problem;
@@ -106,54 +197,11 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
         crate::bench::us_per_node_update(&problem, rule, &vec![LinearRgb::splat(0.5); nodes])?
             * nodes as f64
             / 1e3;
-    let agents = nodes.div_ceil(NODES_PER_AGENT);
-    let owners: HashMap<String, Vec<u32>> = (0..agents)
-        .map(|a| {
-            (
-                format!("p{a}"),
-                ((a * NODES_PER_AGENT) as u32..((a + 1) * NODES_PER_AGENT).min(nodes) as u32)
-                    .collect(),
-            )
-        })
-        .collect();
-    let room = VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default())?);
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
-    let endpoint = format!("http://{}", listener.local_addr()?);
-    let cancel = CancellationToken::new();
-    let config = CameraConfig {
-        room: "bench".into(),
-        token: "t".into(),
-        heartbeat: Duration::from_secs(1),
-        deadline: Duration::from_secs(5),
-        model_rounds: 0,
-        calibration_epoch: 1,
-        stale_frames: 0,
-    };
-    let (mut status, _camera) = camera::serve(
-        config,
-        RoomModel {
-            problem,
-            owners: owners.clone(),
-            start: None,
-            hot: Default::default(),
-        },
-        room.camera(),
-        listener,
-        cancel.clone(),
-    );
+    let mut room = SyntheticAgents::camera(&problem, PlantConfig::default(), None, 0).await?;
+    let agents = room.agents;
     let before = alloc.current_usage();
-    for id in owners.keys() {
-        let config = NodeConfig {
-            endpoint: endpoint.clone(),
-            room: "bench".into(),
-            token: "t".into(),
-            projector_id: id.clone(),
-            rule,
-            start: LinearRgb::splat(0.5),
-            state_file: None,
-        };
-        tokio::spawn(node::run(config, room.display(), cancel.child_token()));
-    }
+    room.spawn_nodes(rule);
+    let status = &mut room.status;
     let ready = tokio::time::timeout(Duration::from_secs(180), async {
         loop {
             let s = status.borrow().clone();
@@ -164,7 +212,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
         }
     })
     .await;
-    ready.context("the agents did not all join within 60 s")??;
+    ready.context("the agents did not all join within 180 s")??;
     let heap_mb = alloc.current_usage().saturating_sub(before) as f64 / 1e6;
     let heap_per_agent = heap_mb / agents as f64;
     let rounds = if nodes >= 1000 { 20 } else { 60 };
@@ -182,7 +230,7 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
         out += s.bytes_out;
         inn += s.bytes_in;
     }
-    cancel.cancel();
+    room.stop().await;
     times.remove(0);
     times.sort_by(f64::total_cmp);
     let pct = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];

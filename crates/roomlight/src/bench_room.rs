@@ -10,9 +10,6 @@ use crate::pipeline::{self, Churn, RunOptions, RunResult};
 use anyhow::{Context, Result, bail};
 use comfy_table::{Table, presets::UTF8_FULL_CONDENSED};
 use peak_alloc::PeakAlloc;
-use roomlight_agent::camera::{self, CameraConfig, RoomModel};
-use roomlight_agent::hardware::VirtualRoom;
-use roomlight_agent::node::{self, NodeConfig};
 use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
 use roomlight_core::conventional::conventional_start;
 use roomlight_core::metrics::patch_delta_e;
@@ -21,11 +18,9 @@ use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, Problem, StepRule};
 use roomlight_sim::scenes::{HardCase, hard_case_of};
 use serde::Serialize;
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio_util::sync::CancellationToken;
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -532,9 +527,6 @@ fn scene_run(r: &RunResult, compute_us_per_round: f64, settle_from: u64) -> Run 
     }
 }
 
-/// Nodes per node agent in the synthetic room (one agent per projector of ten nodes).
-const NODES_PER_AGENT: usize = 10;
-
 /// A synthetic room of `nodes` nodes and 24 patches each (no rendering: the transport is
 /// written down), with the camera's noise, through the agents on loopback for every rule.
 fn synthetic_case(outcome: &mut Outcome, plan: &Plan, nodes: usize, budget: u64) -> Result<()> {
@@ -599,48 +591,18 @@ async fn synthetic_run(
     budget: u64,
     seed: u64,
 ) -> Result<Run> {
-    let nodes = problem.nodes();
-    let plant = Plant::new(
-        problem.clone(),
-        PlantConfig {
-            noise_scale: 1.0,
-            seed,
-            ..PlantConfig::default()
-        },
-    )?;
-    let room = VirtualRoom::new(plant);
-    let agents = nodes.div_ceil(NODES_PER_AGENT);
-    let owners: HashMap<String, Vec<u32>> = (0..agents)
-        .map(|a| {
-            let first = a * NODES_PER_AGENT;
-            let nodes = (first as u32..(first + NODES_PER_AGENT).min(nodes) as u32).collect();
-            (format!("p{a}"), nodes)
-        })
-        .collect();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
-    let endpoint = format!("http://{}", listener.local_addr()?);
-    let cancel = CancellationToken::new();
-    let config = CameraConfig {
-        room: "synthetic".into(),
-        token: "bench".into(),
-        heartbeat: Duration::from_secs(1),
-        deadline: Duration::from_secs(5),
-        model_rounds,
-        calibration_epoch: 1,
-        stale_frames: 0,
+    let plant = PlantConfig {
+        noise_scale: 1.0,
+        seed,
+        ..PlantConfig::default()
     };
-    let (mut status, camera_task) = camera::serve(
-        config,
-        RoomModel {
-            problem: problem.clone(),
-            owners: owners.clone(),
-            start: Some(start.to_vec()),
-            hot: Default::default(),
-        },
-        room.camera(),
-        listener,
-        cancel.clone(),
-    );
+    let mut agents = crate::bench_net::SyntheticAgents::camera(
+        problem,
+        plant,
+        Some(start.to_vec()),
+        model_rounds,
+    )
+    .await?;
     let de = |x: &[LinearRgb]| -> Result<f64> {
         Ok(patch_delta_e(problem.target(), &problem.response(x))?.mean)
     };
@@ -651,50 +613,31 @@ async fn synthetic_run(
         excess: problem.objective(start),
         mean_de00: de(start)?,
     }];
-    let mut tasks = Vec::new();
-    for id in owners.keys() {
-        let config = NodeConfig {
-            endpoint: endpoint.clone(),
-            room: "synthetic".into(),
-            token: "bench".into(),
-            projector_id: id.clone(),
-            rule,
-            start: LinearRgb::splat(0.5),
-            state_file: None,
-        };
-        tasks.push(tokio::spawn(node::run(
-            config,
-            room.display(),
-            cancel.child_token(),
-        )));
-    }
+    agents.spawn_nodes(rule);
     let mut bytes = pipeline::PerRound::default();
+    let expected = agents.agents;
     let outcome = tokio::time::timeout(Duration::from_secs(300), async {
         loop {
-            status.changed().await?;
-            let s = status.borrow().clone();
+            agents.status.changed().await?;
+            let s = agents.status.borrow().clone();
             bytes.add(&s);
-            let x = room.shown();
+            let x = agents.room.shown();
             trace.push(Point {
                 capture: s.captures,
                 seconds: t0.elapsed().as_secs_f64(),
-                excess: room.true_objective(),
+                excess: agents.room.true_objective(),
                 mean_de00: de(&x)?,
             });
-            if s.captures >= budget && s.live_projectors == agents {
+            if s.captures >= budget && s.live_projectors == expected {
                 return Ok::<_, anyhow::Error>(s);
             }
         }
     })
     .await;
     let seconds = t0.elapsed().as_secs_f64();
-    cancel.cancel();
-    for task in tasks {
-        let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
-    }
-    let _ = tokio::time::timeout(Duration::from_secs(5), camera_task).await;
+    let x = agents.room.shown();
+    agents.stop().await;
     let last = outcome.context("the synthetic room's agents did not finish within 300 s")??;
-    let x = room.shown();
     let de_final = patch_delta_e(problem.target(), &problem.response(&x))?;
     let rounds = last.round.max(1) as f64;
     Ok(Run {
