@@ -402,33 +402,11 @@ impl Bench {
         })
     }
 
-    /// The first standard luminaire leaves, the last one (off until then) joins: a third of
-    /// the way through the budget and two thirds (captures 5 and 10 of the full bench).
+    /// The first standard luminaire leaves, the last one (off until then, its attenuation
+    /// known) joins: captures 5 and 10 of the full bench.
     fn churn(&self, quick: bool) -> Result<Churn> {
-        let standard: Vec<usize> = self
-            .room
-            .projectors()
-            .iter()
-            .enumerate()
-            .filter(|(k, p)| {
-                p.kind == roomlight_sim::scene::ProjectorKind::Standard
-                    && self.cal.regions.iter().any(|r| r.projector == *k)
-            })
-            .map(|(k, _)| k)
-            .collect();
-        let (Some(&leaving), Some(&joining)) = (standard.first(), standard.last()) else {
-            bail!("the room has no standard luminaire with nodes");
-        };
-        if leaving == joining {
-            bail!("the room has a single standard luminaire: none to join after one left");
-        }
         let (leave_at, join_at) = if quick { (2, 4) } else { (5, 10) };
-        Ok(Churn {
-            leaving,
-            leave_at,
-            joining,
-            join_at,
-        })
+        Churn::pick(&self.room, &self.cal, leave_at, join_at, false)
     }
 
     /// Every rule on `preset`, `plan.repeats` times each.

@@ -190,6 +190,54 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             images,
         });
     }
+    // A projector leaves, and another that the camera agent has never measured joins: it is
+    // calibrated hot, then the room converges without the leaver (first preset, default rule).
+    let hot_join = match presets.first() {
+        Some(first) => {
+            let (leave_at, join_at, after) = if args.quick { (3, 6, 8) } else { (5, 10, 12) };
+            match pipeline::Churn::pick(&room, &cal, leave_at, join_at, true) {
+                Ok(churn) => {
+                    let truth = pipeline::Truth::new(&room, &transport, &first.model, 0)?;
+                    let nodes = cal
+                        .regions
+                        .iter()
+                        .filter(|r| r.projector == churn.joining)
+                        .count() as u64;
+                    let options = RunOptions {
+                        max_captures: join_at + nodes + 1 + after,
+                        stop_when_settled: false,
+                        churn: Some(churn),
+                        ..RunOptions::default_rule(args.seed)
+                    };
+                    let result = run(&first.model, &truth, options)?;
+                    let name = |k: usize| room.projectors()[k].name.clone();
+                    println!(
+                        "{} leaves after {leave_at} captures, {} joins unmeasured after {join_at}: calibrated hot ({} projector, {} captures), then {} captures in all: excess {:.1e} over the optimum without the leaver (true {:.1e}), mean ΔE00 {:.2}",
+                        name(churn.leaving),
+                        name(churn.joining),
+                        result.calibrated_hot,
+                        nodes + 1,
+                        result.captures,
+                        result.final_excess,
+                        result.true_excess,
+                        mean(&result.de00)
+                    );
+                    Some(report::HotJoin {
+                        leaving: name(churn.leaving),
+                        joining: name(churn.joining),
+                        churn,
+                        calibration_captures: (nodes + 1) * result.calibrated_hot,
+                        result,
+                    })
+                }
+                Err(e) => {
+                    println!("no projector to join hot: {e:#}");
+                    None
+                }
+            }
+        }
+        None => None,
+    };
     let pm = match presets.first() {
         Some(first) => {
             let t = Instant::now();
@@ -229,6 +277,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let report = Report {
         pm,
         shadows,
+        hot_join,
         room: name,
         seed: args.seed,
         chart_names: room.scene().charts.iter().map(|c| c.name.clone()).collect(),

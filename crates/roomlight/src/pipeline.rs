@@ -809,13 +809,49 @@ pub struct RunOptions {
 
 /// A projector leaving the room (switched off, its node agent stopped) once `leave_at`
 /// captures are taken, and another, off from the start, whose node agent joins after
-/// `join_at` captures. Projectors are indices into the room's projectors.
+/// `join_at` captures. Projectors are indices into the room's projectors. `hot`: the camera
+/// agent does not know the joining projector's attenuation and measures it when it joins.
 #[derive(Debug, Clone, Copy)]
 pub struct Churn {
     pub leaving: usize,
     pub leave_at: u64,
     pub joining: usize,
     pub join_at: u64,
+    pub hot: bool,
+}
+
+impl Churn {
+    /// The first standard luminaire with nodes leaves, the last one (off until then) joins.
+    pub fn pick(
+        room: &Room,
+        cal: &Calibrated,
+        leave_at: u64,
+        join_at: u64,
+        hot: bool,
+    ) -> Result<Self> {
+        let standard: Vec<usize> = room
+            .projectors()
+            .iter()
+            .enumerate()
+            .filter(|(k, p)| {
+                p.kind == ProjectorKind::Standard && cal.regions.iter().any(|r| r.projector == *k)
+            })
+            .map(|(k, _)| k)
+            .collect();
+        let (Some(&leaving), Some(&joining)) = (standard.first(), standard.last()) else {
+            bail!("the room has no standard luminaire with nodes");
+        };
+        if leaving == joining {
+            bail!("the room has a single standard luminaire: none to join after one left");
+        }
+        Ok(Self {
+            leaving,
+            leave_at,
+            joining,
+            join_at,
+            hot,
+        })
+    }
 }
 
 impl RunOptions {
@@ -887,6 +923,8 @@ pub struct RunResult {
     pub capture_seconds: f64,
     /// Rounds run (captures and model rounds).
     pub rounds: u64,
+    /// Projectors the camera agent calibrated hot during the run.
+    pub calibrated_hot: u64,
     /// Protobuf bytes between the agents, both ways, per round once the agents are attached (the first capture's traffic, which
     /// carries every node's attenuation, left out).
     pub bytes_per_round: f64,
@@ -1080,13 +1118,39 @@ pub fn run_agents(
                 0
             },
         };
+        // A projector joining hot is unknown to the camera agent: empty columns until measured.
+        let (known, hot) = match options.churn.filter(|c| c.hot) {
+            Some(c) => {
+                let columns = model
+                    .problem
+                    .columns()
+                    .iter()
+                    .enumerate()
+                    .map(|(n, column)| {
+                        if joining.contains(&n) {
+                            AttenuationColumn::new(Vec::new(), Vec::new())
+                        } else {
+                            Ok(column.clone())
+                        }
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                let problem = Problem::new(
+                    columns,
+                    model.problem.black().to_vec(),
+                    model.problem.target().to_vec(),
+                    model.problem.noise().to_vec(),
+                )?;
+                (problem, [name_of(c.joining)?].into())
+            }
+            None => (model.problem.clone(), Default::default()),
+        };
         let (mut status, camera_task) = camera::serve(
             config,
             RoomModel {
-                problem: model.problem.clone(),
+                problem: known,
                 owners: owners.clone(),
                 start: Some(model.conventional.clone()),
-                hot: Default::default(),
+                hot,
             },
             hw.clone(),
             listener,
@@ -1234,6 +1298,7 @@ pub fn run_agents(
         capture_seconds,
         rounds: last.round,
         bytes_per_round: steady.bytes_per_round(),
+        calibrated_hot: last.calibrated_hot,
     })
 }
 

@@ -55,6 +55,20 @@ pub struct Report {
     pub pm: Option<crate::pm::PmResult>,
     /// Large aperture against a standard projector (rooms without one: none).
     pub shadows: Option<crate::shadow::ShadowComparison>,
+    /// A projector leaving and an unmeasured one joining hot (rooms with one standard
+    /// luminaire: none).
+    pub hot_join: Option<HotJoin>,
+}
+
+/// One projector leaves, another joins that the camera agent has never measured: it is
+/// calibrated hot while the others keep their values, then the room converges again.
+pub struct HotJoin {
+    pub leaving: String,
+    pub joining: String,
+    pub churn: crate::pipeline::Churn,
+    /// Captures of the hot calibration (black, then each node at white).
+    pub calibration_captures: u64,
+    pub result: RunResult,
 }
 
 /// Mean of `v`.
@@ -167,6 +181,20 @@ pub fn metrics(report: &Report) -> Value {
         "rules": rules,
         "wall_seconds": report.wall_seconds,
     });
+    if let Some(h) = &report.hot_join {
+        m["hot_join"] = json!({
+            "leaving": h.leaving,
+            "joining": h.joining,
+            "leave_at": h.churn.leave_at,
+            "join_at": h.churn.join_at,
+            "calibration_captures": h.calibration_captures,
+            "captures": h.result.captures,
+            "final_excess": h.result.final_excess,
+            "true_excess": h.result.true_excess,
+            "mean_de00": mean(&h.result.de00),
+            "trace": h.result.trace,
+        });
+    }
     if let Some(pm) = &report.pm {
         let by_condition = |v: &[f64; 3]| -> Value {
             crate::pm::CONDITIONS
@@ -389,6 +417,26 @@ pub fn write(dir: &Path, report: &Report) -> Result<()> {
         &series(|p| (p.capture as f64, p.mean_de00)),
         false,
     )?;
+    if let Some(h) = &report.hot_join {
+        let trace = |f: fn(&TracePoint) -> f64| -> Vec<(f64, f64)> {
+            h.result
+                .trace
+                .iter()
+                .map(|p| (p.capture as f64, f(p)))
+                .collect()
+        };
+        plot(
+            &dir.join("hot-join.svg"),
+            "a projector leaves, an unmeasured one joins hot",
+            "captures",
+            "excess over the optimum without the leaver",
+            &[
+                ("model excess", trace(|p| p.model_excess)),
+                ("true excess", trace(|p| p.true_excess)),
+            ],
+            true,
+        )?;
+    }
     if let Some(s) = &report.shadows {
         let series: Vec<(&str, Vec<(f64, f64)>)> = s
             .kinds
@@ -537,6 +585,26 @@ large aperture (glare).</p><img src=\"shadow.svg\" alt=\"shadow profiles\">",
                 .join(", "),
             crate::shadow::STANDARD_PUPIL_MM,
             s.peak_radiance_ratio
+        );
+    }
+    if let Some(j) = &report.hot_join {
+        let _ = write!(
+            h,
+            "<h2>A projector leaves, an unmeasured one joins</h2><p>On the first preset, default rule: \
+{} is switched off after {} captures; {}, dark until then and unknown to the camera agent, joins after {}. \
+The camera agent measures it hot ({} captures: its nodes at black, then each alone at white, while the \
+others keep their values), sends everyone <i>s</i> anew, and the room converges without the leaver: \
+after {} captures in all, excess {:.1e} over the measured model's optimum (true {:.1e}), mean ΔE00 {:.2}.</p>\
+<img src=\"hot-join.svg\" alt=\"excess through the leave and the hot join\">",
+            escape(&j.leaving),
+            j.churn.leave_at,
+            escape(&j.joining),
+            j.churn.join_at,
+            j.calibration_captures,
+            j.result.captures,
+            j.result.final_excess,
+            j.result.true_excess,
+            mean(&j.result.de00)
         );
     }
     h.push_str("<h2>Convergence</h2><p>On the first preset, from the conventional start, each rule until the \

@@ -99,6 +99,14 @@ fn demo_quick_writes_a_report_whose_figures_meet_the_bars() {
             .as_f64()
             .unwrap_or_else(|| panic!("no number {key} in {v}"))
     };
+    // A projector leaves, an unmeasured one joins: it is calibrated hot (its nodes at black,
+    // then each at white: at least two captures) and the room ends within 1% of the optimum
+    // without the leaver.
+    let hot = &metrics["hot_join"];
+    assert!(number(hot, "calibration_captures") >= 2.0, "{hot}");
+    assert!(number(hot, "final_excess") < 1e-2, "{hot}");
+    assert!(number(hot, "true_excess") < 1e-2, "{hot}");
+    assert!(out.join("hot-join.svg").exists());
     for (name, p) in presets {
         for key in [
             "captures",
