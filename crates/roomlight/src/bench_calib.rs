@@ -211,6 +211,16 @@ pub fn run(quick: bool) -> Result<()> {
             }
             let truth = room.true_correspondence(k);
             let (reached, close, far) = accuracy(&truth, &decoded, m.width);
+            // Of the decoded pixels off by more than 2, the share the simulator says this
+            // projector does not reach directly at all (a defocused projector's blur reaches
+            // beyond its pinhole footprint).
+            let decoded_n = decoded.map.iter().filter(|d| d.is_some()).count();
+            let outside = truth
+                .iter()
+                .zip(&decoded.map)
+                .filter(|(t, d)| t.is_none() && d.is_some())
+                .count() as f64
+                / decoded_n.max(1) as f64;
             // The same, leaving out pixels where the projector's direct signal (light × albedo:
             // grazing surfaces, black chart frames) is under 2% of its typical (99th percentile)
             // level: there the direct light cannot be told from noise and global light, and
@@ -280,6 +290,13 @@ pub fn run(quick: bool) -> Result<()> {
                 100.0 * close_lit,
                 reached_lit
             );
+            if far > 0.0 {
+                println!(
+                    "{:<14} of the decoded pixels, {:.3}% lie where the simulator has no direct correspondence for it",
+                    "",
+                    100.0 * outside
+                );
+            }
             decoded_all[k] = Some(decoded);
         }
     }
