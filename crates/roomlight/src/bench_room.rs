@@ -18,7 +18,7 @@ use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, Problem, StepRule};
 use roomlight_sim::scenes::{HardCase, hard_case_of};
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -38,6 +38,8 @@ pub struct Plan {
     pub seed: u64,
     pub json: Option<PathBuf>,
     pub out: Option<PathBuf>,
+    /// Only the cases whose name contains this (and the scaling run if it contains it).
+    pub case: Option<String>,
 }
 
 /// One record of the table and of `--json`: medians over the repeats.
@@ -265,6 +267,7 @@ pub fn run(plan: &Plan, alloc: &PeakAlloc) -> Result<()> {
         few_rules: plan.quick,
         ..Variant::plain(budget)
     };
+    let wanted = |name: &str| plan.case.as_deref().is_none_or(|f| name.contains(f));
     if plan.presets || plan.hard {
         let mut base = if plan.quick {
             roomlight_sim::scenes::small()?
@@ -275,51 +278,83 @@ pub fn run(plan: &Plan, alloc: &PeakAlloc) -> Result<()> {
             base.camera.resolution = [640, 480];
         }
         let base_name = base.name.clone();
-        println!("calibrating {base_name}");
-        let bench = Bench::calibrate(base.clone(), plan.seed)?;
+        // The base room is calibrated once, and only when one of its cases is wanted.
+        let mut calibrated: Option<Bench> = None;
         if plan.presets {
-            let presets = if plan.quick {
-                1
-            } else {
-                bench.room.scene().presets.len()
-            };
-            for preset in 0..presets {
-                let name = format!("{base_name}/{}", bench.room.scene().presets[preset].name);
-                let variant = Variant::plain(budget);
-                bench.case(&mut outcome, plan, &name, preset, variant, preset == 0)?;
+            let presets = if plan.quick { 1 } else { base.presets.len() };
+            for (preset, spec) in base.presets.iter().enumerate().take(presets) {
+                let name = format!("{base_name}/{}", spec.name);
+                if wanted(&name) {
+                    let variant = Variant::plain(budget);
+                    Bench::once(&mut calibrated, &base, plan.seed)?.case(
+                        &mut outcome,
+                        plan,
+                        &name,
+                        preset,
+                        variant,
+                        preset == 0,
+                    )?;
+                }
             }
         }
         if plan.hard {
             // Errors one and two captures stale (camera latency), a projector leaving and
             // another joining: the base room's first preset.
             for latency in [1, 2] {
+                let name = format!("{base_name}/stale-{latency}");
+                if !wanted(&name) {
+                    continue;
+                }
                 // Discarding late frames spends captures: a longer budget.
                 let variant = Variant {
                     latency,
                     ..hard(if plan.quick { 10 } else { 20 })
                 };
-                let name = format!("{base_name}/stale-{latency}");
-                bench.case(&mut outcome, plan, &name, 0, variant, false)?;
+                Bench::once(&mut calibrated, &base, plan.seed)?.case(
+                    &mut outcome,
+                    plan,
+                    &name,
+                    0,
+                    variant,
+                    false,
+                )?;
             }
-            match bench.churn(plan.quick) {
-                Ok(churn) => {
-                    let variant = Variant {
-                        churn: Some(churn),
-                        ..hard(hard_budget.max(churn.join_at + 8))
-                    };
-                    let name = format!(
-                        "{base_name}/leave-{}-join-{}",
-                        churn.leave_at, churn.join_at
-                    );
-                    bench.case(&mut outcome, plan, &name, 0, variant, false)?;
+            let (leave_at, join_at) = if plan.quick { (2, 4) } else { (5, 10) };
+            // The joining projector's attenuation known to the camera agent, or measured hot
+            // when it joins (its nodes black, then each white: more captures).
+            for hot in [false, true] {
+                let name = format!(
+                    "{base_name}/leave-{leave_at}-join-{join_at}{}",
+                    if hot { "-hot" } else { "" }
+                );
+                if !wanted(&name) {
+                    continue;
                 }
-                Err(e) => outcome
-                    .failed
-                    .push((format!("{base_name}/leave-join"), format!("{e:#}"))),
+                let b = Bench::once(&mut calibrated, &base, plan.seed)?;
+                match Churn::pick(&b.room, &b.cal, leave_at, join_at, hot) {
+                    Ok(churn) => {
+                        let joining = b
+                            .cal
+                            .regions
+                            .iter()
+                            .filter(|r| r.projector == churn.joining)
+                            .count() as u64;
+                        let calibration = if hot { joining + 1 } else { 0 };
+                        let variant = Variant {
+                            churn: Some(churn),
+                            ..hard(hard_budget.max(join_at + 8) + calibration)
+                        };
+                        b.case(&mut outcome, plan, &name, 0, variant, false)?;
+                    }
+                    Err(e) => outcome.failed.push((name, format!("{e:#}"))),
+                }
             }
             for case in HardCase::ALL {
                 let scene = hard_case_of(base.clone(), case)?;
                 let name = scene.name.clone();
+                if !wanted(&name) {
+                    continue;
+                }
                 println!("hard case {name}: calibrating");
                 let attempt = Bench::calibrate(scene, plan.seed)
                     .and_then(|b| b.case(&mut outcome, plan, &name, 0, hard(hard_budget), false));
@@ -330,10 +365,12 @@ pub fn run(plan: &Plan, alloc: &PeakAlloc) -> Result<()> {
                 }
             }
             let nodes = if plan.quick { 100 } else { 1000 };
-            synthetic_case(&mut outcome, plan, nodes, hard_budget)?;
+            if wanted(&format!("synthetic-{nodes}")) {
+                synthetic_case(&mut outcome, plan, nodes, hard_budget)?;
+            }
         }
     }
-    if plan.scaling {
+    if plan.scaling && wanted("scaling") {
         outcome.scaling = crate::bench_net::run(plan.quick, alloc)?;
     }
     print_table(&outcome.records);
@@ -386,6 +423,19 @@ struct Bench {
 }
 
 impl Bench {
+    /// The bench in `slot`, calibrated on first use.
+    fn once<'a>(
+        slot: &'a mut Option<Bench>,
+        scene: &roomlight_sim::scene::Scene,
+        seed: u64,
+    ) -> Result<&'a Bench> {
+        if slot.is_none() {
+            println!("calibrating {}", scene.name);
+            *slot = Some(Bench::calibrate(scene.clone(), seed)?);
+        }
+        slot.as_ref().context("the calibrated room")
+    }
+
     fn calibrate(scene: roomlight_sim::scene::Scene, seed: u64) -> Result<Self> {
         let room = Arc::new(roomlight_sim::Room::build(scene).context("building the room")?);
         let mut noise = roomlight_sim::CameraNoise::with_seed(&room, seed);
@@ -400,13 +450,6 @@ impl Bench {
             transport,
             noise: std::cell::RefCell::new(noise),
         })
-    }
-
-    /// The first standard luminaire leaves, the last one (off until then, its attenuation
-    /// known) joins: captures 5 and 10 of the full bench.
-    fn churn(&self, quick: bool) -> Result<Churn> {
-        let (leave_at, join_at) = if quick { (2, 4) } else { (5, 10) };
-        Churn::pick(&self.room, &self.cal, leave_at, join_at, false)
     }
 
     /// Every rule on `preset`, `plan.repeats` times each.
@@ -788,29 +831,4 @@ pub fn captures_cell(median: Option<u64>, range: [Option<u64>; 2], budget: u64) 
     } else {
         format!("{} ({}…{})", one(median), one(range[0]), one(range[1]))
     }
-}
-
-/// `roomlight bench room`: the presets (or the hard cases) only.
-pub fn room_only(
-    quick: bool,
-    hard: bool,
-    repeats: usize,
-    json: Option<&Path>,
-    out: Option<&Path>,
-    seed: u64,
-    alloc: &PeakAlloc,
-) -> Result<()> {
-    run(
-        &Plan {
-            quick,
-            presets: !hard,
-            hard,
-            scaling: false,
-            repeats,
-            seed,
-            json: json.map(Path::to_path_buf),
-            out: out.map(Path::to_path_buf),
-        },
-        alloc,
-    )
 }

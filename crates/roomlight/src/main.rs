@@ -86,6 +86,9 @@ struct BenchArgs {
     /// Seed of the camera noise (repeats use the following seeds).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Only the cases whose name contains this text (e.g. `stale`, `lab/warm`, `scaling`).
+    #[arg(long)]
+    case: Option<String>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -123,6 +126,9 @@ enum BenchCommand {
         /// Seed of the camera noise.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Only the cases whose name contains this text.
+        #[arg(long)]
+        case: Option<String>,
     },
     /// Calibration on the embedded lab: structured-light accuracy against the simulator's truth,
     /// captures with and without simultaneous coding, decode speed.
@@ -173,6 +179,7 @@ fn bench(args: BenchArgs) -> Result<()> {
                 seed: args.seed,
                 json: args.json,
                 out: args.out,
+                case: args.case,
             },
             &ALLOCATOR,
         ),
@@ -186,13 +193,19 @@ fn bench(args: BenchArgs) -> Result<()> {
             out,
             repeats,
             seed,
-        }) => bench_room::room_only(
-            quick,
-            hard,
-            repeats,
-            json.as_deref(),
-            out.as_deref(),
-            seed,
+            case,
+        }) => bench_room::run(
+            &bench_room::Plan {
+                quick,
+                presets: !hard,
+                hard,
+                scaling: false,
+                repeats,
+                seed,
+                json,
+                out,
+                case,
+            },
             &ALLOCATOR,
         ),
         Some(BenchCommand::Net { quick }) => bench_net::run(quick, &ALLOCATOR).map(|_| ()),

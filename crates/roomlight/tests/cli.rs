@@ -481,6 +481,7 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         "small/stale-1",
         "small/stale-2",
         "small/leave-2-join-4",
+        "small/leave-2-join-4-hot",
         "small-reflective",
         "small-two-on-one-wall",
         "small-dim-projector",
@@ -521,6 +522,7 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         "small-uncorrected-gamma",
         "small-bright-target",
         "small/leave-2-join-4",
+        "small/leave-2-join-4-hot",
         "synthetic-100",
     ] {
         reaches(case, "model-20");
@@ -576,4 +578,26 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
             );
         }
     }
+}
+
+/// `--case` runs only the cases whose name contains the text (here one stale case: the quick
+/// subset of rules plus the two answers to a late camera).
+#[test]
+fn bench_case_filter_runs_only_the_matching_cases() {
+    let rows = bench_quick_rows("room", &["--hard", "--case", "stale-1"]);
+    let rules: Vec<&str> = rows.iter().filter_map(|r| r["rule"].as_str()).collect();
+    assert!(
+        rows.iter().all(|r| r["case"] == "small/stale-1"),
+        "{rows:?}"
+    );
+    assert_eq!(
+        rules,
+        [
+            "paper",
+            "momentum",
+            "model-20",
+            "safe-delay",
+            "model-20-discard"
+        ]
+    );
 }
