@@ -708,3 +708,101 @@ async fn nodes_start_from_the_camera_agents_start_and_the_room_reports_settled_a
         status.captures
     );
 }
+
+/// A camera that asks the camera agent to stop while it takes capture `at`.
+struct StopDuring {
+    inner: VirtualCamera,
+    at: u64,
+    taken: u64,
+    stop: CancellationToken,
+}
+
+impl Camera for StopDuring {
+    async fn capture(&mut self) -> Result<Vec<LinearRgb>, roomlight_agent::AgentError> {
+        self.taken += 1;
+        if self.taken == self.at {
+            self.stop.cancel();
+        }
+        self.inner.capture().await
+    }
+}
+
+/// A stop request in the middle of a round (SIGINT, SIGTERM) lets that round finish — its
+/// errors, contributions and model rounds — and publish its status before the camera agent
+/// stops; it does not start another.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stop_request_lets_the_current_round_finish() {
+    let problem = synthetic_room(&SyntheticConfig::new(12, 4))
+        .expect("room")
+        .problem;
+    let owners: HashMap<String, Vec<u32>> = (0..3)
+        .map(|p| (format!("p{p}"), (4 * p..4 * p + 4).collect()))
+        .collect();
+    let room =
+        VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+    let nodes_cancel = CancellationToken::new();
+    let camera_cancel = CancellationToken::new();
+    let model_rounds = 5;
+    let config = CameraConfig {
+        room: "lab".into(),
+        token: TOKEN.into(),
+        heartbeat: Duration::from_millis(200),
+        deadline: Duration::from_secs(2),
+        model_rounds,
+        calibration_epoch: 1,
+        stale_frames: 0,
+    };
+    // The stop comes during the fourth capture, once all three projectors take part.
+    let at = 4;
+    let (status, handle) = camera::serve(
+        config,
+        RoomModel {
+            problem,
+            owners: owners.clone(),
+            start: None,
+            hot: Default::default(),
+        },
+        StopDuring {
+            inner: room.camera(),
+            at,
+            taken: 0,
+            stop: camera_cancel.clone(),
+        },
+        listener,
+        camera_cancel.clone(),
+    );
+    for id in owners.keys() {
+        let config = NodeConfig {
+            endpoint: endpoint.clone(),
+            room: "lab".into(),
+            token: TOKEN.into(),
+            projector_id: id.clone(),
+            rule: StepRule::Momentum { theta: 1.0 },
+            start: LinearRgb::splat(0.5),
+            state_file: None,
+        };
+        tokio::spawn(node::run(
+            config,
+            room.display(),
+            nodes_cancel.child_token(),
+        ));
+    }
+    tokio::time::timeout(Duration::from_secs(30), handle)
+        .await
+        .expect("the camera agent stops in time")
+        .expect("task")
+        .expect("clean stop");
+    let last = status.borrow().clone();
+    nodes_cancel.cancel();
+    assert_eq!(last.captures, at, "{last:?}");
+    assert_eq!(last.round, at * (model_rounds as u64 + 1), "{last:?}");
+    assert_eq!(
+        room.captures(),
+        at as usize,
+        "no capture after the stop request"
+    );
+}

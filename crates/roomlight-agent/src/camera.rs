@@ -132,7 +132,8 @@ struct Shared {
     contributions: mpsc::Sender<Contribution>,
     bytes_out: AtomicU64,
     bytes_in: AtomicU64,
-    /// Cancelled when the camera agent stops: ends every node's reader.
+    /// Cancelled once the camera agent has stopped its rounds: ends every node's reader and
+    /// the server (the caller's token only asks the rounds to stop after the current one).
     cancel: CancellationToken,
 }
 
@@ -724,10 +725,10 @@ pub fn serve(
         contributions: contrib_tx,
         bytes_out: AtomicU64::new(0),
         bytes_in: AtomicU64::new(0),
-        cancel: cancel.clone(),
+        cancel: CancellationToken::new(),
     });
     let (status_tx, status_rx) = watch::channel(RoomStatus::default());
-    let server_cancel = cancel.clone();
+    let server_cancel = shared.cancel.clone();
     let service = Service(shared.clone());
     let handle = tokio::spawn(async move {
         let server = tonic::transport::Server::builder()
@@ -751,13 +752,16 @@ pub fn serve(
             let mut calibrated_hot = 0u64;
             let mut previous: Option<f64> = None;
             let mut quiet = 0u32;
-            loop {
+            // A stop request ends the rounds between two rounds, never inside one.
+            while !cancel.is_cancelled() {
                 // Someone must be there, and have shown its last frame (or wait to be measured).
-                if !wait_for(&shared, Duration::from_secs(3600), |r| {
-                    r.peers.values().any(|p| p.shown.is_some() || !p.calibrated)
-                })
-                .await
-                {
+                let present = tokio::select! {
+                    present = wait_for(&shared, Duration::from_secs(3600), |r| {
+                        r.peers.values().any(|p| p.shown.is_some() || !p.calibrated)
+                    }) => present,
+                    () = cancel.cancelled() => break,
+                };
+                if !present {
                     continue;
                 }
                 let hot = shared
@@ -826,12 +830,20 @@ pub fn serve(
                 });
             }
         };
+        // On a stop request the current round finishes (bounded: a round waits at most a
+        // deadline for the acknowledgements and one per model round for the contributions).
+        let grace = shared.config.deadline * (shared.config.model_rounds as u32 + 3);
+        let stop_waiting = async {
+            cancel.cancelled().await;
+            tokio::time::sleep(grace).await;
+        };
         tokio::pin!(server);
         tokio::select! {
             result = &mut server => return result.map_err(crate::AgentError::from),
             () = rounds => {}
-            () = cancel.cancelled() => {}
+            () = stop_waiting => tracing::warn!(?grace, "the round did not finish in time: stopped"),
         }
+        shared.cancel.cancel();
         // Stopping: say goodbye and end every node's stream, so the node agents reconnect to
         // whichever camera agent comes next instead of waiting on a stream nobody writes to.
         let peers: Vec<Peer> = shared.registry().peers.drain().map(|(_, p)| p).collect();
