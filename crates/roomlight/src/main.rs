@@ -11,6 +11,7 @@ mod graycode_cmd;
 mod pipeline;
 mod pm;
 mod procs;
+mod rendered;
 mod report;
 mod shadow;
 

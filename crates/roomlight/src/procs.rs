@@ -44,9 +44,14 @@ pub struct SimArgs {
     /// Address to serve on (port 0: any free port, printed).
     #[arg(long, default_value = "127.0.0.1:50050")]
     listen: String,
-    /// Where to write the room's model (the stand-in for calibration) for the camera agent.
+    /// Where to write the synthetic room's model (the stand-in for calibration) for the
+    /// camera agent. Required for a synthetic room.
     #[arg(long)]
-    model_out: PathBuf,
+    model_out: Option<PathBuf>,
+    /// Serve a rendered room instead (the `RenderedRoom` service: projector images in, camera
+    /// images out, LED presets): `default` (the embedded lab), `small`, or a scene TOML file.
+    #[arg(long, conflicts_with_all = ["synthetic", "projectors", "model_out"])]
+    scene: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -184,6 +189,33 @@ fn announce(what: &str, addr: std::net::SocketAddr) {
 
 pub fn sim(args: &SimArgs) -> Result<()> {
     init_logs();
+    if let Some(which) = &args.scene {
+        let scene = match which.as_str() {
+            "default" | "lab" => roomlight_sim::scenes::lab()?,
+            "small" => roomlight_sim::scenes::small()?,
+            path => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("reading the scene {path}"))?;
+                roomlight_sim::scene::Scene::from_toml(&text, path)?
+            }
+        };
+        let room = std::sync::Arc::new(
+            roomlight_sim::Room::build(scene)
+                .with_context(|| format!("building the room of {which}"))?,
+        );
+        return runtime()?.block_on(async {
+            let listener = tokio::net::TcpListener::bind(&args.listen)
+                .await
+                .with_context(|| format!("binding {}", args.listen))?;
+            announce("sim", listener.local_addr()?);
+            let cancel = CancellationToken::new();
+            stop_on_signals(cancel.clone());
+            crate::rendered::serve(room, args.seed, listener, cancel).await
+        });
+    }
+    let Some(model_out) = &args.model_out else {
+        bail!("--model-out FILE is required for a synthetic room (or give --scene)");
+    };
     if args.projectors == 0 || args.synthetic < args.projectors {
         bail!(
             "--projectors must be between 1 and --synthetic ({})",
@@ -205,11 +237,10 @@ pub fn sim(args: &SimArgs) -> Result<()> {
         problem: problem.clone(),
         owners,
     };
-    let tmp = args.model_out.with_extension("tmp");
+    let tmp = model_out.with_extension("tmp");
     std::fs::write(&tmp, serde_json::to_string(&model)?)
         .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, &args.model_out)
-        .with_context(|| format!("writing {}", args.model_out.display()))?;
+    std::fs::rename(&tmp, model_out).with_context(|| format!("writing {}", model_out.display()))?;
     let plant = Plant::new(
         problem,
         PlantConfig {
