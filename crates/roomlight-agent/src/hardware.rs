@@ -10,6 +10,13 @@ use std::sync::{Arc, Mutex, PoisonError};
 pub trait Display: Send + 'static {
     /// Shows `value` on node `node` (a global node id).
     fn show(&mut self, node: u32, value: LinearRgb);
+
+    /// Resolves once everything shown so far is on the display: a node agent acknowledges a
+    /// frame only after this, so the camera never captures a frame that is still on its way.
+    /// Displays that show synchronously need nothing more.
+    fn flush(&mut self) -> impl Future<Output = ()> + Send {
+        std::future::ready(())
+    }
 }
 
 /// Measures the chart patches (linear camera values, one per patch).

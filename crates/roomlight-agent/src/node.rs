@@ -339,6 +339,7 @@ async fn session(
                     && assigned.iter().all(|n| nodes.contains_key(n))
                 {
                     started = true;
+                    display.flush().await;
                     send(
                         &tx,
                         message(v1::node_message::Body::Shown(v1::Shown {
@@ -389,6 +390,7 @@ async fn session(
                     // This round is complete; rounds before it will never be.
                     applied.retain(|r, _| *r > e.round);
                     keeper.maybe(*epoch, memory);
+                    display.flush().await;
                     send(
                         &tx,
                         message(v1::node_message::Body::Shown(v1::Shown {
@@ -425,6 +427,7 @@ async fn session(
                         }
                     }
                 }
+                display.flush().await;
                 send(
                     &tx,
                     message(v1::node_message::Body::Shown(v1::Shown {

@@ -59,16 +59,25 @@ pub async fn serve_hardware(
     Ok(())
 }
 
-/// A display in another process: values are queued and sent in order by a background task.
+/// What a [`RemoteDisplay`] queues for its background task.
+#[derive(Debug)]
+enum Queued {
+    Value(u32, LinearRgb),
+    /// Answered once every value queued before it has been taken by the display.
+    Flush(tokio::sync::oneshot::Sender<()>),
+}
+
+/// A display in another process: values are queued and sent in order by a background task;
+/// [`Display::flush`] waits until the display has taken them.
 #[derive(Debug, Clone)]
-pub struct RemoteDisplay(mpsc::UnboundedSender<(u32, LinearRgb)>);
+pub struct RemoteDisplay(mpsc::UnboundedSender<Queued>);
 
 impl RemoteDisplay {
     /// Connects to `endpoint` (e.g. `http://127.0.0.1:7000`); the task ends with `cancel`.
     pub async fn connect(endpoint: String, cancel: CancellationToken) -> Result<Self, AgentError> {
         let mut client =
             v1::virtual_hardware_client::VirtualHardwareClient::connect(endpoint).await?;
-        let (tx, mut rx) = mpsc::unbounded_channel::<(u32, LinearRgb)>();
+        let (tx, mut rx) = mpsc::unbounded_channel::<Queued>();
         tokio::spawn(async move {
             loop {
                 let first = tokio::select! {
@@ -76,21 +85,29 @@ impl RemoteDisplay {
                     v = rx.recv() => v,
                 };
                 let Some(first) = first else { return };
-                // Everything queued meanwhile goes in the same request.
-                let mut batch = vec![first];
-                while let Ok(v) = rx.try_recv() {
-                    batch.push(v);
-                }
-                let values = batch
-                    .into_iter()
-                    .map(|(node, x)| v1::NodeState {
+                // Everything queued meanwhile goes in the same request; flushes are answered
+                // once it has been taken.
+                let mut values = Vec::new();
+                let mut flushes = Vec::new();
+                let mut take = |q: Queued| match q {
+                    Queued::Value(node, x) => values.push(v1::NodeState {
                         node,
                         x: Some(to_rgb(x)),
                         attenuation: None,
-                    })
-                    .collect();
-                if let Err(status) = client.show(v1::ShowRequest { values }).await {
+                    }),
+                    Queued::Flush(done) => flushes.push(done),
+                };
+                take(first);
+                while let Ok(q) = rx.try_recv() {
+                    take(q);
+                }
+                if !values.is_empty()
+                    && let Err(status) = client.show(v1::ShowRequest { values }).await
+                {
                     tracing::warn!(%status, "the display did not take the frame");
+                }
+                for done in flushes {
+                    let _ = done.send(());
                 }
             }
         });
@@ -101,7 +118,18 @@ impl RemoteDisplay {
 impl Display for RemoteDisplay {
     fn show(&mut self, node: u32, value: LinearRgb) {
         // The task only stops with the agent.
-        let _ = self.0.send((node, value));
+        let _ = self.0.send(Queued::Value(node, value));
+    }
+
+    fn flush(&mut self) -> impl Future<Output = ()> + Send {
+        let (done, taken) = tokio::sync::oneshot::channel();
+        let queued = self.0.send(Queued::Flush(done)).is_ok();
+        async move {
+            // A task that is gone (the agent stopping) has nothing left to wait for.
+            if queued {
+                let _ = taken.await;
+            }
+        }
     }
 }
 
