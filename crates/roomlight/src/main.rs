@@ -40,8 +40,12 @@ enum Command {
     /// Runs the best end-to-end pipeline there is so far: a synthetic room lit by distributed
     /// node updates from the conventional start, reported against the exact optimum.
     Demo(demo::DemoArgs),
-    /// The simulated hardware as a process: a synthetic room served as `VirtualHardware`.
+    /// The simulated hardware as a process: a synthetic room served as `VirtualHardware`, or
+    /// (`--scene`) the rendered room served as `RenderedRoom`.
     Sim(procs::SimArgs),
+    /// Calibrates a simulated room and writes the files the processes of a rendered room need
+    /// (the camera agent's model and charts, each node agent's frame).
+    Calibrate(procs::CalibrateArgs),
     /// The camera agent of a room.
     Camera {
         /// Its TOML config (see deploy/camera.toml).
@@ -161,6 +165,7 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Demo(args) => demo::run(&args),
         Command::Sim(args) => procs::sim(&args),
+        Command::Calibrate(args) => procs::calibrate(&args),
         Command::Camera { config } => procs::camera(&config),
         Command::Node { config } => procs::node(&config),
         Command::Graycode { which } => graycode_cmd::run(which),

@@ -25,6 +25,67 @@ pub struct ModelFile {
     pub problem: Problem,
     /// Projector id → node ids.
     pub owners: HashMap<String, Vec<u32>>,
+    /// Each node's start (the conventional start); absent: the node agents' own.
+    #[serde(default)]
+    pub start: Option<Vec<LinearRgb>>,
+}
+
+/// Where the camera agent of a rendered room finds its patches in a camera image.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct ChartsFile {
+    pub corners: Vec<roomlight_calib::charts::ChartCorners>,
+    /// Room patch index of each model patch.
+    pub patches: Vec<usize>,
+    pub sample: roomlight_calib::charts::SampleConfig,
+}
+
+/// The camera agent's camera: the synthetic room's patches, or a rendered room's images
+/// sampled at the charts.
+enum AnyCamera {
+    Synthetic(RemoteCamera),
+    Rendered(crate::rendered::RenderedCamera),
+}
+
+impl roomlight_agent::hardware::Camera for AnyCamera {
+    fn capture(
+        &mut self,
+    ) -> impl Future<Output = Result<Vec<LinearRgb>, roomlight_agent::AgentError>> + Send {
+        let capture: std::pin::Pin<Box<dyn Future<Output = _> + Send + '_>> = match self {
+            Self::Synthetic(c) => Box::pin(c.capture()),
+            Self::Rendered(c) => Box::pin(c.capture()),
+        };
+        capture
+    }
+}
+
+/// A node agent's display: node values on the synthetic room, or its projector's image on a
+/// rendered room.
+enum AnyDisplay {
+    Synthetic(RemoteDisplay),
+    Rendered(crate::rendered::RenderedDisplay),
+}
+
+impl roomlight_agent::hardware::Display for AnyDisplay {
+    fn show(&mut self, node: u32, value: LinearRgb) {
+        match self {
+            Self::Synthetic(d) => d.show(node, value),
+            Self::Rendered(d) => d.show(node, value),
+        }
+    }
+
+    fn flush(&mut self) -> impl Future<Output = ()> + Send {
+        let flush: std::pin::Pin<Box<dyn Future<Output = ()> + Send + '_>> = match self {
+            Self::Synthetic(d) => Box::pin(d.flush()),
+            Self::Rendered(d) => Box::pin(d.flush()),
+        };
+        flush
+    }
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: not {what}", path.display()))
 }
 
 #[derive(Debug, clap::Args)]
@@ -52,6 +113,140 @@ pub struct SimArgs {
     /// images out, LED presets): `default` (the embedded lab), `small`, or a scene TOML file.
     #[arg(long, conflicts_with_all = ["synthetic", "projectors", "model_out"])]
     scene: Option<String>,
+    /// With --scene: the camera's resolution instead of the scene's, as WIDTHxHEIGHT.
+    #[arg(long, requires = "scene")]
+    camera: Option<String>,
+}
+
+/// `roomlight calibrate`: calibrates a simulated room (in one process, through captures only)
+/// and writes what the processes of a rendered room need.
+#[derive(Debug, clap::Args)]
+pub struct CalibrateArgs {
+    /// `default` (the embedded lab), `small`, or a scene TOML file.
+    #[arg(long, default_value = "default")]
+    scene: String,
+    /// The camera's resolution instead of the scene's, as WIDTHxHEIGHT.
+    #[arg(long)]
+    camera: Option<String>,
+    /// The LED preset whose light the projectors reproduce (default: the first).
+    #[arg(long)]
+    preset: Option<String>,
+    /// Seed of the camera noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Folder for model.json, charts.json and one frame-PROJECTOR.json per luminaire.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// A scene by name or file, with the camera's resolution optionally replaced.
+fn load_scene(which: &str, camera: Option<&str>) -> Result<roomlight_sim::scene::Scene> {
+    let mut scene = match which {
+        "default" | "lab" => roomlight_sim::scenes::lab()?,
+        "small" => roomlight_sim::scenes::small()?,
+        path => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading the scene {path}"))?;
+            roomlight_sim::scene::Scene::from_toml(&text, path)?
+        }
+    };
+    if let Some(size) = camera {
+        let parsed = size
+            .split_once('x')
+            .and_then(|(w, h)| Some([w.parse::<u32>().ok()?, h.parse::<u32>().ok()?]))
+            .filter(|[w, h]| *w > 0 && *h > 0);
+        let Some(resolution) = parsed else {
+            bail!("--camera {size:?}: expected WIDTHxHEIGHT, e.g. 640x480");
+        };
+        scene.camera.resolution = resolution;
+    }
+    Ok(scene)
+}
+
+/// Writes `value` as JSON to `dir/name` (through a temporary file).
+fn write_json(dir: &Path, name: &str, value: &impl Serialize) -> Result<()> {
+    let path = dir.join(name);
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, serde_json::to_string(value)?)
+        .with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, &path).with_context(|| format!("writing {}", path.display()))?;
+    println!("wrote {}", path.display());
+    Ok(())
+}
+
+pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
+    let scene = load_scene(&args.scene, args.camera.as_deref())?;
+    let room = std::sync::Arc::new(
+        roomlight_sim::Room::build(scene)
+            .with_context(|| format!("building the room of {}", args.scene))?,
+    );
+    let preset = match &args.preset {
+        Some(name) => room
+            .preset(name)
+            .with_context(|| format!("--preset {name}"))?,
+        None => 0,
+    };
+    let mut noise = roomlight_sim::CameraNoise::with_seed(&room, args.seed);
+    let bar = indicatif::ProgressBar::hidden();
+    let cal = crate::pipeline::calibrate(&room, &mut noise, &bar, |line| println!("{line}"))?;
+    let model = crate::pipeline::measure_target(&room, &cal, preset, &mut noise)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let mut owners: HashMap<String, Vec<u32>> = HashMap::new();
+    for (n, r) in cal.regions.iter().enumerate() {
+        owners
+            .entry(room.projectors()[r.projector].name.clone())
+            .or_default()
+            .push(n as u32);
+    }
+    write_json(
+        &args.out,
+        "model.json",
+        &ModelFile {
+            problem: model.problem.clone(),
+            owners: owners.clone(),
+            start: Some(model.conventional.clone()),
+        },
+    )?;
+    write_json(
+        &args.out,
+        "charts.json",
+        &ChartsFile {
+            corners: cal.corners.clone(),
+            patches: model.patches.clone(),
+            sample: crate::pipeline::sample_config(&room),
+        },
+    )?;
+    for (k, p) in room.projectors().iter().enumerate() {
+        let nodes: Vec<(u32, Vec<(u32, f32)>)> = cal
+            .regions
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.projector == k)
+            .map(|(n, r)| {
+                let weights = r
+                    .weights
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, w)| **w > 0.0)
+                    .map(|(i, w)| (i as u32, *w))
+                    .collect();
+                (n as u32, weights)
+            })
+            .collect();
+        if nodes.is_empty() {
+            continue;
+        }
+        let spec = crate::rendered::FrameSpec {
+            projector: p.name.clone(),
+            width: p.pinhole.width,
+            height: p.pinhole.height,
+            response: cal.responses[k].clone(),
+            nodes,
+        };
+        write_json(&args.out, &format!("frame-{}.json", p.name), &spec)?;
+    }
+    Ok(())
 }
 
 #[derive(Debug, Deserialize)]
@@ -62,6 +257,10 @@ struct CameraFile {
     listen: String,
     hardware: String,
     model: PathBuf,
+    /// A rendered room: the charts file (`roomlight calibrate` writes it); absent: the
+    /// synthetic room's patches.
+    #[serde(default)]
+    charts: Option<PathBuf>,
     #[serde(default = "heartbeat_default")]
     heartbeat_ms: u64,
     #[serde(default = "deadline_default")]
@@ -97,6 +296,10 @@ struct NodeFile {
     #[serde(default = "mdns_wait_default")]
     mdns_wait_s: u64,
     hardware: String,
+    /// A rendered room: this projector's frame file (`roomlight calibrate` writes it); absent:
+    /// node values on the synthetic room.
+    #[serde(default)]
+    frame: Option<PathBuf>,
     projector: String,
     #[serde(default)]
     state_file: Option<PathBuf>,
@@ -190,15 +393,7 @@ fn announce(what: &str, addr: std::net::SocketAddr) {
 pub fn sim(args: &SimArgs) -> Result<()> {
     init_logs();
     if let Some(which) = &args.scene {
-        let scene = match which.as_str() {
-            "default" | "lab" => roomlight_sim::scenes::lab()?,
-            "small" => roomlight_sim::scenes::small()?,
-            path => {
-                let text = std::fs::read_to_string(path)
-                    .with_context(|| format!("reading the scene {path}"))?;
-                roomlight_sim::scene::Scene::from_toml(&text, path)?
-            }
-        };
+        let scene = load_scene(which, args.camera.as_deref())?;
         let room = std::sync::Arc::new(
             roomlight_sim::Room::build(scene)
                 .with_context(|| format!("building the room of {which}"))?,
@@ -236,6 +431,7 @@ pub fn sim(args: &SimArgs) -> Result<()> {
     let model = ModelFile {
         problem: problem.clone(),
         owners,
+        start: None,
     };
     let tmp = model_out.with_extension("tmp");
     std::fs::write(&tmp, serde_json::to_string(&model)?)
@@ -292,7 +488,17 @@ pub fn camera(path: &Path) -> Result<()> {
         stale_frames: file.stale_frames,
     };
     runtime()?.block_on(async {
-        let camera = RemoteCamera::connect(file.hardware.clone()).await.with_context(|| format!("connecting to the camera at {}", file.hardware))?;
+        let camera = match &file.charts {
+            Some(path) => {
+                let charts: ChartsFile = read_json(path, "a charts file")?;
+                if charts.patches.len() != problem.patches() {
+                    bail!("{}: {} patches, the model {} has {}", path.display(), charts.patches.len(), file.model.display(), problem.patches());
+                }
+                let client = crate::rendered::connect(file.hardware.clone()).await.with_context(|| format!("connecting to the rendered room at {}", file.hardware))?;
+                AnyCamera::Rendered(crate::rendered::RenderedCamera::new(client, charts.corners, charts.patches, charts.sample))
+            }
+            None => AnyCamera::Synthetic(RemoteCamera::connect(file.hardware.clone()).await.with_context(|| format!("connecting to the camera at {}", file.hardware))?),
+        };
         let listener = tokio::net::TcpListener::bind(&file.listen).await.with_context(|| format!("binding {}", file.listen))?;
         announce("camera", listener.local_addr()?);
         // Advertised for as long as the agent runs (withdrawn when dropped).
@@ -304,7 +510,7 @@ pub fn camera(path: &Path) -> Result<()> {
         };
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
-        let (mut status, handle) = camera::serve(config, RoomModel { problem, owners: model.owners, start: None, hot: Default::default() }, camera, listener, cancel.clone());
+        let (mut status, handle) = camera::serve(config, RoomModel { problem, owners: model.owners, start: model.start, hot: Default::default() }, camera, listener, cancel.clone());
         loop {
             tokio::select! {
                 () = cancel.cancelled() => break,
@@ -360,9 +566,34 @@ pub fn node(path: &Path) -> Result<()> {
     runtime()?.block_on(async {
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
-        let display = RemoteDisplay::connect(file.hardware.clone(), cancel.clone())
-            .await
-            .with_context(|| format!("connecting to the display at {}", file.hardware))?;
+        let display = match &file.frame {
+            Some(path) => {
+                let spec: crate::rendered::FrameSpec = read_json(path, "a frame file")?;
+                if spec.projector != file.projector {
+                    bail!(
+                        "{}: drawn for projector {:?}, this node agent is {:?}",
+                        path.display(),
+                        spec.projector,
+                        file.projector
+                    );
+                }
+                let client = crate::rendered::connect(file.hardware.clone())
+                    .await
+                    .with_context(|| {
+                        format!("connecting to the rendered room at {}", file.hardware)
+                    })?;
+                AnyDisplay::Rendered(crate::rendered::RenderedDisplay::new(
+                    client,
+                    spec,
+                    cancel.clone(),
+                ))
+            }
+            None => AnyDisplay::Synthetic(
+                RemoteDisplay::connect(file.hardware.clone(), cancel.clone())
+                    .await
+                    .with_context(|| format!("connecting to the display at {}", file.hardware))?,
+            ),
+        };
         let config = NodeConfig {
             endpoint,
             room: file.room,

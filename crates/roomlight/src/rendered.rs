@@ -184,3 +184,277 @@ pub async fn serve(
         .await
         .context("serving the rendered room")
 }
+
+/// A client of the rendered room, with messages large enough for whole camera images.
+pub type Client = v1::rendered_room_client::RenderedRoomClient<tonic::transport::Channel>;
+
+/// Connects to a `RenderedRoom` service at `endpoint`.
+pub async fn connect(endpoint: String) -> Result<Client, roomlight_agent::AgentError> {
+    Ok(
+        v1::rendered_room_client::RenderedRoomClient::connect(endpoint)
+            .await?
+            .max_decoding_message_size(MAX_MESSAGE)
+            .max_encoding_message_size(MAX_MESSAGE),
+    )
+}
+
+/// The camera agent's camera on a rendered room: each capture is a whole image, sampled at the
+/// charts (corners, inner-half boxes, trimmed means) and reduced to the model's patches.
+#[derive(Clone)]
+pub struct RenderedCamera {
+    client: Client,
+    corners: Arc<Vec<roomlight_calib::charts::ChartCorners>>,
+    /// Room patch index of each model patch.
+    patches: Arc<Vec<usize>>,
+    sample: roomlight_calib::charts::SampleConfig,
+}
+
+impl RenderedCamera {
+    pub fn new(
+        client: Client,
+        corners: Vec<roomlight_calib::charts::ChartCorners>,
+        patches: Vec<usize>,
+        sample: roomlight_calib::charts::SampleConfig,
+    ) -> Self {
+        Self {
+            client,
+            corners: Arc::new(corners),
+            patches: Arc::new(patches),
+            sample,
+        }
+    }
+}
+
+/// A capture's bytes as an image; refused unless they are `width · height` finite RGB triples.
+fn decode_image(image: v1::Image) -> Result<roomlight_calib::image_io::LinearImage, String> {
+    let expected = image.width as usize * image.height as usize * 12;
+    if image.linear_f32le.len() != expected {
+        return Err(format!(
+            "capture of {}×{}: {} bytes, expected {expected}",
+            image.width,
+            image.height,
+            image.linear_f32le.len()
+        ));
+    }
+    let values: Vec<f32> = image
+        .linear_f32le
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err("capture holds a value that is not finite".into());
+    }
+    Ok(roomlight_calib::image_io::LinearImage {
+        width: image.width,
+        height: image.height,
+        pixels: values.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+    })
+}
+
+impl roomlight_agent::hardware::Camera for RenderedCamera {
+    fn capture(
+        &mut self,
+    ) -> impl Future<Output = Result<Vec<roomlight_core::LinearRgb>, roomlight_agent::AgentError>> + Send
+    {
+        let this = self.clone();
+        async move {
+            let protocol = roomlight_agent::AgentError::Protocol;
+            let mut client = this.client.clone();
+            let image = client.capture_image(v1::CaptureRequest {}).await?;
+            let image = decode_image(image.into_inner()).map_err(protocol)?;
+            let samples =
+                roomlight_calib::charts::sample_charts(&image, &this.corners, &this.sample)
+                    .map_err(|e| protocol(format!("charts: {e}")))?;
+            this.patches
+                .iter()
+                .map(|&i| {
+                    samples.get(i).map(|s| s.mean).ok_or_else(|| {
+                        protocol(format!("patch {i}: the charts have {}", samples.len()))
+                    })
+                })
+                .collect()
+        }
+    }
+}
+
+/// What a node agent's host knows of its projector to draw node values: each node's feathered
+/// weights (sparse, row-major pixels) and the projector's measured response.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct FrameSpec {
+    pub projector: String,
+    pub width: u32,
+    pub height: u32,
+    pub response: roomlight_calib::response::Response,
+    /// `(node id, [(pixel, weight)])`.
+    pub nodes: Vec<(u32, Vec<(u32, f32)>)>,
+}
+
+impl FrameSpec {
+    /// The 8-bit image for node values `x` (nodes without a value are black).
+    pub fn image(&self, x: &std::collections::HashMap<u32, roomlight_core::LinearRgb>) -> Vec<u8> {
+        let mut light = vec![roomlight_core::LinearRgb::ZERO; (self.width * self.height) as usize];
+        for (node, weights) in &self.nodes {
+            let Some(&v) = x.get(node) else { continue };
+            for &(i, w) in weights {
+                if let Some(l) = light.get_mut(i as usize) {
+                    *l += v * f64::from(w);
+                }
+            }
+        }
+        light
+            .into_iter()
+            .flat_map(|l| {
+                self.response
+                    .to_code(l)
+                    .map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)
+            })
+            .collect()
+    }
+}
+
+enum Queued {
+    Value(u32, roomlight_core::LinearRgb),
+    Flush(tokio::sync::oneshot::Sender<()>),
+}
+
+/// A node agent's display on a rendered room: node values drawn into its projector's image and
+/// shown; [`Display::flush`](roomlight_agent::hardware::Display::flush) waits until the room
+/// has the image.
+#[derive(Clone)]
+pub struct RenderedDisplay(tokio::sync::mpsc::UnboundedSender<Queued>);
+
+impl RenderedDisplay {
+    /// Draws with `spec` and shows through `client` until `cancel`.
+    pub fn new(mut client: Client, spec: FrameSpec, cancel: CancellationToken) -> Self {
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Queued>();
+        tokio::spawn(async move {
+            let mut values = std::collections::HashMap::new();
+            loop {
+                let first = tokio::select! {
+                    () = cancel.cancelled() => return,
+                    q = rx.recv() => q,
+                };
+                let Some(first) = first else { return };
+                let mut flushes = Vec::new();
+                let mut changed = false;
+                let mut take = |q: Queued| match q {
+                    Queued::Value(node, x) => {
+                        values.insert(node, x);
+                        changed = true;
+                    }
+                    Queued::Flush(done) => flushes.push(done),
+                };
+                take(first);
+                while let Ok(q) = rx.try_recv() {
+                    take(q);
+                }
+                if changed {
+                    let request = v1::ShowImageRequest {
+                        projector: spec.projector.clone(),
+                        width: spec.width,
+                        height: spec.height,
+                        rgb8: spec.image(&values),
+                    };
+                    if let Err(status) = client.show_image(request).await {
+                        tracing::warn!(%status, projector = %spec.projector, "the projector did not take the image");
+                    }
+                }
+                for done in flushes {
+                    let _ = done.send(());
+                }
+            }
+        });
+        Self(tx)
+    }
+}
+
+impl roomlight_agent::hardware::Display for RenderedDisplay {
+    fn show(&mut self, node: u32, value: roomlight_core::LinearRgb) {
+        let _ = self.0.send(Queued::Value(node, value));
+    }
+
+    fn flush(&mut self) -> impl Future<Output = ()> + Send {
+        let (done, taken) = tokio::sync::oneshot::channel();
+        let queued = self.0.send(Queued::Flush(done)).is_ok();
+        async move {
+            if queued {
+                let _ = taken.await;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use roomlight_agent::hardware::{Camera, Display};
+    use roomlight_core::LinearRgb;
+
+    /// A node agent's display and the camera agent's camera against the served small room: one
+    /// node over the whole left projector at linear 0.5 (linear response) is shown as an 8-bit
+    /// image, and the captured patches match the simulator's own render of that frame, sampled
+    /// the same way, to within the camera noise.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn display_and_camera_adapters_drive_the_rendered_room() {
+        let mut scene = roomlight_sim::scenes::small().expect("small");
+        scene.camera.resolution = [640, 480];
+        let room = Arc::new(Room::build(scene).expect("room"));
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind");
+        let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+        let cancel = CancellationToken::new();
+        tokio::spawn(serve(room.clone(), 7, listener, cancel.clone()));
+        let client = connect(endpoint).await.expect("connect");
+        let k = room
+            .projectors()
+            .iter()
+            .position(|p| p.name == "left")
+            .expect("left");
+        let [w, h] = room.scene().projectors[k].resolution;
+        let spec = FrameSpec {
+            projector: "left".into(),
+            width: w,
+            height: h,
+            response: roomlight_calib::response::Response::linear(),
+            nodes: vec![(0, (0..w * h).map(|i| (i, 1.0)).collect())],
+        };
+        let mut display = RenderedDisplay::new(client.clone(), spec, cancel.clone());
+        let corners = crate::pipeline::chart_corners(&room).expect("corners");
+        let sample = crate::pipeline::sample_config(&room);
+        let patches: Vec<usize> = (0..room.patches()).collect();
+        let mut camera = RenderedCamera::new(client, corners.clone(), patches, sample);
+        display.show(0, LinearRgb::splat(0.5));
+        display.flush().await;
+        let served = camera.capture().await.expect("capture");
+        let mut frames = vec![Frame::Black; room.projectors().len()];
+        frames[k] = Frame::Uniform([128.0 / 255.0; 3]);
+        let image = room.render(&frames, None).expect("render");
+        let local = roomlight_calib::charts::sample_charts(
+            &roomlight_calib::image_io::LinearImage {
+                width: image.width,
+                height: image.height,
+                pixels: image.pixels,
+            },
+            &corners,
+            &sample,
+        )
+        .expect("sample");
+        assert_eq!(served.len(), local.len());
+        let lit = local.iter().filter(|s| s.mean.max_abs() > 0.01).count();
+        assert!(lit > 0, "the left projector lights some patch");
+        for (i, (s, l)) in served.iter().zip(&local).enumerate() {
+            for c in 0..3 {
+                let tolerance = 6.0 * l.std_error[c].max(1e-4) + 0.01 * l.mean[c];
+                assert!(
+                    (s[c] - l.mean[c]).abs() <= tolerance,
+                    "patch {i} channel {c}: served {} vs rendered {} (σ {})",
+                    s[c],
+                    l.mean[c],
+                    l.std_error[c]
+                );
+            }
+        }
+        cancel.cancel();
+    }
+}

@@ -315,3 +315,95 @@ fn the_rendered_room_is_served_images_in_and_out() {
     });
     drop(procs);
 }
+
+/// The rendered small room through separate processes: `roomlight calibrate` measures it (in
+/// one process, through captures) and writes the files; `roomlight sim --scene small` serves it;
+/// the camera agent samples the charts of its images and one node agent per luminaire draws its
+/// nodes into its projector's image. The room converges to within 1% of the measured model's
+/// optimum.
+#[test]
+fn the_rendered_room_converges_through_separate_processes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    let calibrated = Command::new(env!("CARGO_BIN_EXE_roomlight"))
+        .args([
+            "calibrate",
+            "--scene",
+            "small",
+            "--camera",
+            "640x480",
+            "--seed",
+            "2",
+            "--out",
+            ".",
+        ])
+        .current_dir(d)
+        .output()
+        .expect("run calibrate");
+    assert!(
+        calibrated.status.success(),
+        "calibrate: {}",
+        String::from_utf8_lossy(&calibrated.stderr)
+    );
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
+            .expect("json");
+    let problem: roomlight_core::Problem =
+        serde_json::from_value(model["problem"].clone()).expect("problem");
+    let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
+    let projectors: Vec<String> = model["owners"]
+        .as_object()
+        .expect("owners")
+        .keys()
+        .cloned()
+        .collect();
+    assert!(projectors.len() >= 2, "{projectors:?}");
+    let mut procs = Procs(Vec::new());
+    let sim_out = procs.spawn(
+        "sim",
+        &[
+            "sim",
+            "--scene",
+            "small",
+            "--camera",
+            "640x480",
+            "--seed",
+            "9",
+            "--listen",
+            "127.0.0.1:0",
+        ],
+        d,
+    );
+    let sim = address(&wait_line(&sim_out, Duration::from_secs(60), |l| {
+        l.starts_with("sim listening on")
+    }));
+    std::fs::write(
+        d.join("camera.toml"),
+        format!(
+            "room = \"small\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://{sim}\"\nmodel = \"model.json\"\ncharts = \"charts.json\"\nheartbeat_ms = 500\nmodel_rounds = 20\nmdns = false\n"
+        ),
+    )
+    .expect("camera config");
+    let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
+    let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
+        l.starts_with("camera listening on")
+    }));
+    for p in &projectors {
+        std::fs::write(
+            d.join(format!("{p}.toml")),
+            format!(
+                "room = \"small\"\ntoken = \"t\"\ncamera = \"http://{camera}\"\nhardware = \"http://{sim}\"\nframe = \"frame-{p}.json\"\nprojector = \"{p}\"\n"
+            ),
+        )
+        .expect("node config");
+        procs.spawn(p, &["node", "--config", &format!("{p}.toml")], d);
+    }
+    let n = projectors.len();
+    let line = wait_line(&cam_out, Duration::from_secs(120), |l| {
+        status(l).is_some_and(|(c, g, live)| live == n && c >= 3 && best.excess(g) < 1e-2)
+    });
+    let (captures, g, _) = status(&line).expect("status");
+    assert!(best.excess(g) < 1e-2, "{line}: excess {}", best.excess(g));
+    assert!(captures < 60, "{line}");
+    drop(procs);
+}
