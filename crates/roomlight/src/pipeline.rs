@@ -227,6 +227,17 @@ pub struct Model {
 /// A node's non-zero weights: `(node, [(pixel, weight)])`.
 type SparseNode = (usize, Vec<(u32, f32)>);
 
+/// A node region's non-zero weights as `(pixel, weight)`, row-major pixels.
+pub fn sparse_weights(region: &NodeRegion) -> Vec<(u32, f32)> {
+    region
+        .weights
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| **w > 0.0)
+        .map(|(i, w)| (i as u32, *w))
+        .collect()
+}
+
 /// Node values as projector frames: each pixel's linear light is the sum of its nodes' weights
 /// times their values, turned into a code through the projector's measured response (as a node
 /// agent does before it shows a frame). Each node's weights are kept sparse.
@@ -248,16 +259,7 @@ impl FrameBuilder {
                     .iter()
                     .enumerate()
                     .filter(|(_, r)| r.projector == k)
-                    .map(|(n, r)| {
-                        let weights = r
-                            .weights
-                            .iter()
-                            .enumerate()
-                            .filter(|(_, w)| **w > 0.0)
-                            .map(|(i, w)| (i as u32, *w))
-                            .collect();
-                        (n, weights)
-                    })
+                    .map(|(n, r)| (n, sparse_weights(r)))
                     .collect();
                 (p.pinhole.width, p.pinhole.height, nodes)
             })

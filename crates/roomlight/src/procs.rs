@@ -163,15 +163,34 @@ fn load_scene(which: &str, camera: Option<&str>) -> Result<roomlight_sim::scene:
     Ok(scene)
 }
 
-/// Writes `value` as JSON to `dir/name` (through a temporary file).
-fn write_json(dir: &Path, name: &str, value: &impl Serialize) -> Result<()> {
-    let path = dir.join(name);
+/// Writes `value` as JSON to `path` (through a temporary file, so a reader never sees half).
+fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     let tmp = path.with_extension("tmp");
     std::fs::write(&tmp, serde_json::to_string(value)?)
         .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, &path).with_context(|| format!("writing {}", path.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
     println!("wrote {}", path.display());
     Ok(())
+}
+
+/// Binds `listen`, prints where it serves, and runs `serve` until Ctrl-C or SIGTERM.
+fn serve_until_stopped<Fut>(
+    name: &str,
+    listen: &str,
+    serve: impl FnOnce(tokio::net::TcpListener, CancellationToken) -> Fut,
+) -> Result<()>
+where
+    Fut: Future<Output = Result<()>>,
+{
+    runtime()?.block_on(async {
+        let listener = tokio::net::TcpListener::bind(listen)
+            .await
+            .with_context(|| format!("binding {listen}"))?;
+        announce(name, listener.local_addr()?);
+        let cancel = CancellationToken::new();
+        stop_on_signals(cancel.clone());
+        serve(listener, cancel).await
+    })
 }
 
 pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
@@ -200,8 +219,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
             .push(n as u32);
     }
     write_json(
-        &args.out,
-        "model.json",
+        &args.out.join("model.json"),
         &ModelFile {
             problem: model.problem.clone(),
             owners: owners.clone(),
@@ -209,8 +227,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
         },
     )?;
     write_json(
-        &args.out,
-        "charts.json",
+        &args.out.join("charts.json"),
         &ChartsFile {
             corners: cal.corners.clone(),
             patches: model.patches.clone(),
@@ -223,16 +240,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
             .iter()
             .enumerate()
             .filter(|(_, r)| r.projector == k)
-            .map(|(n, r)| {
-                let weights = r
-                    .weights
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, w)| **w > 0.0)
-                    .map(|(i, w)| (i as u32, *w))
-                    .collect();
-                (n as u32, weights)
-            })
+            .map(|(n, r)| (n as u32, crate::pipeline::sparse_weights(r)))
             .collect();
         if nodes.is_empty() {
             continue;
@@ -244,7 +252,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
             response: cal.responses[k].clone(),
             nodes,
         };
-        write_json(&args.out, &format!("frame-{}.json", p.name), &spec)?;
+        write_json(&args.out.join(format!("frame-{}.json", p.name)), &spec)?;
     }
     Ok(())
 }
@@ -398,14 +406,8 @@ pub fn sim(args: &SimArgs) -> Result<()> {
             roomlight_sim::Room::build(scene)
                 .with_context(|| format!("building the room of {which}"))?,
         );
-        return runtime()?.block_on(async {
-            let listener = tokio::net::TcpListener::bind(&args.listen)
-                .await
-                .with_context(|| format!("binding {}", args.listen))?;
-            announce("sim", listener.local_addr()?);
-            let cancel = CancellationToken::new();
-            stop_on_signals(cancel.clone());
-            crate::rendered::serve(room, args.seed, listener, cancel).await
+        return serve_until_stopped("sim", &args.listen, |listener, cancel| {
+            crate::rendered::serve(room, args.seed, listener, cancel)
         });
     }
     let Some(model_out) = &args.model_out else {
@@ -433,10 +435,7 @@ pub fn sim(args: &SimArgs) -> Result<()> {
         owners,
         start: None,
     };
-    let tmp = model_out.with_extension("tmp");
-    std::fs::write(&tmp, serde_json::to_string(&model)?)
-        .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, model_out).with_context(|| format!("writing {}", model_out.display()))?;
+    write_json(model_out, &model)?;
     let plant = Plant::new(
         problem,
         PlantConfig {
@@ -446,13 +445,7 @@ pub fn sim(args: &SimArgs) -> Result<()> {
         },
     )?;
     let room = VirtualRoom::new(plant);
-    runtime()?.block_on(async {
-        let listener = tokio::net::TcpListener::bind(&args.listen)
-            .await
-            .with_context(|| format!("binding {}", args.listen))?;
-        announce("sim", listener.local_addr()?);
-        let cancel = CancellationToken::new();
-        stop_on_signals(cancel.clone());
+    serve_until_stopped("sim", &args.listen, |listener, cancel| async move {
         serve_hardware(room, listener, cancel).await?;
         Ok(())
     })
