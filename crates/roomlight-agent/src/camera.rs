@@ -485,7 +485,20 @@ async fn collect(
 ) {
     let until = tokio::time::Instant::now() + shared.config.deadline;
     while !nodes.is_empty() {
-        match tokio::time::timeout_at(until, rx.recv()).await {
+        let changed = shared.changed.notified();
+        // A projector that left will not answer: its nodes are not waited for.
+        {
+            let reg = shared.registry();
+            nodes.retain(|n| reg.peers.values().any(|p| p.nodes.contains(n)));
+        }
+        if nodes.is_empty() {
+            return;
+        }
+        let received = tokio::select! {
+            received = tokio::time::timeout_at(until, rx.recv()) => received,
+            () = changed => continue,
+        };
+        match received {
             Ok(Some(c)) if c.round == round => {
                 if let Some(k) = nodes.iter().position(|&n| n == c.node) {
                     nodes.swap_remove(k);
