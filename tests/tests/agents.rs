@@ -44,8 +44,7 @@ impl Sandbox {
         Self::start_with(model_rounds, None, PlantConfig::default(), |c, _| c).await
     }
 
-    /// The room with `hot` unknown to the camera agent (its columns empty in the camera's
-    /// model) until it joins and is measured.
+    /// The room with `hot` unknown to the camera agent until it joins and is measured.
     async fn start_hot(model_rounds: usize, hot: &str, plant: PlantConfig) -> Self {
         Self::start_full(model_rounds, None, plant, Some(hot), |c, _| c).await
     }
@@ -91,36 +90,33 @@ impl Sandbox {
             stale_frames: 0,
         };
         let camera_cancel = cancel.child_token();
-        // What the camera agent knows: a hot projector's columns are empty until measured.
-        let known = match hot {
+        // A hot projector's columns in the camera agent's model are wrong (another projector's):
+        // the camera agent must ignore them and measure the projector when it joins.
+        let handed = match hot {
             Some(id) => {
-                let columns = problem
-                    .columns()
+                let wrong: Vec<u32> = owners
                     .iter()
-                    .enumerate()
-                    .map(|(n, c)| {
-                        if owners[id].contains(&(n as u32)) {
-                            roomlight_core::AttenuationColumn::new(Vec::new(), Vec::new())
-                                .expect("empty column")
-                        } else {
-                            c.clone()
-                        }
-                    })
-                    .collect();
+                    .find(|(other, _)| other.as_str() != id)
+                    .map(|(_, nodes)| nodes.clone())
+                    .expect("another projector");
+                let mut columns = problem.columns().to_vec();
+                for (&n, &w) in owners[id].iter().zip(&wrong) {
+                    columns[n as usize] = problem.columns()[w as usize].clone();
+                }
                 Problem::new(
                     columns,
                     problem.black().to_vec(),
                     problem.target().to_vec(),
                     problem.noise().to_vec(),
                 )
-                .expect("camera's model")
+                .expect("the camera's model")
             }
             None => problem.clone(),
         };
         let (status, handle) = camera::serve(
             config.clone(),
             RoomModel {
-                problem: known,
+                problem: handed,
                 owners: owners.clone(),
                 start: start.clone(),
                 hot: hot.into_iter().map(String::from).collect(),
@@ -309,8 +305,9 @@ async fn a_projector_that_joins_later_enters_the_next_rounds() {
 
 /// A projector the camera agent has never measured joins mid-run: it is calibrated hot (its
 /// nodes at black, then each alone at white, by differential captures while the others keep
-/// their values), gets its attenuation, and the room converges to the optimum with it. Without
-/// the measurement its nodes would have empty columns and could not help.
+/// their values), gets its attenuation, and the room converges to the optimum with it. The
+/// camera agent is handed wrong columns for it and must not use them: without the measurement
+/// its nodes would have no columns (or the wrong ones) and could not help.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_projector_joining_hot_is_measured_and_the_room_converges_to_the_new_optimum() {
     let plant = PlantConfig {
@@ -805,4 +802,102 @@ async fn a_stop_request_lets_the_current_round_finish() {
         at as usize,
         "no capture after the stop request"
     );
+}
+
+/// A projector that leaves in the middle of a round (its stream ends after it received its
+/// errors) is not waited for: with a one-minute deadline, the round and the next ones go on
+/// with the projector that stayed at once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_round_does_not_wait_for_a_projector_that_left_during_it() {
+    use roomlight_proto::v1;
+    let problem = synthetic_room(&SyntheticConfig::new(8, 4))
+        .expect("room")
+        .problem;
+    let owners: HashMap<String, Vec<u32>> = (0..2)
+        .map(|p| (format!("p{p}"), (4 * p..4 * p + 4).collect()))
+        .collect();
+    let room =
+        VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+    let cancel = CancellationToken::new();
+    let config = CameraConfig {
+        room: "lab".into(),
+        token: TOKEN.into(),
+        heartbeat: Duration::from_secs(20),
+        deadline: Duration::from_secs(60),
+        model_rounds: 0,
+        calibration_epoch: 1,
+        stale_frames: 0,
+    };
+    let (mut status, _camera) = camera::serve(
+        config,
+        RoomModel {
+            problem,
+            owners,
+            start: None,
+            hot: Default::default(),
+        },
+        room.camera(),
+        listener,
+        cancel.clone(),
+    );
+    // p1 attaches by hand, shows its start, and goes away as soon as it has its first errors.
+    let mut client = v1::room_client::RoomClient::connect(endpoint.clone())
+        .await
+        .expect("connect");
+    let (tx, rx) = tokio::sync::mpsc::channel(8);
+    tx.send(hello("p1")).await.expect("queue hello");
+    tx.send(v1::NodeMessage {
+        body: Some(v1::node_message::Body::Shown(v1::Shown {
+            seq: 0,
+            pattern: false,
+        })),
+    })
+    .await
+    .expect("queue");
+    let mut inbound = client
+        .attach(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .expect("admitted")
+        .into_inner();
+    let node = NodeConfig {
+        endpoint,
+        room: "lab".into(),
+        token: TOKEN.into(),
+        projector_id: "p0".into(),
+        rule: StepRule::Safe { theta: 1.0 },
+        start: LinearRgb::splat(0.5),
+        state_file: None,
+    };
+    tokio::spawn(node::run(node, room.display(), cancel.child_token()));
+    tokio::time::timeout(Duration::from_secs(20), async {
+        loop {
+            match inbound.message().await {
+                Ok(Some(m)) if matches!(m.body, Some(v1::room_message::Body::Errors(_))) => return,
+                Ok(Some(_)) => {}
+                other => panic!("p1's stream ended before its errors: {other:?}"),
+            }
+        }
+    })
+    .await
+    .expect("p1 gets its errors");
+    drop(inbound);
+    drop(tx);
+    drop(client);
+    // Well inside the deadline: the round p1 left finishes, and more follow with p0 alone.
+    tokio::time::timeout(Duration::from_secs(20), async {
+        loop {
+            let s = status.borrow().clone();
+            if s.live_projectors == 1 && s.captures >= 4 {
+                return;
+            }
+            status.changed().await.expect("camera agent running");
+        }
+    })
+    .await
+    .expect("the rounds went on without waiting for p1's contributions");
+    cancel.cancel();
 }

@@ -2,7 +2,7 @@
 //! (simulated) projector once `flush` returns, so that its acknowledgement never races the frame.
 
 use roomlight_agent::hardware::{Display, VirtualRoom};
-use roomlight_agent::remote::{RemoteDisplay, serve_hardware};
+use roomlight_agent::remote::{remote_display, serve_hardware};
 use roomlight_core::LinearRgb;
 use roomlight_core::closed_loop::{Plant, PlantConfig};
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
@@ -20,7 +20,7 @@ async fn a_remote_display_has_shown_everything_once_flush_returns() {
     let endpoint = format!("http://{}", listener.local_addr().expect("address"));
     let cancel = CancellationToken::new();
     tokio::spawn(serve_hardware(room.clone(), listener, cancel.clone()));
-    let mut display = RemoteDisplay::connect(endpoint, cancel.clone())
+    let mut display = remote_display(endpoint, cancel.clone())
         .await
         .expect("connect");
     for k in 0..200u32 {

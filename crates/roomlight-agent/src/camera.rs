@@ -57,7 +57,7 @@ pub struct RoomModel {
     pub start: Option<Vec<LinearRgb>>,
     /// Projectors whose attenuation is measured when they join (DESIGN §4, hot calibration):
     /// each of their nodes at white against all at black, by differential captures while the
-    /// other projectors keep their values. Their columns in `problem` are not used before.
+    /// other projectors keep their values. Their columns in `problem` are ignored (emptied).
     pub hot: HashSet<String>,
 }
 
@@ -722,13 +722,23 @@ pub fn serve(
     tokio::task::JoinHandle<Result<(), crate::AgentError>>,
 ) {
     let (contrib_tx, mut contrib_rx) = mpsc::channel(4096);
-    let white = model.problem.white_response();
+    // Nothing is known of a hot projector until it is measured: not its light in `s`, not its
+    // columns.
+    let unknown: Vec<usize> = model
+        .hot
+        .iter()
+        .filter_map(|id| model.owners.get(id))
+        .flatten()
+        .map(|&n| n as usize)
+        .collect();
+    let problem = model.problem.without_nodes(&unknown);
+    let white = problem.white_response();
     let shared = Arc::new(Shared {
         config,
         owners: model.owners,
         start: model.start,
         live: std::sync::RwLock::new(Live {
-            problem: model.problem,
+            problem,
             white,
             uncalibrated: model.hot,
         }),

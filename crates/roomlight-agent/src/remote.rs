@@ -1,5 +1,5 @@
 //! The virtual hardware over gRPC (DESIGN §6): `roomlight sim` serves a [`VirtualRoom`] as the
-//! `VirtualHardware` service; node agents show through [`RemoteDisplay`] and the camera agent
+//! `VirtualHardware` service; node agents show through [`remote_display`] and the camera agent
 //! captures through [`RemoteCamera`], so the same binaries run against simulated hardware in
 //! separate processes.
 
@@ -59,63 +59,60 @@ pub async fn serve_hardware(
     Ok(())
 }
 
-/// What a [`RemoteDisplay`] queues for its background task.
+/// What a [`QueuedDisplay`] hands its background task.
 #[derive(Debug)]
 enum Queued {
     Value(u32, LinearRgb),
-    /// Answered once every value queued before it has been taken by the display.
+    /// Answered once every value queued before it has been applied.
     Flush(tokio::sync::oneshot::Sender<()>),
 }
 
-/// A display in another process: values are queued and sent in order by a background task;
-/// [`Display::flush`] waits until the display has taken them.
+/// A display whose values a background task applies in batches (sent to another process, or
+/// drawn into a projector image first); [`Display::flush`] resolves once everything shown before
+/// it has been applied.
 #[derive(Debug, Clone)]
-pub struct RemoteDisplay(mpsc::UnboundedSender<Queued>);
+pub struct QueuedDisplay(mpsc::UnboundedSender<Queued>);
 
-impl RemoteDisplay {
-    /// Connects to `endpoint` (e.g. `http://127.0.0.1:7000`); the task ends with `cancel`.
-    pub async fn connect(endpoint: String, cancel: CancellationToken) -> Result<Self, AgentError> {
-        let mut client =
-            v1::virtual_hardware_client::VirtualHardwareClient::connect(endpoint).await?;
+impl QueuedDisplay {
+    /// Spawns the task until `cancel`: `apply` is handed each batch of values in the order they
+    /// were shown (everything queued while the previous batch was applied) and returns a future
+    /// that resolves once the display has them.
+    pub fn spawn<F, Fut>(cancel: CancellationToken, mut apply: F) -> Self
+    where
+        F: FnMut(Vec<(u32, LinearRgb)>) -> Fut + Send + 'static,
+        Fut: Future<Output = ()> + Send,
+    {
         let (tx, mut rx) = mpsc::unbounded_channel::<Queued>();
         tokio::spawn(async move {
             loop {
                 let first = tokio::select! {
                     () = cancel.cancelled() => return,
-                    v = rx.recv() => v,
+                    q = rx.recv() => q,
                 };
                 let Some(first) = first else { return };
-                // Everything queued meanwhile goes in the same request; flushes are answered
-                // once it has been taken.
                 let mut values = Vec::new();
                 let mut flushes = Vec::new();
                 let mut take = |q: Queued| match q {
-                    Queued::Value(node, x) => values.push(v1::NodeState {
-                        node,
-                        x: Some(to_rgb(x)),
-                        attenuation: None,
-                    }),
+                    Queued::Value(node, x) => values.push((node, x)),
                     Queued::Flush(done) => flushes.push(done),
                 };
                 take(first);
                 while let Ok(q) = rx.try_recv() {
                     take(q);
                 }
-                if !values.is_empty()
-                    && let Err(status) = client.show(v1::ShowRequest { values }).await
-                {
-                    tracing::warn!(%status, "the display did not take the frame");
+                if !values.is_empty() {
+                    apply(values).await;
                 }
                 for done in flushes {
                     let _ = done.send(());
                 }
             }
         });
-        Ok(Self(tx))
+        Self(tx)
     }
 }
 
-impl Display for RemoteDisplay {
+impl Display for QueuedDisplay {
     fn show(&mut self, node: u32, value: LinearRgb) {
         // The task only stops with the agent.
         let _ = self.0.send(Queued::Value(node, value));
@@ -131,6 +128,31 @@ impl Display for RemoteDisplay {
             }
         }
     }
+}
+
+/// A display in another process (`roomlight sim`'s synthetic room): node values sent in
+/// batches; the task ends with `cancel`.
+pub async fn remote_display(
+    endpoint: String,
+    cancel: CancellationToken,
+) -> Result<QueuedDisplay, AgentError> {
+    let client = v1::virtual_hardware_client::VirtualHardwareClient::connect(endpoint).await?;
+    Ok(QueuedDisplay::spawn(cancel, move |batch| {
+        let values = batch
+            .into_iter()
+            .map(|(node, x)| v1::NodeState {
+                node,
+                x: Some(to_rgb(x)),
+                attenuation: None,
+            })
+            .collect();
+        let mut client = client.clone();
+        async move {
+            if let Err(status) = client.show(v1::ShowRequest { values }).await {
+                tracing::warn!(%status, "the display did not take the frame");
+            }
+        }
+    }))
 }
 
 /// A camera in another process.

@@ -13,7 +13,7 @@ use peak_alloc::PeakAlloc;
 use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
 use roomlight_core::conventional::conventional_start;
 use roomlight_core::metrics::patch_delta_e;
-use roomlight_core::optimum::{global_step, optimum};
+use roomlight_core::optimum::optimum;
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, Problem, StepRule};
 use roomlight_sim::scenes::{HardCase, hard_case_of};
@@ -149,40 +149,27 @@ type RuleSpec = (&'static str, StepRule, usize, bool);
 
 /// Every rule, or the quick subset; with stale errors also the safe step the delay allows.
 fn rules(problem: &Problem, quick_subset: bool, latency: usize) -> Vec<RuleSpec> {
-    let momentum = StepRule::Momentum { theta: 1.0 };
-    let mut all = vec![
-        ("paper", StepRule::paper(), 0, false),
-        (
-            "global-oracle",
-            StepRule::Fixed {
-                epsilon: global_step(problem),
-            },
-            0,
-            false,
-        ),
-        ("safe", StepRule::Safe { theta: 1.0 }, 0, false),
-        ("momentum", momentum, 0, false),
-        ("model-5", momentum, 5, false),
-        ("model-20", momentum, 20, false),
-    ];
+    // The same six rules as `bench core` (the budget does not matter here).
+    let mut all: Vec<RuleSpec> = crate::bench::rules(problem, 1)
+        .into_iter()
+        .map(|(name, config)| (name, config.rule, config.model_rounds, false))
+        .collect();
     if latency > 0 {
         // Two answers to a late camera: damp the step as the delay rule requires, or discard
         // the late frames and keep the fast rule.
+        let momentum = StepRule::Momentum { theta: 1.0 };
         all.push(("safe-delay", StepRule::safe_for_delay(latency), 0, false));
         all.push(("model-20-discard", momentum, 20, true));
     }
     if quick_subset {
-        all.into_iter()
-            .filter(|(name, ..)| {
-                matches!(
-                    *name,
-                    "paper" | "momentum" | "model-20" | "safe-delay" | "model-20-discard"
-                )
-            })
-            .collect()
-    } else {
-        all
+        all.retain(|(name, ..)| {
+            matches!(
+                *name,
+                "paper" | "momentum" | "model-20" | "safe-delay" | "model-20-discard"
+            )
+        });
     }
+    all
 }
 
 fn median(v: &mut [f64]) -> f64 {

@@ -179,6 +179,18 @@ fn inside(q: &[[f64; 2]; 4], x: f64, y: f64) -> bool {
 const RAMP_LEVELS: usize = 9;
 
 impl Calibrated {
+    /// Projector name → its node ids.
+    pub fn owners(&self, room: &Room) -> HashMap<String, Vec<u32>> {
+        let mut owners: HashMap<String, Vec<u32>> = HashMap::new();
+        for (n, r) in self.regions.iter().enumerate() {
+            owners
+                .entry(room.projectors()[r.projector].name.clone())
+                .or_default()
+                .push(n as u32);
+        }
+        owners
+    }
+
     /// The same nodes with another target kept dark (`mask`: camera pixels of the new target),
     /// e.g. a contrast board put where the bust was. Fails if the nodes would change.
     pub fn regions_with_mask(&self, mask: &[bool]) -> Result<Vec<NodeRegion>> {
@@ -1090,13 +1102,7 @@ pub fn run_agents(
     let best = optimum(&model.problem.without_nodes(&gone))?;
     let true_best = optimum(&truth.problem.without_nodes(&gone))?;
     let de_conv = patch_delta_e(&truth.target, &hw.noiseless(&initial)?)?;
-    let mut owners: HashMap<String, Vec<u32>> = HashMap::new();
-    for (n, r) in cal.regions.iter().enumerate() {
-        owners
-            .entry(room.projectors()[r.projector].name.clone())
-            .or_default()
-            .push(n as u32);
-    }
+    let owners = cal.owners(room);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -1120,36 +1126,15 @@ pub fn run_agents(
                 0
             },
         };
-        // A projector joining hot is unknown to the camera agent: empty columns until measured.
-        let (known, hot) = match options.churn.filter(|c| c.hot) {
-            Some(c) => {
-                let columns = model
-                    .problem
-                    .columns()
-                    .iter()
-                    .enumerate()
-                    .map(|(n, column)| {
-                        if joining.contains(&n) {
-                            AttenuationColumn::new(Vec::new(), Vec::new())
-                        } else {
-                            Ok(column.clone())
-                        }
-                    })
-                    .collect::<Result<Vec<_>, _>>()?;
-                let problem = Problem::new(
-                    columns,
-                    model.problem.black().to_vec(),
-                    model.problem.target().to_vec(),
-                    model.problem.noise().to_vec(),
-                )?;
-                (problem, [name_of(c.joining)?].into())
-            }
-            None => (model.problem.clone(), Default::default()),
+        // A projector joining hot is measured by the camera agent when it joins.
+        let hot = match options.churn.filter(|c| c.hot) {
+            Some(c) => [name_of(c.joining)?].into(),
+            None => Default::default(),
         };
         let (mut status, camera_task) = camera::serve(
             config,
             RoomModel {
-                problem: known,
+                problem: model.problem.clone(),
                 owners: owners.clone(),
                 start: Some(model.conventional.clone()),
                 hot,

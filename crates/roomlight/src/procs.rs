@@ -7,7 +7,7 @@ use roomlight_agent::camera::{self, CameraConfig, RoomModel};
 use roomlight_agent::discovery::{self, MdnsConfig};
 use roomlight_agent::hardware::VirtualRoom;
 use roomlight_agent::node::{self, NodeConfig};
-use roomlight_agent::remote::{RemoteCamera, RemoteDisplay, serve_hardware};
+use roomlight_agent::remote::{RemoteCamera, remote_display, serve_hardware};
 use roomlight_core::closed_loop::{Plant, PlantConfig};
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, Problem, StepRule};
@@ -55,30 +55,6 @@ impl roomlight_agent::hardware::Camera for AnyCamera {
             Self::Rendered(c) => Box::pin(c.capture()),
         };
         capture
-    }
-}
-
-/// A node agent's display: node values on the synthetic room, or its projector's image on a
-/// rendered room.
-enum AnyDisplay {
-    Synthetic(RemoteDisplay),
-    Rendered(crate::rendered::RenderedDisplay),
-}
-
-impl roomlight_agent::hardware::Display for AnyDisplay {
-    fn show(&mut self, node: u32, value: LinearRgb) {
-        match self {
-            Self::Synthetic(d) => d.show(node, value),
-            Self::Rendered(d) => d.show(node, value),
-        }
-    }
-
-    fn flush(&mut self) -> impl Future<Output = ()> + Send {
-        let flush: std::pin::Pin<Box<dyn Future<Output = ()> + Send + '_>> = match self {
-            Self::Synthetic(d) => Box::pin(d.flush()),
-            Self::Rendered(d) => Box::pin(d.flush()),
-        };
-        flush
     }
 }
 
@@ -211,18 +187,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
     let model = crate::pipeline::measure_target(&room, &cal, preset, &mut noise)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let mut owners: HashMap<String, Vec<u32>> = HashMap::new();
-    for (n, r) in cal.regions.iter().enumerate() {
-        owners
-            .entry(room.projectors()[r.projector].name.clone())
-            .or_default()
-            .push(n as u32);
-    }
     write_json(
         &args.out.join("model.json"),
         &ModelFile {
             problem: model.problem.clone(),
-            owners: owners.clone(),
+            owners: cal.owners(&room),
             start: Some(model.conventional.clone()),
         },
     )?;
@@ -575,17 +544,11 @@ pub fn node(path: &Path) -> Result<()> {
                     .with_context(|| {
                         format!("connecting to the rendered room at {}", file.hardware)
                     })?;
-                AnyDisplay::Rendered(crate::rendered::RenderedDisplay::new(
-                    client,
-                    spec,
-                    cancel.clone(),
-                ))
+                crate::rendered::rendered_display(client, spec, cancel.clone())
             }
-            None => AnyDisplay::Synthetic(
-                RemoteDisplay::connect(file.hardware.clone(), cancel.clone())
-                    .await
-                    .with_context(|| format!("connecting to the display at {}", file.hardware))?,
-            ),
+            None => remote_display(file.hardware.clone(), cancel.clone())
+                .await
+                .with_context(|| format!("connecting to the display at {}", file.hardware))?,
         };
         let config = NodeConfig {
             endpoint,

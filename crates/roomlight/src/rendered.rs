@@ -312,76 +312,30 @@ impl FrameSpec {
     }
 }
 
-enum Queued {
-    Value(u32, roomlight_core::LinearRgb),
-    Flush(tokio::sync::oneshot::Sender<()>),
-}
-
-/// A node agent's display on a rendered room: node values drawn into its projector's image and
-/// shown; [`Display::flush`](roomlight_agent::hardware::Display::flush) waits until the room
-/// has the image.
-#[derive(Clone)]
-pub struct RenderedDisplay(tokio::sync::mpsc::UnboundedSender<Queued>);
-
-impl RenderedDisplay {
-    /// Draws with `spec` and shows through `client` until `cancel`.
-    pub fn new(mut client: Client, spec: FrameSpec, cancel: CancellationToken) -> Self {
-        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Queued>();
-        tokio::spawn(async move {
-            let mut values = std::collections::HashMap::new();
-            loop {
-                let first = tokio::select! {
-                    () = cancel.cancelled() => return,
-                    q = rx.recv() => q,
-                };
-                let Some(first) = first else { return };
-                let mut flushes = Vec::new();
-                let mut changed = false;
-                let mut take = |q: Queued| match q {
-                    Queued::Value(node, x) => {
-                        values.insert(node, x);
-                        changed = true;
-                    }
-                    Queued::Flush(done) => flushes.push(done),
-                };
-                take(first);
-                while let Ok(q) = rx.try_recv() {
-                    take(q);
-                }
-                if changed {
-                    let request = v1::ShowImageRequest {
-                        projector: spec.projector.clone(),
-                        width: spec.width,
-                        height: spec.height,
-                        rgb8: spec.image(&values),
-                    };
-                    if let Err(status) = client.show_image(request).await {
-                        tracing::warn!(%status, projector = %spec.projector, "the projector did not take the image");
-                    }
-                }
-                for done in flushes {
-                    let _ = done.send(());
-                }
-            }
-        });
-        Self(tx)
-    }
-}
-
-impl roomlight_agent::hardware::Display for RenderedDisplay {
-    fn show(&mut self, node: u32, value: roomlight_core::LinearRgb) {
-        let _ = self.0.send(Queued::Value(node, value));
-    }
-
-    fn flush(&mut self) -> impl Future<Output = ()> + Send {
-        let (done, taken) = tokio::sync::oneshot::channel();
-        let queued = self.0.send(Queued::Flush(done)).is_ok();
+/// A node agent's display on a rendered room: node values drawn with `spec` into its
+/// projector's 8-bit image and shown through `client` until `cancel`; a flush resolves once the
+/// room has the image.
+pub fn rendered_display(
+    client: Client,
+    spec: FrameSpec,
+    cancel: CancellationToken,
+) -> roomlight_agent::remote::QueuedDisplay {
+    let mut values = std::collections::HashMap::new();
+    roomlight_agent::remote::QueuedDisplay::spawn(cancel, move |batch| {
+        values.extend(batch);
+        let request = v1::ShowImageRequest {
+            projector: spec.projector.clone(),
+            width: spec.width,
+            height: spec.height,
+            rgb8: spec.image(&values),
+        };
+        let mut client = client.clone();
         async move {
-            if queued {
-                let _ = taken.await;
+            if let Err(status) = client.show_image(request).await {
+                tracing::warn!(%status, "the projector did not take the image");
             }
         }
-    }
+    })
 }
 
 #[cfg(test)]
@@ -419,7 +373,7 @@ mod tests {
             response: roomlight_calib::response::Response::linear(),
             nodes: vec![(0, (0..w * h).map(|i| (i, 1.0)).collect())],
         };
-        let mut display = RenderedDisplay::new(client.clone(), spec, cancel.clone());
+        let mut display = rendered_display(client.clone(), spec, cancel.clone());
         let corners = crate::pipeline::chart_corners(&room).expect("corners");
         let sample = crate::pipeline::sample_config(&room);
         let patches: Vec<usize> = (0..room.patches()).collect();
