@@ -88,6 +88,7 @@ impl Sandbox {
             model_rounds,
             calibration_epoch: 1,
             stale_frames: 0,
+            model_out: None,
         };
         let camera_cancel = cancel.child_token();
         // A hot projector's columns in the camera agent's model are wrong (another projector's):
@@ -120,6 +121,7 @@ impl Sandbox {
                 owners: owners.clone(),
                 start: start.clone(),
                 hot: hot.into_iter().map(String::from).collect(),
+                survey: None,
             },
             wrap(room.camera(), room.clone()),
             listener,
@@ -161,6 +163,7 @@ impl Sandbox {
             owners: self.owners.clone(),
             start: None,
             hot: Default::default(),
+            survey: None,
         };
         let (status, handle) = camera::serve(
             self.config.clone(),
@@ -184,6 +187,7 @@ impl Sandbox {
             room: "lab".into(),
             token: TOKEN.into(),
             projector_id: projector.into(),
+            kind: roomlight_proto::v1::ProjectorKind::Standard,
             rule: StepRule::Momentum { theta: 1.0 },
             start: LinearRgb::splat(0.5),
             state_file,
@@ -752,6 +756,7 @@ async fn a_stop_request_lets_the_current_round_finish() {
         model_rounds,
         calibration_epoch: 1,
         stale_frames: 0,
+        model_out: None,
     };
     // The stop comes during the fourth capture, once all three projectors take part.
     let at = 4;
@@ -762,6 +767,7 @@ async fn a_stop_request_lets_the_current_round_finish() {
             owners: owners.clone(),
             start: None,
             hot: Default::default(),
+            survey: None,
         },
         StopDuring {
             inner: room.camera(),
@@ -778,6 +784,7 @@ async fn a_stop_request_lets_the_current_round_finish() {
             room: "lab".into(),
             token: TOKEN.into(),
             projector_id: id.clone(),
+            kind: roomlight_proto::v1::ProjectorKind::Standard,
             rule: StepRule::Momentum { theta: 1.0 },
             start: LinearRgb::splat(0.5),
             state_file: None,
@@ -831,6 +838,7 @@ async fn a_round_does_not_wait_for_a_projector_that_left_during_it() {
         model_rounds: 0,
         calibration_epoch: 1,
         stale_frames: 0,
+        model_out: None,
     };
     let (mut status, _camera) = camera::serve(
         config,
@@ -839,6 +847,7 @@ async fn a_round_does_not_wait_for_a_projector_that_left_during_it() {
             owners,
             start: None,
             hot: Default::default(),
+            survey: None,
         },
         room.camera(),
         listener,
@@ -868,6 +877,7 @@ async fn a_round_does_not_wait_for_a_projector_that_left_during_it() {
         room: "lab".into(),
         token: TOKEN.into(),
         projector_id: "p0".into(),
+        kind: v1::ProjectorKind::Standard,
         rule: StepRule::Safe { theta: 1.0 },
         start: LinearRgb::splat(0.5),
         state_file: None,

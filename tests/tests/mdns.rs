@@ -39,6 +39,7 @@ async fn a_node_finds_the_camera_agent_of_its_room_over_mdns_on_loopback() {
         model_rounds: 0,
         calibration_epoch: 1,
         stale_frames: 0,
+        model_out: None,
     };
     let (mut status, _camera) = camera::serve(
         config,
@@ -47,6 +48,7 @@ async fn a_node_finds_the_camera_agent_of_its_room_over_mdns_on_loopback() {
             owners,
             start: None,
             hot: Default::default(),
+            survey: None,
         },
         room.camera(),
         listener,
@@ -71,6 +73,7 @@ async fn a_node_finds_the_camera_agent_of_its_room_over_mdns_on_loopback() {
         room: room_name.clone(),
         token: "t".into(),
         projector_id: "p0".into(),
+        kind: roomlight_proto::v1::ProjectorKind::Standard,
         rule: StepRule::Safe { theta: 1.0 },
         start: LinearRgb::splat(0.5),
         state_file: None,

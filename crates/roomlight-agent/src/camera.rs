@@ -4,10 +4,15 @@
 //! ones are logged and left out of the round), capture, send each node the errors on its support,
 //! collect contributions, and run model rounds between captures.
 
-use crate::hardware::Camera;
+use crate::hardware::{Assignment, Camera, Pattern};
 use prost::Message;
+use roomlight_calib::charts::{COLUMNS, ChartCorners, ROWS, SampleConfig};
+use roomlight_calib::graycode::{Coding, DecodeConfig, Manifest};
+use roomlight_calib::image_io::LinearImage;
+use roomlight_calib::response::{fit_response, footprint_ramp, ramp_codes};
 use roomlight_core::aggregator::{ErrorAggregator, ErrorKind, RoundSummary};
 use roomlight_core::closed_loop::objective_noise;
+use roomlight_core::conventional::conventional_value;
 use roomlight_core::{AttenuationColumn, LinearRgb, Problem};
 use roomlight_proto::convert::{from_sparse, to_rgb, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
@@ -42,6 +47,9 @@ pub struct CameraConfig {
     /// each measured round the camera agent discards this many captures, so that the nodes
     /// never act on errors of values they no longer show. Every capture is counted.
     pub stale_frames: usize,
+    /// Where to write the model (`problem`, `owners`, `start`, as JSON, atomically) after each
+    /// projector calibrated over the wire or hot; `None`: nowhere.
+    pub model_out: Option<std::path::PathBuf>,
 }
 
 /// The calibrated room the camera agent holds: every node's attenuation, and which projector
@@ -59,6 +67,38 @@ pub struct RoomModel {
     /// each of their nodes at white against all at black, by differential captures while the
     /// other projectors keep their values. Their columns in `problem` are ignored (emptied).
     pub hot: HashSet<String>,
+    /// Calibration over the wire: a projector the model does not know is admitted, and the
+    /// camera agent shows it structured light and a response ramp through its node agent,
+    /// decodes and segments it (roomlight-calib), sends it its nodes' weights and then measures
+    /// their attenuation, all while the other projectors keep their values. `None`: only the
+    /// projectors of `owners` are admitted.
+    pub survey: Option<Survey>,
+}
+
+/// What a room's installer configures once for calibration over the wire (DESIGN §4): where the
+/// charts are in the camera image, how to sample them, and which camera pixels are the target.
+#[derive(Debug, Clone)]
+pub struct Survey {
+    pub corners: Vec<ChartCorners>,
+    pub sample: SampleConfig,
+    /// The target's camera pixels (row-major, the camera's resolution): luminaires keep them
+    /// dark.
+    pub target_mask: Vec<bool>,
+    /// Room patch index (chart · patches per chart + patch) of each of the model's patches.
+    pub patches: Vec<usize>,
+}
+
+impl Survey {
+    /// The model's patches on chart `chart` (for a node's conventional start).
+    fn chart_patches(&self, chart: usize) -> Vec<u32> {
+        let per = COLUMNS * ROWS;
+        self.patches
+            .iter()
+            .enumerate()
+            .filter(|(_, i)| **i / per == chart)
+            .map(|(k, _)| k as u32)
+            .collect()
+    }
 }
 
 /// What the round loop has done so far (for tests, logs and the demo).
@@ -97,6 +137,10 @@ struct Peer {
     calibrated: bool,
     /// The last Show pattern it has on its display.
     pattern_shown: Option<u64>,
+    /// Its resolution and kind, as its Hello said (for calibration over the wire).
+    width: u32,
+    height: u32,
+    kind: v1::ProjectorKind,
 }
 
 #[derive(Debug, Default)]
@@ -118,12 +162,19 @@ struct Live {
     problem: Problem,
     white: Vec<LinearRgb>,
     uncalibrated: HashSet<String>,
+    /// Projector id → its node ids (grows as projectors are segmented over the wire).
+    owners: HashMap<String, Vec<u32>>,
+    /// Each node's start (`None`: the node agent's own default).
+    start: Vec<Option<LinearRgb>>,
+    /// The weights and responses of the projectors segmented over the wire.
+    assignments: HashMap<String, Assignment>,
+    /// The chart of each node segmented over the wire (for its conventional start).
+    charts: HashMap<u32, usize>,
 }
 
 struct Shared {
     config: CameraConfig,
-    owners: HashMap<String, Vec<u32>>,
-    start: Option<Vec<LinearRgb>>,
+    survey: Option<Survey>,
     live: std::sync::RwLock<Live>,
     /// Sequence numbers of Show patterns.
     pattern_seq: AtomicU64,
@@ -161,10 +212,11 @@ impl Shared {
                         node: n,
                         p: Some(to_sparse(column.support(), column.values())),
                         s: Some(to_sparse(column.support(), &s)),
-                        start: self
+                        start: live
                             .start
-                            .as_ref()
-                            .and_then(|v| v.get(n as usize))
+                            .get(n as usize)
+                            .copied()
+                            .flatten()
                             .filter(|x| x.is_finite())
                             .map(|x| to_rgb(x.clamp_unit())),
                     },
@@ -222,11 +274,32 @@ impl v1::room_server::Room for Service {
             tracing::warn!(projector = %hello.projector_id, "refused: wrong room token");
             return Err(Status::unauthenticated("wrong room token"));
         }
-        let Some(nodes) = shared.owners.get(&hello.projector_id).cloned() else {
-            return Err(Status::not_found(format!(
-                "projector {:?} is not calibrated in room {:?}",
-                hello.projector_id, shared.config.room
-            )));
+        let known = shared.live().owners.get(&hello.projector_id).cloned();
+        let nodes = match known {
+            Some(nodes) => nodes,
+            // Calibrated over the wire once it is here: it must say how large it is.
+            None if shared.survey.is_some() => {
+                if hello.width == 0 || hello.height == 0 {
+                    tracing::warn!(projector = %hello.projector_id, "refused: no resolution to calibrate");
+                    return Err(Status::failed_precondition(format!(
+                        "projector {:?} is not calibrated in room {:?}, and its Hello gives no resolution to calibrate it with (a display that draws pixels does)",
+                        hello.projector_id, shared.config.room
+                    )));
+                }
+                shared
+                    .live
+                    .write()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .uncalibrated
+                    .insert(hello.projector_id.clone());
+                Vec::new()
+            }
+            None => {
+                return Err(Status::not_found(format!(
+                    "projector {:?} is not calibrated in room {:?}",
+                    hello.projector_id, shared.config.room
+                )));
+            }
         };
         // One stream per projector: a second one while the first is alive is refused (a
         // reconnecting node is admitted once its old stream has ended or missed its heartbeats).
@@ -254,12 +327,22 @@ impl v1::room_server::Room for Service {
                     .as_ref()
                     .is_some_and(|st| st.calibration_epoch == shared.config.calibration_epoch),
             })),
-            room_message(v1::room_message::Body::Assign(v1::Assign {
-                nodes: nodes
-                    .iter()
-                    .map(|&n| v1::NodeAssignment { node: n, chart: n })
-                    .collect(),
-            })),
+            room_message(v1::room_message::Body::Assign(
+                match shared.live().assignments.get(&hello.projector_id) {
+                    Some(a) => assign_message(a),
+                    None => v1::Assign {
+                        nodes: nodes
+                            .iter()
+                            .map(|&n| v1::NodeAssignment {
+                                node: n,
+                                chart: n,
+                                ..Default::default()
+                            })
+                            .collect(),
+                        ..Default::default()
+                    },
+                },
+            )),
         ];
         if calibrated {
             hello_msgs.extend(shared.attenuation_messages(&nodes));
@@ -284,13 +367,17 @@ impl v1::room_server::Room for Service {
                     awaiting: None,
                     calibrated,
                     pattern_shown: None,
+                    width: hello.width,
+                    height: hello.height,
+                    kind: v1::ProjectorKind::try_from(hello.kind)
+                        .unwrap_or(v1::ProjectorKind::Unspecified),
                 },
             );
             connection
         };
         tracing::info!(%projector, nodes = nodes.len(), "joined");
         shared.changed.notify_waiters();
-        tokio::spawn(read_node(shared, projector, connection, nodes, inbound));
+        tokio::spawn(read_node(shared, projector, connection, inbound));
         Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
     }
 }
@@ -300,7 +387,6 @@ async fn read_node(
     shared: Arc<Shared>,
     projector: String,
     connection: u64,
-    nodes: Vec<u32>,
     mut inbound: Streaming<v1::NodeMessage>,
 ) {
     let silence = 3 * shared.config.heartbeat;
@@ -344,7 +430,12 @@ async fn read_node(
                 shared.changed.notify_waiters();
             }
             Some(v1::node_message::Body::Contribution(c)) => {
-                if !nodes.contains(&c.node) {
+                let owns = shared
+                    .registry()
+                    .peers
+                    .get(&projector)
+                    .is_some_and(|p| p.connection == connection && p.nodes.contains(&c.node));
+                if !owns {
                     tracing::warn!(%projector, node = c.node, "contribution for a node it does not own: ignored");
                     continue;
                 }
@@ -558,6 +649,41 @@ async fn capture_fresh(
     Some(y)
 }
 
+/// Sends `projector` a Show pattern and waits until it has it on its display; false when it
+/// left or did not show it within the deadline (logged).
+async fn show_pattern(
+    shared: &Shared,
+    projector: &str,
+    tx: &mpsc::Sender<Result<v1::RoomMessage, Status>>,
+    pattern: v1::show::Pattern,
+) -> bool {
+    let seq = shared.pattern_seq.fetch_add(1, Ordering::Relaxed) + 1;
+    let show = v1::Show {
+        seq,
+        pattern: Some(pattern),
+    };
+    shared
+        .bytes_out
+        .fetch_add(show.encoded_len() as u64, Ordering::Relaxed);
+    if tx
+        .send(room_message(v1::room_message::Body::Show(show)))
+        .await
+        .is_err()
+    {
+        return false;
+    }
+    let shown = wait_for(shared, shared.config.deadline, |r| {
+        r.peers
+            .get(projector)
+            .is_some_and(|p| p.pattern_shown.is_some_and(|s| s >= seq))
+    })
+    .await;
+    if !shown {
+        tracing::warn!(%projector, seq, "pattern not shown within the deadline");
+    }
+    shown
+}
+
 /// Shows `lit` at white and the projector's other nodes at black (all black for `None`), waits
 /// for the projector to acknowledge the pattern, and captures.
 async fn show_and_capture(
@@ -568,7 +694,6 @@ async fn show_and_capture(
     lit: Option<u32>,
     captures: &mut u64,
 ) -> Option<Vec<LinearRgb>> {
-    let seq = shared.pattern_seq.fetch_add(1, Ordering::Relaxed) + 1;
     let values = nodes
         .iter()
         .map(|&n| v1::NodeState {
@@ -581,27 +706,285 @@ async fn show_and_capture(
             attenuation: None,
         })
         .collect();
-    let show = v1::Show {
-        seq,
-        pattern: Some(v1::show::Pattern::Nodes(v1::NodeValues { values })),
-    };
-    shared
-        .bytes_out
-        .fetch_add(show.encoded_len() as u64, Ordering::Relaxed);
-    tx.send(room_message(v1::room_message::Body::Show(show)))
-        .await
-        .ok()?;
-    let shown = wait_for(shared, shared.config.deadline, |r| {
-        r.peers
-            .get(projector)
-            .is_some_and(|p| p.pattern_shown.is_some_and(|s| s >= seq))
-    })
-    .await;
-    if !shown {
-        tracing::warn!(%projector, seq, "pattern not shown within the deadline");
+    let pattern = v1::show::Pattern::Nodes(v1::NodeValues { values });
+    if !show_pattern(shared, projector, tx, pattern).await {
         return None;
     }
     capture_fresh(shared, camera, captures).await
+}
+
+/// Shows a whole-frame pattern on `projector`, waits for it, and captures a whole image (the
+/// camera's stale frames discarded first, every frame counted).
+async fn show_and_capture_image(
+    shared: &Shared,
+    camera: &mut impl Camera,
+    projector: &str,
+    tx: &mpsc::Sender<Result<v1::RoomMessage, Status>>,
+    pattern: Pattern,
+    captures: &mut u64,
+) -> Option<LinearImage> {
+    if !show_pattern(shared, projector, tx, wire_pattern(pattern)).await {
+        return None;
+    }
+    let mut last = None;
+    for _ in 0..=shared.config.stale_frames {
+        match camera.capture_image().await {
+            Ok(image) => {
+                *captures += 1;
+                last = Some(image);
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "image capture failed");
+                return None;
+            }
+        }
+    }
+    last
+}
+
+/// A whole-frame pattern as a Show pattern (white and black as uniform codes).
+fn wire_pattern(pattern: Pattern) -> v1::show::Pattern {
+    use roomlight_calib::graycode::{Axis, Pattern as Gray};
+    let uniform = |v: f64| {
+        v1::show::Pattern::Uniform(v1::Uniform {
+            code: Some(to_rgb(LinearRgb::splat(v))),
+        })
+    };
+    match pattern {
+        Pattern::Uniform(code) => v1::show::Pattern::Uniform(v1::Uniform {
+            code: Some(to_rgb(LinearRgb(code.map(f64::from)))),
+        }),
+        Pattern::Structured {
+            pattern: Gray::White,
+            ..
+        } => uniform(1.0),
+        Pattern::Structured {
+            pattern: Gray::Black,
+            ..
+        } => uniform(0.0),
+        Pattern::Structured {
+            pattern: Gray::Bit { axis, bit, inverse },
+            coding,
+        } => v1::show::Pattern::Gray(v1::GrayBit {
+            axis: match axis {
+                Axis::Column => v1::Axis::Column,
+                Axis::Row => v1::Axis::Row,
+            } as i32,
+            bit,
+            inverse,
+            coding: match coding {
+                Coding::Gray => v1::Coding::Gray,
+                Coding::Xor04 => v1::Coding::Xor04,
+            } as i32,
+        }),
+    }
+}
+
+/// An assignment as the Assign message that carries it.
+fn assign_message(a: &Assignment) -> v1::Assign {
+    v1::Assign {
+        nodes: a
+            .nodes
+            .iter()
+            .map(|(n, w)| v1::NodeAssignment {
+                node: *n,
+                chart: *n,
+                pixels: w.iter().map(|p| p.0).collect(),
+                weights: w.iter().map(|p| p.1).collect(),
+            })
+            .collect(),
+        width: a.width,
+        height: a.height,
+        gamma: a.response.gamma.to_vec(),
+    }
+}
+
+/// Levels of the response ramp shown over the wire (DESIGN §4: at least 9).
+const RAMP_LEVELS: usize = 9;
+
+/// Calibrates a projector the model does not know, over the wire (DESIGN §4.2–4.4, §4.7): its
+/// node agent shows structured light and a response ramp while the other projectors keep their
+/// values (the decode compares each pattern with its inverse and the response fit subtracts the
+/// ramp's first level, so their light cancels); the camera agent decodes and segments it
+/// (off the runtime's threads), appends its nodes to the model with empty columns, records
+/// each node's chart for its conventional start, and sends it the nodes' weights and the
+/// response. False when the projector left, a pattern was not shown, the camera failed, or
+/// the decode or the response fit was refused (logged; it is tried again).
+async fn segment_over_wire(
+    shared: &Shared,
+    camera: &mut impl Camera,
+    projector: &str,
+    captures: &mut u64,
+) -> bool {
+    let Some(survey) = shared.survey.clone() else {
+        return false;
+    };
+    let Some((tx, width, height, kind)) = shared
+        .registry()
+        .peers
+        .get(projector)
+        .map(|p| (p.tx.clone(), p.width, p.height, p.kind))
+    else {
+        return false;
+    };
+    // A large aperture's defocus blurs XOR-04's fine stripes: plain Gray code, one node.
+    let large = kind == v1::ProjectorKind::LargeAperture;
+    let coding = if large { Coding::Gray } else { Coding::Xor04 };
+    let (manifest, codes) = match (
+        Manifest::with_coding(width, height, coding),
+        ramp_codes(RAMP_LEVELS),
+    ) {
+        (Ok(m), Ok(c)) => (m, c),
+        (Err(e), _) | (_, Err(e)) => {
+            tracing::error!(%projector, error = %e, "cannot calibrate over the wire");
+            return false;
+        }
+    };
+    tracing::info!(%projector, width, height, patterns = manifest.patterns.len(), "structured light over the wire");
+    let mut images = Vec::with_capacity(manifest.patterns.len());
+    for file in &manifest.patterns {
+        let pattern = Pattern::Structured {
+            pattern: file.pattern,
+            coding,
+        };
+        let Some(image) =
+            show_and_capture_image(shared, camera, projector, &tx, pattern, captures).await
+        else {
+            return false;
+        };
+        images.push(image);
+    }
+    let mut ramp = Vec::with_capacity(codes.len());
+    for &code in &codes {
+        let pattern = Pattern::Uniform([code as f32; 3]);
+        let Some(image) =
+            show_and_capture_image(shared, camera, projector, &tx, pattern, captures).await
+        else {
+            return false;
+        };
+        ramp.push(image);
+    }
+    let name = projector.to_string();
+    let worked = tokio::task::spawn_blocking(move || {
+        let corr = roomlight_calib::graycode::decode(&manifest, &DecodeConfig::default(), |f| {
+            let k = manifest
+                .patterns
+                .iter()
+                .position(|p| p.file == f.file)
+                .unwrap_or(0);
+            Ok(&images[k])
+        })
+        .map_err(|e| format!("decode: {e}"))?;
+        if corr.map.len() != survey.target_mask.len() {
+            return Err(format!(
+                "the camera's images have {} pixels, the survey's target mask {}",
+                corr.map.len(),
+                survey.target_mask.len()
+            ));
+        }
+        let (measured, noise) = footprint_ramp(&ramp, &corr);
+        let response =
+            fit_response(&codes, &measured, &noise).map_err(|e| format!("response: {e}"))?;
+        let whole = || roomlight_calib::nodes::whole_frame(&corr, &survey.corners, &survey.target_mask);
+        let nodes: Vec<(Vec<f32>, Option<usize>)> = if large {
+            vec![whole()]
+        } else {
+            match roomlight_calib::nodes::segment(
+                std::slice::from_ref(&corr),
+                &survey.corners,
+                Some(&survey.target_mask),
+                &roomlight_calib::nodes::NodeConfig::default(),
+            ) {
+                Ok(seg) => seg
+                    .nodes
+                    .into_iter()
+                    .map(|n| (n.weights, Some(n.chart)))
+                    .collect(),
+                Err(e) => {
+                    tracing::info!(projector = %name, reason = %e, "lights no chart: one node over its frame");
+                    vec![whole()]
+                }
+            }
+        };
+        Ok::<_, String>((response, nodes, corr.decoded_share()))
+    })
+    .await;
+    let (response, nodes, decoded) = match worked {
+        Ok(Ok(done)) => done,
+        Ok(Err(e)) => {
+            tracing::error!(%projector, error = %e, "calibration over the wire refused");
+            return false;
+        }
+        Err(e) => {
+            tracing::error!(%projector, error = %e, "calibration over the wire failed");
+            return false;
+        }
+    };
+    let assignment = {
+        let mut live = shared.live.write().unwrap_or_else(PoisonError::into_inner);
+        let first = live.problem.nodes() as u32;
+        let ids: Vec<u32> = (first..).take(nodes.len()).collect();
+        let mut columns = live.problem.columns().to_vec();
+        columns.extend(nodes.iter().map(|_| AttenuationColumn::default()));
+        let problem = match Problem::new(
+            columns,
+            live.problem.black().to_vec(),
+            live.problem.target().to_vec(),
+            live.problem.noise().to_vec(),
+        ) {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::error!(%projector, error = %e, "calibration over the wire refused");
+                return false;
+            }
+        };
+        live.problem = problem;
+        live.start.extend(nodes.iter().map(|_| None));
+        for (&n, (_, chart)) in ids.iter().zip(&nodes) {
+            if let Some(c) = chart {
+                live.charts.insert(n, *c);
+            }
+        }
+        let assignment = Assignment {
+            width,
+            height,
+            response,
+            nodes: ids
+                .iter()
+                .zip(&nodes)
+                .map(|(&n, (w, _))| {
+                    let sparse = w
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, w)| **w > 0.0)
+                        .map(|(i, w)| (i as u32, w.min(1.0)))
+                        .collect();
+                    (n, sparse)
+                })
+                .collect(),
+        };
+        live.owners.insert(projector.to_string(), ids.clone());
+        live.assignments
+            .insert(projector.to_string(), assignment.clone());
+        assignment
+    };
+    let ids: Vec<u32> = assignment.nodes.iter().map(|(n, _)| *n).collect();
+    if let Some(peer) = shared.registry().peers.get_mut(projector) {
+        peer.nodes = ids.clone();
+    }
+    let message = assign_message(&assignment);
+    shared
+        .bytes_out
+        .fetch_add(message.encoded_len() as u64, Ordering::Relaxed);
+    if tx
+        .send(room_message(v1::room_message::Body::Assign(message)))
+        .await
+        .is_err()
+    {
+        return false;
+    }
+    tracing::info!(%projector, nodes = ids.len(), decoded = format!("{:.1}%", 100.0 * decoded), gamma = ?assignment.response.gamma, "segmented over the wire");
+    true
 }
 
 /// Measures a hot projector's attenuation (DESIGN §4): its nodes all at black, then each alone
@@ -617,6 +1000,14 @@ async fn calibrate_hot(
     projector: &str,
     captures: &mut u64,
 ) -> bool {
+    let needs_nodes = shared
+        .registry()
+        .peers
+        .get(projector)
+        .is_some_and(|p| p.nodes.is_empty());
+    if needs_nodes && !segment_over_wire(shared, camera, projector, captures).await {
+        return false;
+    }
     let Some((tx, nodes)) = shared
         .registry()
         .peers
@@ -678,6 +1069,26 @@ async fn calibrate_hot(
                 return false;
             }
         };
+        // Nodes segmented over the wire start from the conventional value of their chart.
+        if let Some(survey) = &shared.survey {
+            for &n in &nodes {
+                let (Some(&chart), Some(column)) =
+                    (live.charts.get(&n), problem.columns().get(n as usize))
+                else {
+                    continue;
+                };
+                let start = conventional_value(
+                    column,
+                    &survey.chart_patches(chart),
+                    problem.target(),
+                    problem.black(),
+                    LinearRgb::splat(0.5),
+                );
+                if let (Ok(x), Some(slot)) = (start, live.start.get_mut(n as usize)) {
+                    *slot = Some(x);
+                }
+            }
+        }
         live.white = problem.white_response();
         live.problem = problem;
         live.uncalibrated.remove(projector);
@@ -705,8 +1116,29 @@ async fn calibrate_hot(
         peer.calibrated = true;
     }
     tracing::info!(%projector, "hot calibration done");
+    if let Some(path) = &shared.config.model_out
+        && let Err(e) = write_model(shared, path)
+    {
+        tracing::warn!(path = %path.display(), error = %e, "could not write the model");
+    }
     shared.changed.notify_waiters();
     true
+}
+
+/// Writes the live model as JSON through a temporary file beside `path`.
+fn write_model(shared: &Shared, path: &std::path::Path) -> std::io::Result<()> {
+    let text = {
+        let live = shared.live();
+        serde_json::to_string(&serde_json::json!({
+            "problem": live.problem,
+            "owners": live.owners,
+            // Only when every node has one (else the node agents' own).
+            "start": live.start.iter().copied().collect::<Option<Vec<LinearRgb>>>(),
+        }))?
+    };
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, text)?;
+    std::fs::rename(&tmp, path)
 }
 
 /// Serves the Room service on `listener` and runs rounds until `cancel`. Returns the status
@@ -733,14 +1165,21 @@ pub fn serve(
         .collect();
     let problem = model.problem.without_nodes(&unknown);
     let white = problem.white_response();
+    let start = match model.start {
+        Some(v) => v.into_iter().map(Some).collect(),
+        None => vec![None; problem.nodes()],
+    };
     let shared = Arc::new(Shared {
         config,
-        owners: model.owners,
-        start: model.start,
+        survey: model.survey,
         live: std::sync::RwLock::new(Live {
             problem,
             white,
             uncalibrated: model.hot,
+            owners: model.owners,
+            start,
+            assignments: HashMap::new(),
+            charts: HashMap::new(),
         }),
         pattern_seq: AtomicU64::new(0),
         registry: Mutex::new(Registry::default()),
@@ -773,6 +1212,7 @@ pub fn serve(
             let mut aggregator = ErrorAggregator::new(target.len());
             let mut captures = 0u64;
             let mut calibrated_hot = 0u64;
+            let mut failed_hot = 0u32;
             let mut previous: Option<f64> = None;
             let mut quiet = 0u32;
             // A stop request ends the rounds between two rounds, never inside one.
@@ -796,8 +1236,11 @@ pub fn serve(
                 if let Some(projector) = hot {
                     if calibrate_hot(&shared, &mut camera, &projector, &mut captures).await {
                         calibrated_hot += 1;
+                        failed_hot = 0;
                     } else {
-                        tokio::time::sleep(Duration::from_millis(200)).await;
+                        // Tried again, backing off to 3.2 s (the cause is logged each time).
+                        failed_hot = (failed_hot + 1).min(4);
+                        tokio::time::sleep(Duration::from_millis(200) * (1 << failed_hot)).await;
                     }
                     continue;
                 }

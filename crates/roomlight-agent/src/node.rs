@@ -3,7 +3,7 @@
 //! acknowledges each frame and reports its contribution changes for model rounds.
 
 use crate::AgentError;
-use crate::hardware::Display;
+use crate::hardware::{Assignment, Display, Pattern};
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState, StepRule};
 use roomlight_proto::convert::{from_rgb, from_sparse, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
@@ -28,6 +28,9 @@ pub struct NodeConfig {
     pub token: String,
     /// This projector's id in the room's calibration.
     pub projector_id: String,
+    /// Standard or large aperture (sent in Hello: the camera agent decodes a large aperture's
+    /// defocused light with plain Gray code and makes it one node).
+    pub kind: v1::ProjectorKind,
     /// The update rule of every node of this projector.
     pub rule: StepRule,
     /// The value a node shows before its first update.
@@ -44,6 +47,10 @@ pub struct SavedState {
     pub calibration_epoch: u64,
     /// Node id → linear light shown.
     pub values: Vec<(u32, LinearRgb)>,
+    /// The nodes' weights and response when the camera agent segmented this projector over
+    /// the wire (so that a restarted node can draw its values before it reconnects).
+    #[serde(default)]
+    pub assignment: Option<Assignment>,
 }
 
 impl SavedState {
@@ -59,6 +66,9 @@ impl SavedState {
                         "state file {}: a value is not finite",
                         path.display()
                     )));
+                }
+                if let Some(a) = &state.assignment {
+                    a.validate(&format!("state file {}", path.display()))?;
                 }
                 Ok(Some(state))
             }
@@ -136,10 +146,15 @@ pub async fn run(
     // The last value each node showed: the start of the next session.
     let mut memory: HashMap<u32, LinearRgb> = HashMap::new();
     let mut epoch = 0;
+    let mut assignment: Option<Assignment> = None;
     // Relight at once from the state file, before any camera agent is reachable.
     if let Some(path) = &config.state_file
         && let Some(saved) = SavedState::load(path)?
     {
+        if let Some(a) = &saved.assignment {
+            display.assign(a);
+        }
+        assignment = saved.assignment;
         for &(node, value) in &saved.values {
             display.show(node, value);
             memory.insert(node, value);
@@ -150,6 +165,7 @@ pub async fn run(
     let mut keeper = Keeper {
         path: config.state_file.clone(),
         last: None,
+        assignment,
     };
     let mut backoff = MIN_BACKOFF;
     loop {
@@ -186,6 +202,10 @@ pub async fn run(
     }
 }
 
+/// Largest message a node agent takes from the camera agent (an Assign of a 4K projector's
+/// weights is about 70 MB).
+const MAX_ROOM_MESSAGE: usize = 256 << 20;
+
 /// First and largest wait before reconnecting.
 const MIN_BACKOFF: Duration = Duration::from_millis(100);
 const MAX_BACKOFF: Duration = Duration::from_secs(5);
@@ -194,6 +214,8 @@ const MAX_BACKOFF: Duration = Duration::from_secs(5);
 struct Keeper {
     path: Option<PathBuf>,
     last: Option<std::time::Instant>,
+    /// The assignment received over the wire, kept with the values.
+    assignment: Option<Assignment>,
 }
 
 impl Keeper {
@@ -213,6 +235,7 @@ impl Keeper {
         if let Err(e) = (SavedState {
             calibration_epoch: epoch,
             values,
+            assignment: self.assignment.clone(),
         })
         .save(path)
         {
@@ -232,7 +255,9 @@ async fn session(
     epoch: &mut u64,
     keeper: &mut Keeper,
 ) -> Result<SessionEnd, AgentError> {
-    let mut client = v1::room_client::RoomClient::new(endpoint.connect().await?);
+    // An Assign with a projector's weights can be several megabytes.
+    let mut client = v1::room_client::RoomClient::new(endpoint.connect().await?)
+        .max_decoding_message_size(MAX_ROOM_MESSAGE);
     let (tx, rx) = mpsc::channel(256);
     let send = |tx: &mpsc::Sender<v1::NodeMessage>, m| {
         let tx = tx.clone();
@@ -249,6 +274,9 @@ async fn session(
             room: config.room.clone(),
             token: config.token.clone(),
             projector_id: config.projector_id.clone(),
+            width: display.resolution().map_or(0, |r| r.0),
+            height: display.resolution().map_or(0, |r| r.1),
+            kind: config.kind as i32,
             state: Some(v1::PersistedState {
                 calibration_epoch: *epoch,
                 nodes: memory
@@ -297,7 +325,15 @@ async fn session(
                 *epoch = w.calibration_epoch;
             }
             Some(v1::room_message::Body::Assign(a)) => {
-                assigned = a.nodes.iter().map(|n| n.node).collect()
+                assigned = a.nodes.iter().map(|n| n.node).collect();
+                // Weights drawn by the camera agent (calibration over the wire): a malformed
+                // assignment ends the session (the camera agent logs the stream's end).
+                if a.width > 0 {
+                    let assignment = assignment_from_wire(&a)?;
+                    display.assign(&assignment);
+                    keeper.assignment = Some(assignment);
+                    keeper.flush(*epoch, memory);
+                }
             }
             Some(v1::room_message::Body::Attenuation(a)) => {
                 let (Some(p), Some(s)) = (a.p.as_ref(), a.s.as_ref()) else {
@@ -407,10 +443,37 @@ async fn session(
             }
             Some(v1::room_message::Body::Show(show)) => {
                 // A calibration pattern: node values shown as they are, without touching the
-                // node states; values for nodes it does not own, or not finite, are refused.
-                let Some(v1::show::Pattern::Nodes(values)) = show.pattern else {
-                    tracing::warn!(seq = show.seq, "unsupported Show pattern: ignored");
-                    continue;
+                // node states (values for nodes it does not own, or not finite, are refused),
+                // or a whole-frame pattern. One the display cannot show is not acknowledged.
+                let values = match show.pattern.map(pattern_from_wire) {
+                    Some(Ok(Wire::Nodes(values))) => values,
+                    Some(Ok(Wire::Frame(pattern))) => {
+                        if !display.show_pattern(pattern) {
+                            tracing::warn!(
+                                seq = show.seq,
+                                "this display shows node values only: pattern ignored"
+                            );
+                            continue;
+                        }
+                        display.flush().await;
+                        send(
+                            &tx,
+                            message(v1::node_message::Body::Shown(v1::Shown {
+                                seq: show.seq,
+                                pattern: true,
+                            })),
+                        )
+                        .await?;
+                        continue;
+                    }
+                    Some(Err(e)) => {
+                        tracing::warn!(seq = show.seq, error = %e, "malformed Show pattern: ignored");
+                        continue;
+                    }
+                    None => {
+                        tracing::warn!(seq = show.seq, "Show without a pattern: ignored");
+                        continue;
+                    }
                 };
                 for v in &values.values {
                     if !assigned.contains(&v.node) {
@@ -440,4 +503,96 @@ async fn session(
             None => {}
         }
     }
+}
+
+/// A Show message's pattern: node values, or a whole frame.
+enum Wire {
+    Nodes(v1::NodeValues),
+    Frame(Pattern),
+}
+
+fn pattern_from_wire(p: v1::show::Pattern) -> Result<Wire, String> {
+    use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+    Ok(match p {
+        v1::show::Pattern::Nodes(values) => Wire::Nodes(values),
+        v1::show::Pattern::Uniform(u) => {
+            let code = from_rgb("uniform code", u.code.as_ref()).map_err(|e| e.to_string())?;
+            if code.0.iter().any(|v| !(0.0..=1.0).contains(v)) {
+                return Err(format!("uniform code {code:?}: expected values in [0, 1]"));
+            }
+            Wire::Frame(Pattern::Uniform(code.0.map(|v| v as f32)))
+        }
+        v1::show::Pattern::Gray(g) => {
+            let axis = match v1::Axis::try_from(g.axis) {
+                Ok(v1::Axis::Column) => Axis::Column,
+                Ok(v1::Axis::Row) => Axis::Row,
+                _ => return Err(format!("Gray bit axis {}: expected column or row", g.axis)),
+            };
+            let coding = match v1::Coding::try_from(g.coding) {
+                Ok(v1::Coding::Gray) => Coding::Gray,
+                Ok(v1::Coding::Xor04) => Coding::Xor04,
+                _ => {
+                    return Err(format!(
+                        "Gray bit coding {}: expected gray or xor04",
+                        g.coding
+                    ));
+                }
+            };
+            if g.bit >= 32 {
+                return Err(format!("Gray bit {}: expected below 32", g.bit));
+            }
+            Wire::Frame(Pattern::Structured {
+                pattern: Gray::Bit {
+                    axis,
+                    bit: g.bit,
+                    inverse: g.inverse,
+                },
+                coding,
+            })
+        }
+    })
+}
+
+/// The weights and response of an Assign message, checked.
+fn assignment_from_wire(a: &v1::Assign) -> Result<Assignment, AgentError> {
+    let gamma = match a.gamma.as_slice() {
+        [] => [1.0; 3],
+        [r, g, b] => [*r, *g, *b],
+        other => {
+            return Err(AgentError::Protocol(format!(
+                "assignment: {} response exponents, expected 3",
+                other.len()
+            )));
+        }
+    };
+    let mut nodes = Vec::with_capacity(a.nodes.len());
+    for n in &a.nodes {
+        if n.pixels.len() != n.weights.len() {
+            return Err(AgentError::Protocol(format!(
+                "assignment of node {}: {} pixels, {} weights",
+                n.node,
+                n.pixels.len(),
+                n.weights.len()
+            )));
+        }
+        nodes.push((
+            n.node,
+            n.pixels
+                .iter()
+                .copied()
+                .zip(n.weights.iter().copied())
+                .collect(),
+        ));
+    }
+    let assignment = Assignment {
+        width: a.width,
+        height: a.height,
+        response: roomlight_calib::response::Response {
+            gamma,
+            max_residual: [0.0; 3],
+        },
+        nodes,
+    };
+    assignment.validate("assignment")?;
+    Ok(assignment)
 }

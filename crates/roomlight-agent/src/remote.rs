@@ -4,7 +4,7 @@
 //! separate processes.
 
 use crate::AgentError;
-use crate::hardware::{Camera, Display, VirtualRoom};
+use crate::hardware::{Assignment, Camera, Display, Pattern, VirtualRoom};
 use roomlight_core::LinearRgb;
 use roomlight_proto::convert::{from_rgb, to_rgb};
 use roomlight_proto::v1;
@@ -59,27 +59,44 @@ pub async fn serve_hardware(
     Ok(())
 }
 
+/// What a [`QueuedDisplay`]'s task applies, in the order it was shown.
+#[derive(Debug, Clone)]
+pub enum Update {
+    Value(u32, LinearRgb),
+    Pattern(Pattern),
+    Assign(Box<Assignment>),
+}
+
 /// What a [`QueuedDisplay`] hands its background task.
 #[derive(Debug)]
 enum Queued {
-    Value(u32, LinearRgb),
-    /// Answered once every value queued before it has been applied.
+    Update(Update),
+    /// Answered once every update queued before it has been applied.
     Flush(tokio::sync::oneshot::Sender<()>),
 }
 
-/// A display whose values a background task applies in batches (sent to another process, or
+/// A display whose updates a background task applies in batches (sent to another process, or
 /// drawn into a projector image first); [`Display::flush`] resolves once everything shown before
 /// it has been applied.
 #[derive(Debug, Clone)]
-pub struct QueuedDisplay(mpsc::UnboundedSender<Queued>);
+pub struct QueuedDisplay {
+    tx: mpsc::UnboundedSender<Queued>,
+    /// The projector's resolution, for displays that draw pixels and show patterns.
+    resolution: Option<(u32, u32)>,
+}
 
 impl QueuedDisplay {
-    /// Spawns the task until `cancel`: `apply` is handed each batch of values in the order they
+    /// Spawns the task until `cancel`: `apply` is handed each batch of updates in the order they
     /// were shown (everything queued while the previous batch was applied) and returns a future
-    /// that resolves once the display has them.
-    pub fn spawn<F, Fut>(cancel: CancellationToken, mut apply: F) -> Self
+    /// that resolves once the display has them. `resolution`: the projector's, when this display
+    /// draws pixels (it then shows patterns and takes assignments); `None` for node values only.
+    pub fn spawn<F, Fut>(
+        cancel: CancellationToken,
+        resolution: Option<(u32, u32)>,
+        mut apply: F,
+    ) -> Self
     where
-        F: FnMut(Vec<(u32, LinearRgb)>) -> Fut + Send + 'static,
+        F: FnMut(Vec<Update>) -> Fut + Send + 'static,
         Fut: Future<Output = ()> + Send,
     {
         let (tx, mut rx) = mpsc::unbounded_channel::<Queued>();
@@ -90,37 +107,57 @@ impl QueuedDisplay {
                     q = rx.recv() => q,
                 };
                 let Some(first) = first else { return };
-                let mut values = Vec::new();
+                let mut updates = Vec::new();
                 let mut flushes = Vec::new();
                 let mut take = |q: Queued| match q {
-                    Queued::Value(node, x) => values.push((node, x)),
+                    Queued::Update(u) => updates.push(u),
                     Queued::Flush(done) => flushes.push(done),
                 };
                 take(first);
                 while let Ok(q) = rx.try_recv() {
                     take(q);
                 }
-                if !values.is_empty() {
-                    apply(values).await;
+                if !updates.is_empty() {
+                    apply(updates).await;
                 }
                 for done in flushes {
                     let _ = done.send(());
                 }
             }
         });
-        Self(tx)
+        Self { tx, resolution }
     }
 }
 
 impl Display for QueuedDisplay {
     fn show(&mut self, node: u32, value: LinearRgb) {
         // The task only stops with the agent.
-        let _ = self.0.send(Queued::Value(node, value));
+        let _ = self.tx.send(Queued::Update(Update::Value(node, value)));
+    }
+
+    fn show_pattern(&mut self, pattern: Pattern) -> bool {
+        self.resolution.is_some()
+            && self
+                .tx
+                .send(Queued::Update(Update::Pattern(pattern)))
+                .is_ok()
+    }
+
+    fn assign(&mut self, assignment: &Assignment) {
+        if self.resolution.is_some() {
+            let _ = self
+                .tx
+                .send(Queued::Update(Update::Assign(Box::new(assignment.clone()))));
+        }
+    }
+
+    fn resolution(&self) -> Option<(u32, u32)> {
+        self.resolution
     }
 
     fn flush(&mut self) -> impl Future<Output = ()> + Send {
         let (done, taken) = tokio::sync::oneshot::channel();
-        let queued = self.0.send(Queued::Flush(done)).is_ok();
+        let queued = self.tx.send(Queued::Flush(done)).is_ok();
         async move {
             // A task that is gone (the agent stopping) has nothing left to wait for.
             if queued {
@@ -137,13 +174,16 @@ pub async fn remote_display(
     cancel: CancellationToken,
 ) -> Result<QueuedDisplay, AgentError> {
     let client = v1::virtual_hardware_client::VirtualHardwareClient::connect(endpoint).await?;
-    Ok(QueuedDisplay::spawn(cancel, move |batch| {
+    Ok(QueuedDisplay::spawn(cancel, None, move |batch| {
         let values = batch
             .into_iter()
-            .map(|(node, x)| v1::NodeState {
-                node,
-                x: Some(to_rgb(x)),
-                attenuation: None,
+            .filter_map(|u| match u {
+                Update::Value(node, x) => Some(v1::NodeState {
+                    node,
+                    x: Some(to_rgb(x)),
+                    attenuation: None,
+                }),
+                Update::Pattern(_) | Update::Assign(_) => None,
             })
             .collect();
         let mut client = client.clone();

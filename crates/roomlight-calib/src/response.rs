@@ -2,6 +2,8 @@
 //! law and inverted, so that node values are linear light.
 
 use crate::CalibError;
+use crate::graycode::Correspondence;
+use crate::image_io::LinearImage;
 use roomlight_core::LinearRgb;
 use serde::{Deserialize, Serialize};
 
@@ -134,4 +136,43 @@ pub fn fit_response(
         gamma,
         max_residual,
     })
+}
+
+/// The mean camera value over the pixels a projector was decoded on, at each ramp level, with
+/// its standard error; pixels saturated at full white are left out.
+pub fn footprint_ramp(
+    ramp: &[LinearImage],
+    corr: &Correspondence,
+) -> (Vec<LinearRgb>, Vec<LinearRgb>) {
+    let top = ramp.last();
+    let pixels: Vec<usize> = corr
+        .map
+        .iter()
+        .enumerate()
+        .filter(|(i, m)| {
+            m.is_some()
+                && top.is_some_and(|t| {
+                    t.pixels
+                        .get(*i)
+                        .is_some_and(|p| p.iter().all(|&v| v < 0.98))
+                })
+        })
+        .map(|(i, _)| i)
+        .collect();
+    // No pixel: zeros, which the fit refuses with a message naming the projector.
+    let count = pixels.len().max(1) as f64;
+    ramp.iter()
+        .map(|img| {
+            let mut sum = LinearRgb::ZERO;
+            let mut sq = LinearRgb::ZERO;
+            for &i in &pixels {
+                let v = LinearRgb(img.pixels[i].map(f64::from));
+                sum += v;
+                sq += v.hadamard(v);
+            }
+            let mean = sum * (1.0 / count);
+            let var = (sq * (1.0 / count) - mean.hadamard(mean)).map(|v| v.max(0.0));
+            (mean, var.map(|v| (v / count).sqrt()))
+        })
+        .unzip()
 }

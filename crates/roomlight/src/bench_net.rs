@@ -139,6 +139,7 @@ impl SyntheticAgents {
             model_rounds,
             calibration_epoch: 1,
             stale_frames: 0,
+            model_out: None,
         };
         let (status, camera_task) = camera::serve(
             config,
@@ -147,6 +148,7 @@ impl SyntheticAgents {
                 owners: owners.clone(),
                 start,
                 hot: Default::default(),
+                survey: None,
             },
             room.camera(),
             listener,
@@ -171,6 +173,7 @@ impl SyntheticAgents {
                 room: "bench".into(),
                 token: "t".into(),
                 projector_id: id.clone(),
+                kind: roomlight_proto::v1::ProjectorKind::Standard,
                 rule,
                 start: LinearRgb::splat(0.5),
                 state_file: None,

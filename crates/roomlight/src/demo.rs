@@ -498,10 +498,10 @@ fn agents_over_grpc(
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let endpoint = format!("http://{}", listener.local_addr()?);
         let cancel = CancellationToken::new();
-        let config = CameraConfig { room: "demo".into(), token: "demo".into(), heartbeat: Duration::from_millis(500), deadline: Duration::from_secs(2), model_rounds: 5, calibration_epoch: 1, stale_frames: 0 };
-        let (mut status, _handle) = camera::serve(config, RoomModel { problem: problem.clone(), owners: owners.clone(), start: None, hot: Default::default() }, room.camera(), listener, cancel.clone());
+        let config = CameraConfig { room: "demo".into(), token: "demo".into(), heartbeat: Duration::from_millis(500), deadline: Duration::from_secs(2), model_rounds: 5, calibration_epoch: 1, stale_frames: 0, model_out: None };
+        let (mut status, _handle) = camera::serve(config, RoomModel { problem: problem.clone(), owners: owners.clone(), start: None, hot: Default::default(), survey: None }, room.camera(), listener, cancel.clone());
         for id in owners.keys() {
-            let config = NodeConfig { endpoint: endpoint.clone(), room: "demo".into(), token: "demo".into(), projector_id: id.clone(), rule: StepRule::Momentum { theta: 1.0 }, start: LinearRgb::splat(0.5), state_file: None };
+            let config = NodeConfig { endpoint: endpoint.clone(), room: "demo".into(), token: "demo".into(), projector_id: id.clone(), kind: roomlight_proto::v1::ProjectorKind::Standard, rule: StepRule::Momentum { theta: 1.0 }, start: LinearRgb::splat(0.5), state_file: None };
             tokio::spawn(node::run(config, room.display(), cancel.child_token()));
         }
         println!("the real agents over loopback gRPC: a camera agent and {agents} node agents (model rounds K = 5, camera noise on)");

@@ -81,84 +81,15 @@ pub struct Calibrated {
     pub areas: Vec<(usize, Correspondence)>,
 }
 
-/// The mean camera value over the pixels a projector was decoded on, at each ramp level, with
-/// its standard error; pixels saturated at full white are left out.
-fn footprint_ramp(ramp: &[LinearImage], corr: &Correspondence) -> (Vec<LinearRgb>, Vec<LinearRgb>) {
-    let top = ramp.last();
-    let pixels: Vec<usize> = corr
-        .map
-        .iter()
-        .enumerate()
-        .filter(|(i, m)| {
-            m.is_some()
-                && top.is_some_and(|t| {
-                    t.pixels
-                        .get(*i)
-                        .is_some_and(|p| p.iter().all(|&v| v < 0.98))
-                })
-        })
-        .map(|(i, _)| i)
-        .collect();
-    // No pixel: zeros, which the fit refuses with a message naming the projector.
-    let count = pixels.len().max(1) as f64;
-    ramp.iter()
-        .map(|img| {
-            let mut sum = LinearRgb::ZERO;
-            let mut sq = LinearRgb::ZERO;
-            for &i in &pixels {
-                let v = LinearRgb(img.pixels[i].map(f64::from));
-                sum += v;
-                sq += v.hadamard(v);
-            }
-            let mean = sum * (1.0 / count);
-            let var = (sq * (1.0 / count) - mean.hadamard(mean)).map(|v| v.max(0.0));
-            (mean, var.map(|v| (v / count).sqrt()))
-        })
-        .unzip()
-}
-
-/// Projector pixels kept dark around the target for a whole-frame node (large aperture, or a
-/// projector that lights no chart), as a share of the frame's width: a large aperture's light
-/// blurs away from the focus plane, and pixels the decode missed are dark only through this.
-const WHOLE_FRAME_TARGET_MARGIN: f64 = 0.06;
-
-/// A projector as one node: its whole frame except the pixels that land on the target
-/// (decoded, then dilated by a margin of 6% of the frame's width); its chart for the
-/// conventional start is the one it lights over the most camera pixels, if any.
+/// A projector as one node (`roomlight_calib::nodes::whole_frame`): its whole frame except
+/// the pixels that land on the target, and the chart it lights most, if any.
 fn whole_frame_node(
     k: usize,
     corr: &Correspondence,
     corners: &[ChartCorners],
     target: &[bool],
 ) -> (NodeRegion, Option<usize>) {
-    let (w, h) = (corr.projector_width, corr.projector_height);
-    let mut dark = vec![false; (w * h) as usize];
-    for (m, &t) in corr.map.iter().zip(target) {
-        if let (Some((x, y)), true) = (m, t)
-            && *x < w
-            && *y < h
-        {
-            dark[(y * w + x) as usize] = true;
-        }
-    }
-    let margin = (WHOLE_FRAME_TARGET_MARGIN * f64::from(w)).ceil() as u32;
-    let dark = roomlight_calib::nodes::dilate(&dark, w as usize, h as usize, margin);
-    let weights: Vec<f32> = dark.iter().map(|&d| if d { 0.0 } else { 1.0 }).collect();
-    // The chart with the most camera pixels this projector was decoded on.
-    let width = corr.width as usize;
-    let mut counts = vec![0usize; corners.len()];
-    for (i, m) in corr.map.iter().enumerate() {
-        if m.is_none() {
-            continue;
-        }
-        let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
-        if let Some(c) = corners.iter().position(|c| inside(&c.corners, x, y)) {
-            counts[c] += 1;
-        }
-    }
-    let chart = (0..corners.len())
-        .max_by_key(|&c| counts[c])
-        .filter(|&c| counts[c] > 0);
+    let (weights, chart) = roomlight_calib::nodes::whole_frame(corr, corners, target);
     (
         NodeRegion {
             projector: k,
@@ -166,13 +97,6 @@ fn whole_frame_node(
         },
         chart,
     )
-}
-
-/// Whether `(x, y)` lies inside the convex quadrilateral `q`.
-fn inside(q: &[[f64; 2]; 4], x: f64, y: f64) -> bool {
-    let side = |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0]);
-    let s: Vec<f64> = (0..4).map(|i| side(q[i], q[(i + 1) % 4])).collect();
-    s.iter().all(|&v| v >= 0.0) || s.iter().all(|&v| v <= 0.0)
 }
 
 /// Levels of the response ramp.
@@ -419,7 +343,7 @@ pub fn calibrate(
             frames[k] = Frame::Uniform([code as f32; 3]);
             ramp.push(shoot(&frames)?);
         }
-        let (measured, noise) = footprint_ramp(&ramp, c);
+        let (measured, noise) = roomlight_calib::response::footprint_ramp(&ramp, c);
         responses[k] = fit_response(&codes, &measured, &noise)
             .with_context(|| format!("response of {}", room.projectors()[k].name))?;
     }
@@ -1125,6 +1049,7 @@ pub fn run_agents(
             } else {
                 0
             },
+            model_out: None,
         };
         // A projector joining hot is measured by the camera agent when it joins.
         let hot = match options.churn.filter(|c| c.hot) {
@@ -1138,6 +1063,7 @@ pub fn run_agents(
                 owners: owners.clone(),
                 start: Some(model.conventional.clone()),
                 hot,
+                survey: None,
             },
             hw.clone(),
             listener,
@@ -1149,6 +1075,7 @@ pub fn run_agents(
                 room: "lab".into(),
                 token: "demo".into(),
                 projector_id: id.to_string(),
+                kind: roomlight_proto::v1::ProjectorKind::Standard,
                 rule: options.rule,
                 start: LinearRgb::splat(0.5),
                 state_file: None,

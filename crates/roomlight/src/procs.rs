@@ -47,6 +47,18 @@ enum AnyCamera {
 }
 
 impl roomlight_agent::hardware::Camera for AnyCamera {
+    fn capture_image(
+        &mut self,
+    ) -> impl Future<
+        Output = Result<roomlight_calib::image_io::LinearImage, roomlight_agent::AgentError>,
+    > + Send {
+        let capture: std::pin::Pin<Box<dyn Future<Output = _> + Send + '_>> = match self {
+            Self::Synthetic(c) => Box::pin(c.capture_image()),
+            Self::Rendered(c) => Box::pin(c.capture_image()),
+        };
+        capture
+    }
+
     fn capture(
         &mut self,
     ) -> impl Future<Output = Result<Vec<LinearRgb>, roomlight_agent::AgentError>> + Send {
@@ -110,9 +122,28 @@ pub struct CalibrateArgs {
     /// Seed of the camera noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Folder for model.json, charts.json and one frame-PROJECTOR.json per luminaire.
+    /// Folder for model.json, charts.json and one frame-PROJECTOR.json per luminaire (with
+    /// --survey-only: survey.json).
     #[arg(long)]
     out: PathBuf,
+    /// Write only survey.json, what an installer configures once for calibration over the wire
+    /// (chart corners, patch sampling, the target's camera mask), and calibrate nothing: the
+    /// camera agent then calibrates each projector through its node agent as it joins.
+    #[arg(long)]
+    survey_only: bool,
+}
+
+/// What a camera agent needs to calibrate projectors over the wire (DESIGN §4): the charts'
+/// corners in the camera image (clicked once in a real room), how to sample them, and the
+/// target's camera pixels.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct SurveyFile {
+    pub camera_width: u32,
+    pub camera_height: u32,
+    pub corners: Vec<roomlight_calib::charts::ChartCorners>,
+    pub sample: roomlight_calib::charts::SampleConfig,
+    /// Row-major camera pixels of the target, increasing.
+    pub target_pixels: Vec<u32>,
 }
 
 /// A scene by name or file, with the camera's resolution optionally replaced.
@@ -175,6 +206,27 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
         roomlight_sim::Room::build(scene)
             .with_context(|| format!("building the room of {}", args.scene))?,
     );
+    if args.survey_only {
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("creating {}", args.out.display()))?;
+        let [camera_width, camera_height] = room.scene().camera.resolution;
+        return write_json(
+            &args.out.join("survey.json"),
+            &SurveyFile {
+                camera_width,
+                camera_height,
+                corners: crate::pipeline::chart_corners(&room)?,
+                sample: crate::pipeline::sample_config(&room),
+                target_pixels: room
+                    .pixels()
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.target)
+                    .map(|(i, _)| i as u32)
+                    .collect(),
+            },
+        );
+    }
     let preset = match &args.preset {
         Some(name) => room
             .preset(name)
@@ -233,11 +285,25 @@ struct CameraFile {
     token: String,
     listen: String,
     hardware: String,
-    model: PathBuf,
+    /// The calibrated model (`roomlight calibrate` or `roomlight sim` writes it); or `survey`.
+    #[serde(default)]
+    model: Option<PathBuf>,
     /// A rendered room: the charts file (`roomlight calibrate` writes it); absent: the
     /// synthetic room's patches.
     #[serde(default)]
     charts: Option<PathBuf>,
+    /// Calibration over the wire on a rendered room: the survey file (`roomlight calibrate
+    /// --survey-only` writes it); each projector is calibrated through its node agent as it
+    /// joins. Instead of `model` and `charts`.
+    #[serde(default)]
+    survey: Option<PathBuf>,
+    /// With `survey`: the LED preset whose light the projectors reproduce (default: the first).
+    #[serde(default)]
+    preset: Option<String>,
+    /// Where to write the model (problem, owners, starts) whenever a projector has been
+    /// calibrated over the wire or hot.
+    #[serde(default)]
+    model_out: Option<PathBuf>,
     #[serde(default = "heartbeat_default")]
     heartbeat_ms: u64,
     #[serde(default = "deadline_default")]
@@ -274,9 +340,16 @@ struct NodeFile {
     mdns_wait_s: u64,
     hardware: String,
     /// A rendered room: this projector's frame file (`roomlight calibrate` writes it); absent:
-    /// node values on the synthetic room.
+    /// node values on the synthetic room, or (with `rendered`) weights from the camera agent.
     #[serde(default)]
     frame: Option<PathBuf>,
+    /// A rendered room without a frame file: the camera agent calibrates this projector over
+    /// the wire (its display shows the patterns and draws the weights it is sent).
+    #[serde(default)]
+    rendered: bool,
+    /// `standard` or `large-aperture`.
+    #[serde(default = "kind_default")]
+    kind: String,
     projector: String,
     #[serde(default)]
     state_file: Option<PathBuf>,
@@ -288,6 +361,9 @@ struct NodeFile {
     start: f64,
 }
 
+fn kind_default() -> String {
+    "standard".into()
+}
 fn mdns_default() -> bool {
     true
 }
@@ -420,25 +496,143 @@ pub fn sim(args: &SimArgs) -> Result<()> {
     })
 }
 
-pub fn camera(path: &Path) -> Result<()> {
-    init_logs();
-    let file: CameraFile = read_toml(path)?;
-    let text = std::fs::read_to_string(&file.model)
-        .with_context(|| format!("reading the model {}", file.model.display()))?;
-    let model: ModelFile = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a room model", file.model.display()))?;
+/// A calibrated model file, checked.
+fn load_model(path: &Path) -> Result<ModelFile> {
+    let model: ModelFile = read_json(path, "a room model")?;
     let problem = model
         .problem
         .revalidate()
-        .with_context(|| format!("{}: invalid model", file.model.display()))?;
+        .with_context(|| format!("{}: invalid model", path.display()))?;
     for (p, nodes) in &model.owners {
         if let Some(n) = nodes.iter().find(|&&n| n as usize >= problem.nodes()) {
             bail!(
                 "{}: projector {p} owns node {n}, the model has {} nodes",
-                file.model.display(),
+                path.display(),
                 problem.nodes()
             );
         }
+    }
+    Ok(ModelFile { problem, ..model })
+}
+
+/// Calibration over the wire, before any projector: the survey, and the room's black level
+/// (LEDs off, projectors dark) and target (the LED preset) measured through the charts; the
+/// model has no nodes yet and admits every projector that says its resolution.
+async fn survey_model(
+    survey_path: &Path,
+    preset: Option<&str>,
+    client: crate::rendered::Client,
+) -> Result<(RoomModel, crate::rendered::RenderedCamera)> {
+    let survey: SurveyFile = read_json(survey_path, "a survey file")?;
+    let pixels = u64::from(survey.camera_width) * u64::from(survey.camera_height);
+    if let Some(&bad) = survey
+        .target_pixels
+        .iter()
+        .find(|&&i| u64::from(i) >= pixels)
+    {
+        bail!(
+            "{}: target pixel {bad} outside the {}×{} camera",
+            survey_path.display(),
+            survey.camera_width,
+            survey.camera_height
+        );
+    }
+    let mut target_mask = vec![false; pixels as usize];
+    for &i in &survey.target_pixels {
+        target_mask[i as usize] = true;
+    }
+    let description = client
+        .clone()
+        .describe(roomlight_proto::v1::DescribeRequest {})
+        .await
+        .context("describing the rendered room")?
+        .into_inner();
+    if (description.camera_width, description.camera_height)
+        != (survey.camera_width, survey.camera_height)
+    {
+        bail!(
+            "{}: surveyed with a {}×{} camera, the room's is {}×{}",
+            survey_path.display(),
+            survey.camera_width,
+            survey.camera_height,
+            description.camera_width,
+            description.camera_height
+        );
+    }
+    let preset = match preset {
+        Some(p) if description.presets.iter().any(|q| q == p) => p.to_string(),
+        Some(p) => bail!(
+            "preset {p:?}: the room has {}",
+            description.presets.join(", ")
+        ),
+        None => description
+            .presets
+            .first()
+            .cloned()
+            .context("the room has no LED preset to reproduce")?,
+    };
+    let camera = crate::rendered::RenderedCamera::new(
+        client,
+        survey.corners.clone(),
+        Vec::new(),
+        survey.sample,
+    );
+    let sample = |image| {
+        roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample)
+            .context("sampling the charts")
+    };
+    camera.set_lights("").await?;
+    let black = sample(camera.image().await?)?;
+    camera.set_lights(&preset).await?;
+    let target = sample(camera.image().await?)?;
+    camera.set_lights("").await?;
+    let ok = roomlight_calib::charts::PatchStatus::Ok;
+    let patches: Vec<usize> = (0..target.len())
+        .filter(|&i| black[i].status == ok && target[i].status == ok)
+        .collect();
+    if patches.is_empty() {
+        bail!("no chart patch could be measured under both the LEDs and the dark");
+    }
+    let problem = Problem::new(
+        Vec::new(),
+        patches.iter().map(|&i| black[i].mean).collect(),
+        patches.iter().map(|&i| target[i].mean).collect(),
+        patches.iter().map(|&i| target[i].std_error).collect(),
+    )?;
+    println!(
+        "survey: {} of {} patches measured, target from preset {preset}",
+        patches.len(),
+        target.len()
+    );
+    let camera = crate::rendered::RenderedCamera::new(
+        camera.client(),
+        survey.corners.clone(),
+        patches.clone(),
+        survey.sample,
+    );
+    let model = RoomModel {
+        problem,
+        owners: HashMap::new(),
+        start: None,
+        hot: Default::default(),
+        survey: Some(camera::Survey {
+            corners: survey.corners,
+            sample: survey.sample,
+            target_mask,
+            patches,
+        }),
+    };
+    Ok((model, camera))
+}
+
+pub fn camera(path: &Path) -> Result<()> {
+    init_logs();
+    let file: CameraFile = read_toml(path)?;
+    if file.model.is_some() == file.survey.is_some() {
+        bail!(
+            "{}: give either model (a calibrated room) or survey (calibration over the wire)",
+            path.display()
+        );
     }
     let config = CameraConfig {
         room: file.room.clone(),
@@ -448,18 +642,59 @@ pub fn camera(path: &Path) -> Result<()> {
         model_rounds: file.model_rounds,
         calibration_epoch: file.calibration_epoch,
         stale_frames: file.stale_frames,
+        model_out: file.model_out.clone(),
     };
     runtime()?.block_on(async {
-        let camera = match &file.charts {
-            Some(path) => {
-                let charts: ChartsFile = read_json(path, "a charts file")?;
-                if charts.patches.len() != problem.patches() {
-                    bail!("{}: {} patches, the model {} has {}", path.display(), charts.patches.len(), file.model.display(), problem.patches());
-                }
-                let client = crate::rendered::connect(file.hardware.clone()).await.with_context(|| format!("connecting to the rendered room at {}", file.hardware))?;
-                AnyCamera::Rendered(crate::rendered::RenderedCamera::new(client, charts.corners, charts.patches, charts.sample))
+        let connect_rendered = || async {
+            crate::rendered::connect(file.hardware.clone())
+                .await
+                .with_context(|| format!("connecting to the rendered room at {}", file.hardware))
+        };
+        let (model, camera) = match (&file.model, &file.survey) {
+            (_, Some(survey)) => {
+                let (model, camera) =
+                    survey_model(survey, file.preset.as_deref(), connect_rendered().await?).await?;
+                (model, AnyCamera::Rendered(camera))
             }
-            None => AnyCamera::Synthetic(RemoteCamera::connect(file.hardware.clone()).await.with_context(|| format!("connecting to the camera at {}", file.hardware))?),
+            (Some(model_path), None) => {
+                let model = load_model(model_path)?;
+                let camera = match &file.charts {
+                    Some(path) => {
+                        let charts: ChartsFile = read_json(path, "a charts file")?;
+                        if charts.patches.len() != model.problem.patches() {
+                            bail!(
+                                "{}: {} patches, the model {} has {}",
+                                path.display(),
+                                charts.patches.len(),
+                                model_path.display(),
+                                model.problem.patches()
+                            );
+                        }
+                        AnyCamera::Rendered(crate::rendered::RenderedCamera::new(
+                            connect_rendered().await?,
+                            charts.corners,
+                            charts.patches,
+                            charts.sample,
+                        ))
+                    }
+                    None => AnyCamera::Synthetic(
+                        RemoteCamera::connect(file.hardware.clone())
+                            .await
+                            .with_context(|| {
+                                format!("connecting to the camera at {}", file.hardware)
+                            })?,
+                    ),
+                };
+                let model = RoomModel {
+                    problem: model.problem,
+                    owners: model.owners,
+                    start: model.start,
+                    hot: Default::default(),
+                    survey: None,
+                };
+                (model, camera)
+            }
+            (None, None) => unreachable!("checked above"),
         };
         let listener = tokio::net::TcpListener::bind(&file.listen).await.with_context(|| format!("binding {}", file.listen))?;
         announce("camera", listener.local_addr()?);
@@ -472,7 +707,7 @@ pub fn camera(path: &Path) -> Result<()> {
         };
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
-        let (mut status, handle) = camera::serve(config, RoomModel { problem, owners: model.owners, start: model.start, hot: Default::default() }, camera, listener, cancel.clone());
+        let (mut status, handle) = camera::serve(config, model, camera, listener, cancel.clone());
         loop {
             tokio::select! {
                 () = cancel.cancelled() => break,
@@ -481,7 +716,7 @@ pub fn camera(path: &Path) -> Result<()> {
                         break;
                     }
                     let s = status.borrow().clone();
-                    println!("round {} captures {} objective {:.6e} live {}", s.round, s.captures, s.measured_objective, s.live_projectors);
+                    println!("round {} captures {} objective {:.6e} live {} calibrated {}", s.round, s.captures, s.measured_objective, s.live_projectors, s.calibrated_hot);
                     let _ = std::io::stdout().flush();
                 }
             }
@@ -505,6 +740,14 @@ pub fn node(path: &Path) -> Result<()> {
     };
     rule.validate()
         .with_context(|| format!("{}: theta", path.display()))?;
+    let kind = match file.kind.as_str() {
+        "standard" => roomlight_proto::v1::ProjectorKind::Standard,
+        "large-aperture" => roomlight_proto::v1::ProjectorKind::LargeAperture,
+        other => bail!(
+            "{}: kind {other:?}, expected standard or large-aperture",
+            path.display()
+        ),
+    };
     if !(0.0..=1.0).contains(&file.start) {
         bail!(
             "{}: start {}, expected a value in [0, 1]",
@@ -544,7 +787,42 @@ pub fn node(path: &Path) -> Result<()> {
                     .with_context(|| {
                         format!("connecting to the rendered room at {}", file.hardware)
                     })?;
-                crate::rendered::rendered_display(client, spec, cancel.clone())
+                let (name, size) = (spec.projector.clone(), (spec.width, spec.height));
+                crate::rendered::rendered_display(client, name, size, Some(spec), cancel.clone())
+            }
+            None if file.rendered => {
+                let client = crate::rendered::connect(file.hardware.clone())
+                    .await
+                    .with_context(|| {
+                        format!("connecting to the rendered room at {}", file.hardware)
+                    })?;
+                // The projector reports its own mode, as a real display does.
+                let room = client
+                    .clone()
+                    .describe(roomlight_proto::v1::DescribeRequest {})
+                    .await
+                    .context("describing the rendered room")?
+                    .into_inner();
+                let Some(p) = room.projectors.iter().find(|p| p.name == file.projector) else {
+                    bail!(
+                        "{}: projector {:?}, the rendered room has {}",
+                        path.display(),
+                        file.projector,
+                        room.projectors
+                            .iter()
+                            .map(|p| p.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
+                };
+                let size = (p.width, p.height);
+                crate::rendered::rendered_display(
+                    client,
+                    p.name.clone(),
+                    size,
+                    None,
+                    cancel.clone(),
+                )
             }
             None => remote_display(file.hardware.clone(), cancel.clone())
                 .await
@@ -555,6 +833,7 @@ pub fn node(path: &Path) -> Result<()> {
             room: file.room,
             token: file.token,
             projector_id: file.projector,
+            kind,
             rule,
             start: LinearRgb::splat(file.start),
             state_file: file.state_file,

@@ -3,6 +3,7 @@
 //! processes can drive the rendered room as they would real projectors and a real camera.
 
 use anyhow::{Context, Result};
+use roomlight_agent::hardware::Pattern;
 use roomlight_proto::v1;
 use roomlight_sim::{CameraNoise, Frame, ProjectorImage, Room};
 use std::sync::{Arc, Mutex, PoisonError};
@@ -251,7 +252,43 @@ fn decode_image(image: v1::Image) -> Result<roomlight_calib::image_io::LinearIma
     })
 }
 
+impl RenderedCamera {
+    /// The client it captures through.
+    pub fn client(&self) -> Client {
+        self.client.clone()
+    }
+
+    /// Switches the room's LEDs to `preset` (empty: all off).
+    pub async fn set_lights(&self, preset: &str) -> Result<(), roomlight_agent::AgentError> {
+        let mut client = self.client.clone();
+        client
+            .set_lights(v1::SetLightsRequest {
+                preset: preset.to_string(),
+            })
+            .await?;
+        Ok(())
+    }
+
+    /// One whole image.
+    pub async fn image(
+        &self,
+    ) -> Result<roomlight_calib::image_io::LinearImage, roomlight_agent::AgentError> {
+        let mut client = self.client.clone();
+        let image = client.capture_image(v1::CaptureRequest {}).await?;
+        decode_image(image.into_inner()).map_err(roomlight_agent::AgentError::Protocol)
+    }
+}
+
 impl roomlight_agent::hardware::Camera for RenderedCamera {
+    fn capture_image(
+        &mut self,
+    ) -> impl Future<
+        Output = Result<roomlight_calib::image_io::LinearImage, roomlight_agent::AgentError>,
+    > + Send {
+        let this = self.clone();
+        async move { this.image().await }
+    }
+
     fn capture(
         &mut self,
     ) -> impl Future<Output = Result<Vec<roomlight_core::LinearRgb>, roomlight_agent::AgentError>> + Send
@@ -312,22 +349,82 @@ impl FrameSpec {
     }
 }
 
-/// A node agent's display on a rendered room: node values drawn with `spec` into its
-/// projector's 8-bit image and shown through `client` until `cancel`; a flush resolves once the
-/// room has the image.
+/// The 8-bit image of a whole-frame calibration pattern at `width`×`height`.
+fn pattern_image(pattern: Pattern, width: u32, height: u32) -> Vec<u8> {
+    let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    match pattern {
+        Pattern::Uniform(code) => {
+            let px = code.map(byte);
+            (0..width * height).flat_map(|_| px).collect()
+        }
+        Pattern::Structured { pattern, coding } => {
+            match roomlight_calib::graycode::Manifest::with_coding(width, height, coding) {
+                Ok(m) => m
+                    .pattern_values(pattern)
+                    .into_iter()
+                    .flat_map(|v| [byte(v); 3])
+                    .collect(),
+                // Too large to code: dark (the camera agent's decode then finds nothing).
+                Err(e) => {
+                    tracing::warn!(error = %e, "cannot draw the pattern");
+                    vec![0; (width * height * 3) as usize]
+                }
+            }
+        }
+    }
+}
+
+/// A node agent's display on a rendered room, for projector `projector` of `width`×`height`:
+/// node values drawn with `spec` (a frame file, or the weights and response the camera agent
+/// assigns over the wire) into the projector's 8-bit image, or a calibration pattern until the
+/// next value; before it has weights it shows black. Shown through `client` until `cancel`; a
+/// flush resolves once the room has the image.
 pub fn rendered_display(
     client: Client,
-    spec: FrameSpec,
+    projector: String,
+    (width, height): (u32, u32),
+    mut spec: Option<FrameSpec>,
     cancel: CancellationToken,
 ) -> roomlight_agent::remote::QueuedDisplay {
+    use roomlight_agent::remote::Update;
     let mut values = std::collections::HashMap::new();
-    roomlight_agent::remote::QueuedDisplay::spawn(cancel, move |batch| {
-        values.extend(batch);
+    let mut pattern: Option<Pattern> = None;
+    roomlight_agent::remote::QueuedDisplay::spawn(cancel, Some((width, height)), move |batch| {
+        for update in batch {
+            match update {
+                Update::Value(node, x) => {
+                    values.insert(node, x);
+                    pattern = None;
+                }
+                Update::Pattern(p) => pattern = Some(p),
+                Update::Assign(a) if (a.width, a.height) != (width, height) => {
+                    tracing::warn!(
+                        "assignment for a {}×{} projector, this one is {width}×{height}: ignored",
+                        a.width,
+                        a.height
+                    );
+                }
+                Update::Assign(a) => {
+                    spec = Some(FrameSpec {
+                        projector: projector.clone(),
+                        width,
+                        height,
+                        response: a.response,
+                        nodes: a.nodes,
+                    });
+                }
+            }
+        }
+        let rgb8 = match (pattern, &spec) {
+            (Some(p), _) => pattern_image(p, width, height),
+            (None, Some(spec)) => spec.image(&values),
+            (None, None) => vec![0; (width * height * 3) as usize],
+        };
         let request = v1::ShowImageRequest {
-            projector: spec.projector.clone(),
-            width: spec.width,
-            height: spec.height,
-            rgb8: spec.image(&values),
+            projector: projector.clone(),
+            width,
+            height,
+            rgb8,
         };
         let mut client = client.clone();
         async move {
@@ -373,7 +470,13 @@ mod tests {
             response: roomlight_calib::response::Response::linear(),
             nodes: vec![(0, (0..w * h).map(|i| (i, 1.0)).collect())],
         };
-        let mut display = rendered_display(client.clone(), spec, cancel.clone());
+        let mut display = rendered_display(
+            client.clone(),
+            "left".into(),
+            (w, h),
+            Some(spec),
+            cancel.clone(),
+        );
         let corners = crate::pipeline::chart_corners(&room).expect("corners");
         let sample = crate::pipeline::sample_config(&room);
         let patches: Vec<usize> = (0..room.patches()).collect();
