@@ -170,6 +170,10 @@ struct Live {
     assignments: HashMap<String, Assignment>,
     /// The chart of each node segmented over the wire (for its conventional start).
     charts: HashMap<u32, usize>,
+    /// Patches some projector's light made unmeasurable during its calibration over the wire
+    /// (saturated, or crossed by an edge): no column covers them, their target is their black
+    /// level, and their measured errors are taken as zero.
+    excluded: Vec<bool>,
 }
 
 struct Shared {
@@ -685,7 +689,7 @@ async fn show_pattern(
 }
 
 /// Shows `lit` at white and the projector's other nodes at black (all black for `None`), waits
-/// for the projector to acknowledge the pattern, and captures.
+/// for the projector to acknowledge the pattern, and captures (see [`capture_measured`]).
 async fn show_and_capture(
     shared: &Shared,
     camera: &mut impl Camera,
@@ -693,7 +697,7 @@ async fn show_and_capture(
     (tx, nodes): (&mpsc::Sender<Result<v1::RoomMessage, Status>>, &[u32]),
     lit: Option<u32>,
     captures: &mut u64,
-) -> Option<Vec<LinearRgb>> {
+) -> Option<(Vec<LinearRgb>, Vec<bool>)> {
     let values = nodes
         .iter()
         .map(|&n| v1::NodeState {
@@ -710,7 +714,69 @@ async fn show_and_capture(
     if !show_pattern(shared, projector, tx, pattern).await {
         return None;
     }
-    capture_fresh(shared, camera, captures).await
+    capture_measured(shared, camera, captures).await
+}
+
+/// A calibration capture of the model's patches, with whether each could be measured: with a
+/// survey, a whole image sampled at the charts (a saturated patch, or one an edge crosses, is
+/// not measured: its trimmed mean is not linear in the light); without, the camera's patches,
+/// all taken as measured.
+async fn capture_measured(
+    shared: &Shared,
+    camera: &mut impl Camera,
+    captures: &mut u64,
+) -> Option<(Vec<LinearRgb>, Vec<bool>)> {
+    let Some(survey) = &shared.survey else {
+        let y = capture_fresh(shared, camera, captures).await?;
+        let ok = vec![true; y.len()];
+        return Some((y, ok));
+    };
+    let image = capture_image_fresh(shared, camera, captures).await?;
+    let samples =
+        match roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample) {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::warn!(error = %e, "the charts could not be sampled");
+                return None;
+            }
+        };
+    let mut means = Vec::with_capacity(survey.patches.len());
+    let mut ok = Vec::with_capacity(survey.patches.len());
+    for &i in &survey.patches {
+        let Some(sample) = samples.get(i) else {
+            tracing::error!(
+                patch = i,
+                charts = samples.len(),
+                "the survey names a patch the charts lack"
+            );
+            return None;
+        };
+        means.push(sample.mean);
+        ok.push(sample.status == roomlight_calib::charts::PatchStatus::Ok);
+    }
+    Some((means, ok))
+}
+
+/// One whole image, the camera's stale frames discarded first (every frame counted).
+async fn capture_image_fresh(
+    shared: &Shared,
+    camera: &mut impl Camera,
+    captures: &mut u64,
+) -> Option<LinearImage> {
+    let mut last = None;
+    for _ in 0..=shared.config.stale_frames {
+        match camera.capture_image().await {
+            Ok(image) => {
+                *captures += 1;
+                last = Some(image);
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "image capture failed");
+                return None;
+            }
+        }
+    }
+    last
 }
 
 /// Shows a whole-frame pattern on `projector`, waits for it, and captures a whole image (the
@@ -726,20 +792,7 @@ async fn show_and_capture_image(
     if !show_pattern(shared, projector, tx, wire_pattern(pattern)).await {
         return None;
     }
-    let mut last = None;
-    for _ in 0..=shared.config.stale_frames {
-        match camera.capture_image().await {
-            Ok(image) => {
-                *captures += 1;
-                last = Some(image);
-            }
-            Err(e) => {
-                tracing::warn!(error = %e, "image capture failed");
-                return None;
-            }
-        }
-    }
-    last
+    capture_image_fresh(shared, camera, captures).await
 }
 
 /// A whole-frame pattern as a Show pattern (white and black as uniform codes).
@@ -1017,7 +1070,7 @@ async fn calibrate_hot(
         return false;
     };
     tracing::info!(%projector, nodes = nodes.len(), "hot calibration");
-    let Some(black) =
+    let Some((black, mut measurable)) =
         show_and_capture(shared, camera, projector, (&tx, &nodes), None, captures).await
     else {
         return false;
@@ -1031,11 +1084,14 @@ async fn calibrate_hot(
         .collect();
     let mut measured = Vec::with_capacity(nodes.len());
     for &n in &nodes {
-        let Some(white) =
+        let Some((white, ok)) =
             show_and_capture(shared, camera, projector, (&tx, &nodes), Some(n), captures).await
         else {
             return false;
         };
+        for (m, o) in measurable.iter_mut().zip(ok) {
+            *m &= o;
+        }
         let dense: Vec<LinearRgb> = white
             .iter()
             .zip(&black)
@@ -1057,10 +1113,49 @@ async fn calibrate_hot(
                 *slot = column;
             }
         }
+        // Patches this projector's light makes unmeasurable leave the model for good: every
+        // column loses them, their target becomes their black level and their errors are
+        // zero, so the model and the measured G agree and no node acts on them.
+        let newly: Vec<usize> = (0..measurable.len())
+            .filter(|&i| !measurable[i] && !live.excluded.get(i).copied().unwrap_or(true))
+            .collect();
+        let mut target = live.problem.target().to_vec();
+        if !newly.is_empty() {
+            tracing::info!(%projector, patches = ?newly, "patches not measurable under its light: left out");
+            for &i in &newly {
+                live.excluded[i] = true;
+            }
+            for (t, b) in target
+                .iter_mut()
+                .zip(live.problem.black())
+                .zip(&live.excluded)
+                .filter(|(_, x)| **x)
+                .map(|(tb, _)| tb)
+            {
+                *t = *b;
+            }
+            let excluded = live.excluded.clone();
+            for column in &mut columns {
+                let (support, values): (Vec<u32>, Vec<LinearRgb>) = column
+                    .support()
+                    .iter()
+                    .zip(column.values())
+                    .filter(|(i, _)| !excluded[**i as usize])
+                    .map(|(i, v)| (*i, *v))
+                    .unzip();
+                match AttenuationColumn::new(support, values) {
+                    Ok(c) => *column = c,
+                    Err(e) => {
+                        tracing::error!(%projector, error = %e, "hot calibration refused");
+                        return false;
+                    }
+                }
+            }
+        }
         let problem = match Problem::new(
             columns,
             live.problem.black().to_vec(),
-            live.problem.target().to_vec(),
+            target,
             live.problem.noise().to_vec(),
         ) {
             Ok(p) => p,
@@ -1165,6 +1260,7 @@ pub fn serve(
         .collect();
     let problem = model.problem.without_nodes(&unknown);
     let white = problem.white_response();
+    let patches = problem.patches();
     let start = match model.start {
         Some(v) => v.into_iter().map(Some).collect(),
         None => vec![None; problem.nodes()],
@@ -1180,6 +1276,7 @@ pub fn serve(
             start,
             assignments: HashMap::new(),
             charts: HashMap::new(),
+            excluded: vec![false; patches],
         }),
         pattern_seq: AtomicU64::new(0),
         registry: Mutex::new(Registry::default()),
@@ -1250,7 +1347,16 @@ pub fn serve(
                     tokio::time::sleep(Duration::from_millis(200)).await;
                     continue;
                 };
-                let errors: Vec<LinearRgb> = target.iter().zip(&y).map(|(r, y)| *r - *y).collect();
+                let errors: Vec<LinearRgb> = {
+                    let live = shared.live();
+                    live.problem
+                        .target()
+                        .iter()
+                        .zip(&y)
+                        .zip(&live.excluded)
+                        .map(|((r, y), &out)| if out { LinearRgb::ZERO } else { *r - *y })
+                        .collect()
+                };
                 let summary = match aggregator.measured(errors) {
                     Ok(s) => s,
                     Err(e) => {

@@ -429,7 +429,8 @@ fn the_rendered_room_converges_through_separate_processes() {
 /// measures their attenuation while the others keep their values. Checked against the
 /// simulator: every luminaire gets nodes, each response recovers the scene's hidden gamma
 /// within 2%, and the room converges to within 1% of the optimum of the model built over the
-/// wire. Then a node is killed with SIGKILL and restarted: it relights from its state file
+/// wire — first without one luminaire, then again after it joined the lit room (its optimum
+/// lower: the joiner's light is measured and used). Then a node is killed with SIGKILL and restarted: it relights from its state file
 /// (values and weights), is admitted without being calibrated again, and the room converges
 /// again. Nothing is left behind.
 #[test]
@@ -511,19 +512,88 @@ fn the_room_is_calibrated_over_the_wire_and_survives_a_killed_node() {
         .expect("node config");
         procs.spawn(name, &["node", "--config", &format!("{name}.toml")], d);
     };
-    for (name, large, _) in &luminaires {
-        start_node(&mut procs, name, *large);
+    // All but one join a dark room; the last joins the lit, converged room.
+    let joiner = luminaires
+        .iter()
+        .rposition(|(_, large, _)| !large)
+        .expect("a standard luminaire");
+    for (k, (name, large, _)) in luminaires.iter().enumerate() {
+        if k != joiner {
+            start_node(&mut procs, name, *large);
+        }
     }
     let n = luminaires.len();
-    let ready = wait_line(&cam_out, Duration::from_secs(180), |l| {
-        status(l).is_some_and(|(_, _, live)| live == n) && calibrated(l) == Some(n as u64)
-    });
-    let (calibration_captures, _, _) = status(&ready).expect("status");
-    let model: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
-            .expect("json");
+    let model_of = |count: usize| {
+        let ready = wait_line(&cam_out, Duration::from_secs(180), |l| {
+            status(l).is_some_and(|(_, _, live)| live == count)
+                && calibrated(l) == Some(count as u64)
+        });
+        let model: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
+                .expect("json");
+        let problem: roomlight_core::Problem =
+            serde_json::from_value(model["problem"].clone()).expect("problem");
+        let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
+        (status(&ready).expect("status").0, model, best)
+    };
+    let converge = |best: &roomlight_core::optimum::Optimum, count: usize, since: u64| {
+        let line = wait_line(&cam_out, Duration::from_secs(120), |l| {
+            status(l).is_some_and(|(_, g, live)| live == count && best.excess(g) < 1e-2)
+        });
+        let (captures, g, _) = status(&line).expect("status");
+        assert!(best.excess(g) < 1e-2, "{line}: excess {}", best.excess(g));
+        eprintln!(
+            "{count} projectors: within 1% of G* = {:.4e} {} captures after their calibration ({line})",
+            best.objective,
+            captures - since
+        );
+        assert!(captures - since < 30, "{line}");
+    };
+    let (calibrated_at, first_model, first) = model_of(n - 1);
+    converge(&first, n - 1, calibrated_at);
+    start_node(&mut procs, &luminaires[joiner].0, false);
+    let (calibrated_at, model, best) = model_of(n);
+    // The room without the joiner, on the patches the final model still measures (the
+    // joiner's light may leave more out), for a fair comparison of the optima.
     let problem: roomlight_core::Problem =
         serde_json::from_value(model["problem"].clone()).expect("problem");
+    let without: roomlight_core::Problem =
+        serde_json::from_value(first_model["problem"].clone()).expect("problem");
+    let out: Vec<bool> = (0..problem.patches())
+        .map(|i| {
+            problem.target()[i] == problem.black()[i]
+                && problem
+                    .columns()
+                    .iter()
+                    .all(|c| c.get(i as u32) == roomlight_core::LinearRgb::ZERO)
+        })
+        .collect();
+    let columns = without
+        .columns()
+        .iter()
+        .map(|c| {
+            let (s, v): (Vec<u32>, Vec<roomlight_core::LinearRgb>) =
+                c.iter().filter(|(i, _)| !out[*i as usize]).unzip();
+            roomlight_core::AttenuationColumn::new(s, v).expect("column")
+        })
+        .collect();
+    let target = (0..without.patches())
+        .map(|i| {
+            if out[i] {
+                without.black()[i]
+            } else {
+                without.target()[i]
+            }
+        })
+        .collect();
+    let without = roomlight_core::Problem::new(
+        columns,
+        without.black().to_vec(),
+        target,
+        without.noise().to_vec(),
+    )
+    .expect("problem");
+    let first_common = roomlight_core::optimum::optimum(&without).expect("optimum");
     let owners = model["owners"].as_object().expect("owners");
     for (name, large, gamma) in &luminaires {
         let nodes = owners[name.as_str()].as_array().expect("nodes").len();
@@ -548,17 +618,26 @@ fn the_room_is_calibrated_over_the_wire_and_survives_a_killed_node() {
         let weights = state["assignment"]["nodes"].as_array().expect("weights");
         assert_eq!(weights.len(), nodes, "{name}: weights for every node");
     }
-    let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
+    // Its light is measured and used: the optimum with it is lower than without, on the same
+    // patches.
+    assert!(
+        best.objective < 0.5 * first_common.objective,
+        "G* with the joiner {} vs without {} (on the same patches; {} before)",
+        best.objective,
+        first_common.objective,
+        first.objective
+    );
+    eprintln!(
+        "G* without the joiner {:.3e} ({:.3e} on the patches kept after), with it {:.3e}; {} of {} patches left out",
+        first.objective,
+        first_common.objective,
+        best.objective,
+        out.iter().filter(|&&o| o).count(),
+        out.len()
+    );
+    converge(&best, n, calibrated_at);
     let converged =
         |l: &str| status(l).is_some_and(|(_, g, live)| live == n && best.excess(g) < 1e-2);
-    let line = wait_line(&cam_out, Duration::from_secs(120), converged);
-    let (captures, g, _) = status(&line).expect("status");
-    assert!(best.excess(g) < 1e-2, "{line}: excess {}", best.excess(g));
-    eprintln!(
-        "calibrated over the wire in {calibration_captures} captures; within 1% of G* after {} more ({line})",
-        captures - calibration_captures
-    );
-    assert!(captures - calibration_captures < 30, "{line}");
     // SIGKILL a node and start it again: the camera agent notices it left, re-admits it with
     // its weights and attenuation, and does not calibrate it again.
     let (victim, large, _) = luminaires[0].clone();
