@@ -3,8 +3,12 @@
 # simulated lab (in one process, through captures) and writes the files; `roomlight sim --scene`
 # serves the rendered room; the camera agent samples its charts; one node agent per luminaire
 # draws its nodes into its projector's image. Ctrl-C stops them all.
-# Usage: deploy/local-lab.sh [SCENE]   (default: the embedded lab; `small` for the test room)
+# With --wire, nothing is calibrated beforehand but the survey (chart corners, target mask): the
+# camera agent calibrates each projector through its node agent as it joins (DESIGN §4, §6).
+# Usage: deploy/local-lab.sh [--wire] [SCENE]   (default: the embedded lab; `small` for the test room)
 set -euo pipefail
+wire=false
+if [ "${1:-}" = --wire ]; then wire=true; shift; fi
 scene=${1:-default}
 here=$(cd "$(dirname "$0")/.." && pwd)
 work=$(mktemp -d)
@@ -21,7 +25,15 @@ stop() {
 }
 trap stop INT TERM EXIT
 cd "$work"
-"$bin" calibrate --scene "$scene" "${camera_size[@]}" --out . > calibrate.log
+if $wire; then
+    "$bin" calibrate --scene "$scene" "${camera_size[@]}" --survey-only --out . > calibrate.log
+    source_lines="survey = \"survey.json\"
+model_out = \"model.json\""
+else
+    "$bin" calibrate --scene "$scene" "${camera_size[@]}" --out . > calibrate.log
+    source_lines="model = \"model.json\"
+charts = \"charts.json\""
+fi
 "$bin" sim --scene "$scene" "${camera_size[@]}" --listen 127.0.0.1:50060 > sim.log 2>&1 &
 pids+=($!)
 until grep -q "listening on" sim.log; do sleep 0.1; done
@@ -30,26 +42,36 @@ room = "rendered"
 token = "change-me"
 listen = "127.0.0.1:50061"
 hardware = "http://127.0.0.1:50060"
-model = "model.json"
-charts = "charts.json"
+$source_lines
 model_rounds = 20
 mdns = false
 TOML
 "$bin" camera --config camera.toml > camera.log 2>&1 &
 pids+=($!)
 until grep -q "listening on" camera.log; do sleep 0.1; done
-for frame in frame-*.json; do
-    p=${frame#frame-}; p=${p%.json}
-    cat > "$p.toml" <<TOML
+start_node() { # projector, then the lines that say where its weights come from
+    cat > "$1.toml" <<TOML
 room = "rendered"
 token = "change-me"
 camera = "http://127.0.0.1:50061"
 hardware = "http://127.0.0.1:50060"
-frame = "$frame"
-projector = "$p"
+projector = "$1"
+state_file = "$1.state.json"
+$2
 TOML
-    "$bin" node --config "$p.toml" > "$p.log" 2>&1 &
+    "$bin" node --config "$1.toml" > "$1.log" 2>&1 &
     pids+=($!)
-done
+}
+if $wire; then
+    while read -r _ p kind; do
+        start_node "$p" "rendered = true
+kind = \"$kind\""
+    done < <(grep '^luminaire ' calibrate.log)
+else
+    for frame in frame-*.json; do
+        p=${frame#frame-}; p=${p%.json}
+        start_node "$p" "frame = \"$frame\""
+    done
+fi
 echo "rendered $scene running in $work (Ctrl-C stops it); the camera agent's rounds: $work/camera.log"
 tail -f camera.log

@@ -1042,8 +1042,12 @@ async fn segment_over_wire(
 
 /// Measures a hot projector's attenuation (DESIGN §4): its nodes all at black, then each alone
 /// at white, one capture each, while every other projector keeps its values (no errors are
-/// sent meanwhile). `p = max(y_white − y_black, 0)`, entries at or below 3√2 σ (the noise of a
-/// difference of two captures) dropped. Then the projector gets its attenuation and every
+/// sent meanwhile). `p = max(y_white − y_black, 0)`, entries at or below √2 σ (one standard
+/// deviation of a difference of two captures) dropped: about the level the Hadamard path's 3σ
+/// cut reaches with its lower variance. At 3√2 σ the calibrated lab's model dropped enough
+/// faint light that the room measured 6% below the model's optimum (1.4% at √2 σ). Also
+/// patches a capture could not measure leave the model (see [`capture_measured`]). Then the
+/// projector gets its attenuation and every
 /// attached projector its `s` anew (the new light changes it). False when the projector left,
 /// did not show a pattern in time, or the camera failed: it stays uncalibrated and is tried
 /// again.
@@ -1080,7 +1084,7 @@ async fn calibrate_hot(
         .problem
         .noise()
         .iter()
-        .map(|s| *s * (3.0 * std::f64::consts::SQRT_2))
+        .map(|s| *s * (1.0 * std::f64::consts::SQRT_2))
         .collect();
     let mut measured = Vec::with_capacity(nodes.len());
     for &n in &nodes {

@@ -209,6 +209,16 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
     if args.survey_only {
         std::fs::create_dir_all(&args.out)
             .with_context(|| format!("creating {}", args.out.display()))?;
+        // The luminaires a node agent is started for (deploy/local-lab.sh reads these lines).
+        for (p, spec) in room.projectors().iter().zip(&room.scene().projectors) {
+            if spec.role == roomlight_sim::scene::ProjectorRole::Luminaire {
+                let kind = match p.kind {
+                    roomlight_sim::scene::ProjectorKind::LargeAperture => "large-aperture",
+                    _ => "standard",
+                };
+                println!("luminaire {} {kind}", p.name);
+            }
+        }
         let [camera_width, camera_height] = room.scene().camera.resolution;
         return write_json(
             &args.out.join("survey.json"),
