@@ -58,6 +58,14 @@ enum Command {
         #[arg(long)]
         config: PathBuf,
     },
+    /// Prints a model file's size and its optimum G* (to read the camera agent's objective
+    /// against), e.g. the `model_out` of a room calibrated over the wire.
+    Optimum {
+        /// A model file (`roomlight calibrate`, `roomlight sim --model-out`, or a camera
+        /// agent's `model_out`).
+        #[arg(long)]
+        model: PathBuf,
+    },
     /// Gray-code structured light for real photographs.
     Graycode {
         #[command(subcommand)]
@@ -168,6 +176,7 @@ fn main() -> Result<()> {
         Command::Calibrate(args) => procs::calibrate(&args),
         Command::Camera { config } => procs::camera(&config),
         Command::Node { config } => procs::node(&config),
+        Command::Optimum { model } => procs::optimum(&model),
         Command::Graycode { which } => graycode_cmd::run(which),
         Command::Bench(args) => bench(args),
     }

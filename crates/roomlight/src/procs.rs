@@ -525,6 +525,34 @@ fn load_model(path: &Path) -> Result<ModelFile> {
     Ok(ModelFile { problem, ..model })
 }
 
+/// `roomlight optimum`: nodes, patches (and those left out), G* and G with every node black.
+pub fn optimum(path: &Path) -> Result<()> {
+    let model = load_model(path)?;
+    let p = &model.problem;
+    let best = roomlight_core::optimum::optimum(p)
+        .with_context(|| format!("{}: the optimum", path.display()))?;
+    // A patch left out by calibration over the wire: no column covers it and its target is
+    // its black level.
+    let left_out = (0..p.patches())
+        .filter(|&i| {
+            p.target()[i] == p.black()[i]
+                && p.columns()
+                    .iter()
+                    .all(|c| c.get(i as u32) == LinearRgb::ZERO)
+        })
+        .count();
+    println!(
+        "{}: {} nodes of {} projectors, {} patches ({left_out} left out), G* {:.6e}, G at black {:.6e}",
+        path.display(),
+        p.nodes(),
+        model.owners.len(),
+        p.patches(),
+        best.objective,
+        best.objective_black
+    );
+    Ok(())
+}
+
 /// Calibration over the wire, before any projector: the survey, and the room's black level
 /// (LEDs off, projectors dark) and target (the LED preset) measured through the charts; the
 /// model has no nodes yet and admits every projector that says its resolution.

@@ -623,6 +623,25 @@ fn the_room_is_calibrated_over_the_wire_and_survives_a_killed_node() {
         let weights = state["assignment"]["nodes"].as_array().expect("weights");
         assert_eq!(weights.len(), nodes, "{name}: weights for every node");
     }
+    // `roomlight optimum` reads the same model and prints the same G*.
+    let printed = Command::new(env!("CARGO_BIN_EXE_roomlight"))
+        .args(["optimum", "--model", "model.json"])
+        .current_dir(d)
+        .output()
+        .expect("run optimum");
+    let printed = String::from_utf8_lossy(&printed.stdout).to_string();
+    let g_star: f64 = printed
+        .split("G* ")
+        .nth(1)
+        .and_then(|r| r.split(',').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no G* in {printed:?}"));
+    assert!((g_star / best.objective - 1.0).abs() < 1e-5, "{printed}");
+    let left_out = out.iter().filter(|&&o| o).count();
+    assert!(
+        printed.contains(&format!("({left_out} left out)")),
+        "{printed}: {left_out} left out"
+    );
     // Its light is measured and used: the optimum with it is lower than without, on the same
     // patches.
     assert!(
