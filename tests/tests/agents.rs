@@ -46,7 +46,7 @@ impl Sandbox {
 
     /// The room with `hot` unknown to the camera agent until it joins and is measured.
     async fn start_hot(model_rounds: usize, hot: &str, plant: PlantConfig) -> Self {
-        Self::start_full(model_rounds, None, plant, Some(hot), |c, _| c).await
+        Self::start_full(model_rounds, None, plant, Some(hot), None, |c, _| c).await
     }
 
     /// The same room with a start handed out by the camera agent, a plant of one's own and the
@@ -57,7 +57,7 @@ impl Sandbox {
         plant: PlantConfig,
         wrap: impl FnOnce(VirtualCamera, VirtualRoom) -> C,
     ) -> Self {
-        Self::start_full(model_rounds, start, plant, None, wrap).await
+        Self::start_full(model_rounds, start, plant, None, None, wrap).await
     }
 
     async fn start_full<C: Camera + Send + 'static>(
@@ -65,6 +65,7 @@ impl Sandbox {
         start: Option<Vec<LinearRgb>>,
         plant: PlantConfig,
         hot: Option<&str>,
+        survey: Option<camera::Survey>,
         wrap: impl FnOnce(VirtualCamera, VirtualRoom) -> C,
     ) -> Self {
         let problem = synthetic_room(&SyntheticConfig::new(12, 4))
@@ -121,7 +122,7 @@ impl Sandbox {
                 owners: owners.clone(),
                 start: start.clone(),
                 hot: hot.into_iter().map(String::from).collect(),
-                survey: None,
+                survey,
             },
             wrap(room.camera(), room.clone()),
             listener,
@@ -910,4 +911,92 @@ async fn a_round_does_not_wait_for_a_projector_that_left_during_it() {
     .await
     .expect("the rounds went on without waiting for p1's contributions");
     cancel.cancel();
+}
+
+/// Calibration over the wire needs images and a projector that says its size. A projector
+/// the model does not know and whose Hello gives no resolution is refused with a status that
+/// says so; one that does is admitted, but the virtual camera delivers patches only, so its
+/// calibration fails (logged) and is retried — and meanwhile the calibrated projectors go on
+/// with their rounds and reach the optimum without it, its display never drawn on by rounds.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_projector_that_cannot_be_calibrated_over_the_wire_does_not_stop_the_room() {
+    use roomlight_proto::v1;
+    let survey = camera::Survey {
+        corners: Vec::new(),
+        sample: roomlight_calib::charts::SampleConfig::default(),
+        target_mask: Vec::new(),
+        patches: Vec::new(),
+    };
+    let mut sb = Sandbox::start_full(
+        5,
+        None,
+        PlantConfig::default(),
+        None,
+        Some(survey),
+        |c, _| c,
+    )
+    .await;
+    let mut client = v1::room_client::RoomClient::connect(sb.endpoint.clone())
+        .await
+        .expect("connect");
+    let refused = tokio::time::timeout(
+        Duration::from_secs(10),
+        client.attach(tokio_stream::iter(vec![hello("newcomer")])),
+    )
+    .await
+    .expect("an answer in time")
+    .expect_err("no resolution: refused");
+    assert_eq!(refused.code(), tonic::Code::FailedPrecondition, "{refused}");
+    assert!(
+        refused.message().contains("newcomer") && refused.message().contains("resolution"),
+        "{refused}"
+    );
+    for p in ["p0", "p1", "p2"] {
+        sb.join(p);
+    }
+    // A newcomer whose display draws pixels (and shows every pattern it is sent).
+    let cancel = sb.cancel.child_token();
+    let shown = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let counter = shown.clone();
+    let display = roomlight_agent::remote::QueuedDisplay::spawn(
+        cancel.clone(),
+        Some((16, 8)),
+        move |batch| {
+            counter.fetch_add(batch.len(), std::sync::atomic::Ordering::Relaxed);
+            async {}
+        },
+    );
+    let config = NodeConfig {
+        endpoint: sb.endpoint.clone(),
+        room: "lab".into(),
+        token: TOKEN.into(),
+        projector_id: "newcomer".into(),
+        kind: v1::ProjectorKind::Standard,
+        rule: StepRule::Momentum { theta: 1.0 },
+        start: LinearRgb::splat(0.5),
+        state_file: None,
+    };
+    let newcomer = tokio::spawn(node::run(config, display, cancel));
+    let truth = sb.problem.clone();
+    let attached = sb
+        .wait(Duration::from_secs(60), |s| s.live_projectors == 4)
+        .await;
+    let best = optimum(&truth).expect("optimum");
+    // Rounds go on while the newcomer is attached (and failing its calibration).
+    let status = sb
+        .wait(Duration::from_secs(60), |s| {
+            s.live_projectors == 4
+                && s.captures >= attached.captures + 5
+                && best.excess(s.measured_objective) < 1e-2
+        })
+        .await;
+    assert_eq!(
+        status.calibrated_hot, 0,
+        "the newcomer cannot be calibrated"
+    );
+    assert!(!newcomer.is_finished(), "the newcomer stays attached");
+    assert!(
+        shown.load(std::sync::atomic::Ordering::Relaxed) > 0,
+        "the newcomer was shown calibration patterns"
+    );
 }

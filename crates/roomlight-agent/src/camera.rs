@@ -1314,6 +1314,7 @@ pub fn serve(
             let mut captures = 0u64;
             let mut calibrated_hot = 0u64;
             let mut failed_hot = 0u32;
+            let mut retry_hot_at = tokio::time::Instant::now();
             let mut previous: Option<f64> = None;
             let mut quiet = 0u32;
             // A stop request ends the rounds between two rounds, never inside one.
@@ -1335,15 +1336,31 @@ pub fn serve(
                     .find(|(_, p)| !p.calibrated)
                     .map(|(id, _)| id.clone());
                 if let Some(projector) = hot {
-                    if calibrate_hot(&shared, &mut camera, &projector, &mut captures).await {
-                        calibrated_hot += 1;
-                        failed_hot = 0;
-                    } else {
+                    if tokio::time::Instant::now() >= retry_hot_at {
+                        if calibrate_hot(&shared, &mut camera, &projector, &mut captures).await {
+                            calibrated_hot += 1;
+                            failed_hot = 0;
+                            continue;
+                        }
                         // Tried again, backing off to 3.2 s (the cause is logged each time).
                         failed_hot = (failed_hot + 1).min(4);
-                        tokio::time::sleep(Duration::from_millis(200) * (1 << failed_hot)).await;
+                        retry_hot_at = tokio::time::Instant::now()
+                            + Duration::from_millis(200) * (1 << failed_hot);
                     }
-                    continue;
+                    // Meanwhile the calibrated projectors go on with their rounds: one that
+                    // cannot be calibrated must not stop the others' corrections.
+                    let others = shared
+                        .registry()
+                        .peers
+                        .values()
+                        .any(|p| p.calibrated && p.shown.is_some());
+                    if !others {
+                        tokio::select! {
+                            () = tokio::time::sleep_until(retry_hot_at) => {}
+                            () = cancel.cancelled() => break,
+                        }
+                        continue;
+                    }
                 }
                 wait_for(&shared, shared.config.deadline, all_shown).await;
                 let Some(y) = capture_fresh(&shared, &mut camera, &mut captures).await else {

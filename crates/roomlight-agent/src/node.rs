@@ -596,3 +596,108 @@ fn assignment_from_wire(a: &v1::Assign) -> Result<Assignment, AgentError> {
     assignment.validate("assignment")?;
     Ok(assignment)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assign(pixels: Vec<u32>, weights: Vec<f32>, gamma: Vec<f64>) -> v1::Assign {
+        v1::Assign {
+            nodes: vec![v1::NodeAssignment {
+                node: 3,
+                chart: 3,
+                pixels,
+                weights,
+            }],
+            width: 4,
+            height: 2,
+            gamma,
+        }
+    }
+
+    /// A well-formed assignment is taken as sent; every malformed one is refused with a message
+    /// that names the node or the field, never drawn.
+    #[test]
+    fn assignments_over_the_wire_are_checked() {
+        let ok = assignment_from_wire(&assign(vec![0, 5, 7], vec![1.0, 0.5, 0.25], vec![]))
+            .expect("well formed");
+        assert_eq!(ok.nodes, vec![(3, vec![(0, 1.0), (5, 0.5), (7, 0.25)])]);
+        assert_eq!(ok.response.gamma, [1.0; 3], "no exponents: linear");
+        let refused = |a: v1::Assign, says: &str| {
+            let e = assignment_from_wire(&a).expect_err("malformed").to_string();
+            assert!(e.contains(says), "{e:?} should say {says:?}");
+        };
+        refused(
+            assign(vec![0, 1], vec![1.0], vec![]),
+            "node 3: 2 pixels, 1 weights",
+        );
+        refused(
+            assign(vec![0, 8], vec![1.0, 1.0], vec![]),
+            "outside the 4×2 frame",
+        );
+        refused(assign(vec![5, 2], vec![1.0, 1.0], vec![]), "not increasing");
+        refused(assign(vec![0], vec![1.5], vec![]), "outside (0, 1]");
+        refused(assign(vec![0], vec![f32::NAN], vec![]), "outside (0, 1]");
+        refused(
+            assign(vec![0], vec![1.0], vec![2.2, 2.2]),
+            "2 response exponents",
+        );
+        refused(
+            assign(vec![0], vec![1.0], vec![2.2, f64::INFINITY, 2.2]),
+            "finite and positive",
+        );
+        let mut empty = assign(vec![0], vec![1.0], vec![]);
+        empty.height = 0;
+        refused(empty, "a 4×0 projector");
+    }
+
+    /// Whole-frame patterns are read as sent; codes outside [0, 1], unknown axes or codings and
+    /// impossible bits are refused.
+    #[test]
+    fn show_patterns_over_the_wire_are_checked() {
+        use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+        let uniform = |v: f64| {
+            v1::show::Pattern::Uniform(v1::Uniform {
+                code: Some(roomlight_proto::convert::to_rgb(LinearRgb::splat(v))),
+            })
+        };
+        assert!(matches!(
+            pattern_from_wire(uniform(0.25)),
+            Ok(Wire::Frame(Pattern::Uniform([0.25, 0.25, 0.25])))
+        ));
+        for bad in [-0.1, 1.5, f64::NAN] {
+            assert!(pattern_from_wire(uniform(bad)).is_err(), "code {bad}");
+        }
+        let gray = |axis: i32, bit: u32, coding: i32| {
+            v1::show::Pattern::Gray(v1::GrayBit {
+                axis,
+                bit,
+                inverse: true,
+                coding,
+            })
+        };
+        let row = v1::Axis::Row as i32;
+        let xor = v1::Coding::Xor04 as i32;
+        assert!(matches!(
+            pattern_from_wire(gray(row, 3, xor)),
+            Ok(Wire::Frame(Pattern::Structured {
+                pattern: Gray::Bit {
+                    axis: Axis::Row,
+                    bit: 3,
+                    inverse: true
+                },
+                coding: Coding::Xor04
+            }))
+        ));
+        assert!(
+            pattern_from_wire(gray(0, 3, xor)).is_err(),
+            "unspecified axis"
+        );
+        assert!(pattern_from_wire(gray(9, 3, xor)).is_err(), "unknown axis");
+        assert!(
+            pattern_from_wire(gray(row, 3, 0)).is_err(),
+            "unspecified coding"
+        );
+        assert!(pattern_from_wire(gray(row, 40, xor)).is_err(), "bit 40");
+    }
+}
