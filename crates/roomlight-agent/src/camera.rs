@@ -48,7 +48,8 @@ pub struct CameraConfig {
     /// never act on errors of values they no longer show. Every capture is counted.
     pub stale_frames: usize,
     /// Where to write the model (`problem`, `owners`, `start`, as JSON, atomically) after each
-    /// projector calibrated over the wire or hot; `None`: nowhere.
+    /// projector calibrated over the wire or hot, and after patches left the model; `None`:
+    /// nowhere.
     pub model_out: Option<std::path::PathBuf>,
 }
 
@@ -754,6 +755,15 @@ async fn capture_measured(
         means.push(sample.mean);
         ok.push(sample.status == roomlight_calib::charts::PatchStatus::Ok);
     }
+    let patches = shared.live().problem.patches();
+    if means.len() != patches {
+        tracing::error!(
+            surveyed = means.len(),
+            expected = patches,
+            "the survey's patches do not match the model's"
+        );
+        return None;
+    }
     Some((means, ok))
 }
 
@@ -1123,45 +1133,11 @@ async fn calibrate_hot(
         let newly: Vec<usize> = (0..measurable.len())
             .filter(|&i| !measurable[i] && !live.excluded.get(i).copied().unwrap_or(true))
             .collect();
-        let mut target = live.problem.target().to_vec();
         if !newly.is_empty() {
             tracing::info!(%projector, patches = ?newly, "patches not measurable under its light: left out");
-            for &i in &newly {
-                live.excluded[i] = true;
-            }
-            for (t, b) in target
-                .iter_mut()
-                .zip(live.problem.black())
-                .zip(&live.excluded)
-                .filter(|(_, x)| **x)
-                .map(|(tb, _)| tb)
-            {
-                *t = *b;
-            }
-            let excluded = live.excluded.clone();
-            for column in &mut columns {
-                let (support, values): (Vec<u32>, Vec<LinearRgb>) = column
-                    .support()
-                    .iter()
-                    .zip(column.values())
-                    .filter(|(i, _)| !excluded[**i as usize])
-                    .map(|(i, v)| (*i, *v))
-                    .unzip();
-                match AttenuationColumn::new(support, values) {
-                    Ok(c) => *column = c,
-                    Err(e) => {
-                        tracing::error!(%projector, error = %e, "hot calibration refused");
-                        return false;
-                    }
-                }
-            }
         }
-        let problem = match Problem::new(
-            columns,
-            live.problem.black().to_vec(),
-            target,
-            live.problem.noise().to_vec(),
-        ) {
+        let live = &mut *live;
+        let problem = match leave_out(&mut live.excluded, &newly, columns, &live.problem) {
             Ok(p) => p,
             Err(e) => {
                 tracing::error!(%projector, error = %e, "hot calibration refused");
@@ -1192,11 +1168,93 @@ async fn calibrate_hot(
         live.problem = problem;
         live.uncalibrated.remove(projector);
     }
-    // Its attenuation to the new projector, `s` anew to everyone; then it joins the rounds.
+    // Bring-up: while the room is still dark (no projector has shown a round's frame) and
+    // others wait for their calibration, this one stays dark too, so that theirs is measured
+    // in the dark as well (the light of lit projectors adds camera noise and costs decoded
+    // pixels); all are lit once the last is measured.
+    let dark = {
+        let reg = shared.registry();
+        reg.peers.values().all(|p| p.shown.is_none())
+            && reg
+                .peers
+                .iter()
+                .any(|(id, p)| id != projector && !p.calibrated)
+    };
+    if let Some(peer) = shared.registry().peers.get_mut(projector) {
+        peer.calibrated = true;
+    }
+    if dark {
+        let values = nodes
+            .iter()
+            .map(|&n| v1::NodeState {
+                node: n,
+                x: Some(to_rgb(LinearRgb::ZERO)),
+                attenuation: None,
+            })
+            .collect();
+        let black = v1::show::Pattern::Nodes(v1::NodeValues { values });
+        if !show_pattern(shared, projector, &tx, black).await {
+            light_all(shared).await;
+        }
+    } else {
+        // Its attenuation to the new projector, `s` anew to everyone; then it joins the rounds.
+        light_all(shared).await;
+    }
+    tracing::info!(%projector, dark, "hot calibration done");
+    if let Some(path) = &shared.config.model_out
+        && let Err(e) = write_model(shared, path)
+    {
+        tracing::warn!(path = %path.display(), error = %e, "could not write the model");
+    }
+    shared.changed.notify_waiters();
+    true
+}
+
+/// Leaves `newly` out of the model for good (marked in `excluded`): every one of `columns`
+/// loses them and their target becomes their black level; the problem with `columns`.
+fn leave_out(
+    excluded: &mut [bool],
+    newly: &[usize],
+    mut columns: Vec<AttenuationColumn>,
+    problem: &Problem,
+) -> Result<Problem, roomlight_core::ModelError> {
+    for &i in newly {
+        if let Some(x) = excluded.get_mut(i) {
+            *x = true;
+        }
+    }
+    let target: Vec<LinearRgb> = problem
+        .target()
+        .iter()
+        .zip(problem.black())
+        .zip(excluded.iter())
+        .map(|((t, b), &out)| if out { *b } else { *t })
+        .collect();
+    if !newly.is_empty() {
+        for column in &mut columns {
+            let (support, values): (Vec<u32>, Vec<LinearRgb>) = column
+                .iter()
+                .filter(|(i, _)| !excluded.get(*i as usize).copied().unwrap_or(true))
+                .unzip();
+            *column = AttenuationColumn::new(support, values)?;
+        }
+    }
+    Problem::new(
+        columns,
+        problem.black().to_vec(),
+        target,
+        problem.noise().to_vec(),
+    )
+}
+
+/// Sends every attached projector its nodes' attenuation, `s` and start: a projector measured
+/// but not yet lit starts showing its start, a running one keeps its values with the new `s`.
+async fn light_all(shared: &Shared) {
     let outbox: Vec<_> = shared
         .registry()
         .peers
         .values()
+        .filter(|p| p.calibrated)
         .map(|p| (p.tx.clone(), p.nodes.clone()))
         .collect();
     for (tx, nodes) in outbox {
@@ -1211,17 +1269,6 @@ async fn calibrate_hot(
             }
         }
     }
-    if let Some(peer) = shared.registry().peers.get_mut(projector) {
-        peer.calibrated = true;
-    }
-    tracing::info!(%projector, "hot calibration done");
-    if let Some(path) = &shared.config.model_out
-        && let Err(e) = write_model(shared, path)
-    {
-        tracing::warn!(path = %path.display(), error = %e, "could not write the model");
-    }
-    shared.changed.notify_waiters();
-    true
 }
 
 /// Writes the live model as JSON through a temporary file beside `path`.
@@ -1346,6 +1393,16 @@ pub fn serve(
                         failed_hot = (failed_hot + 1).min(4);
                         retry_hot_at = tokio::time::Instant::now()
                             + Duration::from_millis(200) * (1 << failed_hot);
+                        // Projectors kept dark for a bring-up light up now rather than wait
+                        // for one that may never be measured.
+                        let unlit = shared
+                            .registry()
+                            .peers
+                            .values()
+                            .any(|p| p.calibrated && p.shown.is_none());
+                        if unlit {
+                            light_all(&shared).await;
+                        }
                     }
                     // Meanwhile the calibrated projectors go on with their rounds: one that
                     // cannot be calibrated must not stop the others' corrections.
@@ -1363,11 +1420,47 @@ pub fn serve(
                     }
                 }
                 wait_for(&shared, shared.config.deadline, all_shown).await;
-                let Some(y) = capture_fresh(&shared, &mut camera, &mut captures).await else {
+                let Some((y, ok)) = capture_measured(&shared, &mut camera, &mut captures).await
+                else {
                     // The camera is unreachable: the lights stay as they are; try again.
                     tokio::time::sleep(Duration::from_millis(200)).await;
                     continue;
                 };
+                // Calibrated over the wire: a patch the room's light now saturates or an
+                // edge now crosses leaves the model, and everyone gets the cut columns.
+                let newly: Vec<usize> = {
+                    let live = shared.live();
+                    (0..ok.len())
+                        .filter(|&i| !ok[i] && !live.excluded.get(i).copied().unwrap_or(true))
+                        .collect()
+                };
+                if !newly.is_empty() {
+                    let cut = {
+                        let mut guard = shared.live.write().unwrap_or_else(PoisonError::into_inner);
+                        let live = &mut *guard;
+                        let columns = live.problem.columns().to_vec();
+                        match leave_out(&mut live.excluded, &newly, columns, &live.problem) {
+                            Ok(problem) => {
+                                live.white = problem.white_response();
+                                live.problem = problem;
+                                true
+                            }
+                            Err(e) => {
+                                tracing::error!(error = %e, "patches could not be left out");
+                                false
+                            }
+                        }
+                    };
+                    if cut {
+                        tracing::info!(patches = ?newly, "patches no longer measurable under the room's light: left out");
+                        light_all(&shared).await;
+                        if let Some(path) = &shared.config.model_out
+                            && let Err(e) = write_model(&shared, path)
+                        {
+                            tracing::warn!(path = %path.display(), error = %e, "could not write the model");
+                        }
+                    }
+                }
                 let errors: Vec<LinearRgb> = {
                     let live = shared.live();
                     live.problem
