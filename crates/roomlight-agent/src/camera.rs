@@ -1280,6 +1280,9 @@ fn write_model(shared: &Shared, path: &std::path::Path) -> std::io::Result<()> {
             "owners": live.owners,
             // Only when every node has one (else the node agents' own).
             "start": live.start.iter().copied().collect::<Option<Vec<LinearRgb>>>(),
+            // Calibrated over the wire: the room patch of each model patch, so that a camera
+            // agent restarted with the same survey resumes this model.
+            "patches": shared.survey.as_ref().map(|s| &s.patches),
         }))?
     };
     let tmp = path.with_extension("tmp");
@@ -1311,7 +1314,17 @@ pub fn serve(
         .collect();
     let problem = model.problem.without_nodes(&unknown);
     let white = problem.white_response();
-    let patches = problem.patches();
+    // A model resumed over the wire keeps its left-out patches: uncovered, target = black.
+    let excluded: Vec<bool> = (0..problem.patches())
+        .map(|i| {
+            model.survey.is_some()
+                && problem.target()[i] == problem.black()[i]
+                && problem
+                    .columns()
+                    .iter()
+                    .all(|c| c.get(i as u32) == LinearRgb::ZERO)
+        })
+        .collect();
     let start = match model.start {
         Some(v) => v.into_iter().map(Some).collect(),
         None => vec![None; problem.nodes()],
@@ -1327,7 +1340,7 @@ pub fn serve(
             start,
             assignments: HashMap::new(),
             charts: HashMap::new(),
-            excluded: vec![false; patches],
+            excluded,
         }),
         pattern_seq: AtomicU64::new(0),
         registry: Mutex::new(Registry::default()),

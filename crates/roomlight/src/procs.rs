@@ -28,6 +28,10 @@ pub struct ModelFile {
     /// Each node's start (the conventional start); absent: the node agents' own.
     #[serde(default)]
     pub start: Option<Vec<LinearRgb>>,
+    /// Written by a camera agent calibrating over the wire: the room patch index of each model
+    /// patch (a restarted camera agent resumes the model with it).
+    #[serde(default)]
+    pub patches: Option<Vec<usize>>,
 }
 
 /// Where the camera agent of a rendered room finds its patches in a camera image.
@@ -255,6 +259,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
             problem: model.problem.clone(),
             owners: cal.owners(&room),
             start: Some(model.conventional.clone()),
+            patches: None,
         },
     )?;
     write_json(
@@ -489,6 +494,7 @@ pub fn sim(args: &SimArgs) -> Result<()> {
         problem: problem.clone(),
         owners,
         start: None,
+        patches: None,
     };
     write_json(model_out, &model)?;
     let plant = Plant::new(
@@ -555,10 +561,14 @@ pub fn optimum(path: &Path) -> Result<()> {
 
 /// Calibration over the wire, before any projector: the survey, and the room's black level
 /// (LEDs off, projectors dark) and target (the LED preset) measured through the charts; the
-/// model has no nodes yet and admits every projector that says its resolution.
+/// model has no nodes yet and admits every projector that says its resolution. With `resume`
+/// (the model a camera agent calibrating over the wire wrote, e.g. before it was restarted)
+/// nothing is measured: the room is lit by the node agents, which keep their light, and the
+/// model goes on from where it was (new projectors are still calibrated as they join).
 async fn survey_model(
     survey_path: &Path,
     preset: Option<&str>,
+    resume: Option<(&Path, ModelFile)>,
     client: crate::rendered::Client,
 ) -> Result<(RoomModel, crate::rendered::RenderedCamera)> {
     let survey: SurveyFile = read_json(survey_path, "a survey file")?;
@@ -596,6 +606,50 @@ async fn survey_model(
             description.camera_width,
             description.camera_height
         );
+    }
+    let target_survey = |patches: Vec<usize>| camera::Survey {
+        corners: survey.corners.clone(),
+        sample: survey.sample,
+        target_mask: target_mask.clone(),
+        patches,
+    };
+    if let Some((path, model)) = resume {
+        let patches = model.patches.clone().with_context(|| {
+            format!(
+                "{}: no patches (not written by a camera agent calibrating over the wire)",
+                path.display()
+            )
+        })?;
+        let charts =
+            survey.corners.len() * roomlight_calib::charts::COLUMNS * roomlight_calib::charts::ROWS;
+        if patches.len() != model.problem.patches() || patches.iter().any(|&i| i >= charts) {
+            bail!(
+                "{}: {} patches for a model of {}, of {charts} surveyed",
+                path.display(),
+                patches.len(),
+                model.problem.patches()
+            );
+        }
+        println!(
+            "resumed {}: {} nodes of {} projectors",
+            path.display(),
+            model.problem.nodes(),
+            model.owners.len()
+        );
+        let camera = crate::rendered::RenderedCamera::new(
+            client,
+            survey.corners.clone(),
+            patches.clone(),
+            survey.sample,
+        );
+        let model = RoomModel {
+            problem: model.problem,
+            owners: model.owners,
+            start: model.start,
+            hot: Default::default(),
+            survey: Some(target_survey(patches)),
+        };
+        return Ok((model, camera));
     }
     let preset = match preset {
         Some(p) if description.presets.iter().any(|q| q == p) => p.to_string(),
@@ -653,12 +707,7 @@ async fn survey_model(
         owners: HashMap::new(),
         start: None,
         hot: Default::default(),
-        survey: Some(camera::Survey {
-            corners: survey.corners,
-            sample: survey.sample,
-            target_mask,
-            patches,
-        }),
+        survey: Some(target_survey(patches)),
     };
     Ok((model, camera))
 }
@@ -690,8 +739,18 @@ pub fn camera(path: &Path) -> Result<()> {
         };
         let (model, camera) = match (&file.model, &file.survey) {
             (_, Some(survey)) => {
-                let (model, camera) =
-                    survey_model(survey, file.preset.as_deref(), connect_rendered().await?).await?;
+                // The model this camera agent wrote before it was restarted, if any.
+                let resume = match &file.model_out {
+                    Some(out) if out.exists() => Some((out.as_path(), load_model(out)?)),
+                    _ => None,
+                };
+                let (model, camera) = survey_model(
+                    survey,
+                    file.preset.as_deref(),
+                    resume,
+                    connect_rendered().await?,
+                )
+                .await?;
                 (model, AnyCamera::Rendered(camera))
             }
             (Some(model_path), None) => {
