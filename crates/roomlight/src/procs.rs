@@ -721,6 +721,14 @@ pub fn camera(path: &Path) -> Result<()> {
             path.display()
         );
     }
+    // Without its model a restarted camera agent would measure the room's black and target
+    // again while the node agents keep their light on, and get both wrong.
+    if file.survey.is_some() && file.model_out.is_none() {
+        bail!(
+            "{}: survey needs model_out, the file from which a restarted camera agent resumes",
+            path.display()
+        );
+    }
     let config = CameraConfig {
         room: file.room.clone(),
         token: file.token,

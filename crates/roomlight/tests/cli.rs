@@ -601,3 +601,51 @@ fn bench_case_filter_runs_only_the_matching_cases() {
         ]
     );
 }
+
+/// Configs for calibration over the wire are checked before anything runs: model and survey
+/// together, a survey without the model file a restarted camera agent resumes from, a model
+/// file that is not one, and a node of an unknown kind are refused with messages that name the
+/// file and the field.
+#[test]
+fn configs_for_calibration_over_the_wire_are_checked() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    let camera = |name: &str, lines: &str| {
+        let path = d.join(name);
+        std::fs::write(
+            &path,
+            format!(
+                "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://127.0.0.1:1\"\nmdns = false\n{lines}"
+            ),
+        )
+        .expect("config");
+        path.to_str().expect("utf-8").to_string()
+    };
+    let both = camera("both.toml", "model = \"m.json\"\nsurvey = \"s.json\"\n");
+    let e = roomlight_err(&["camera", "--config", &both]);
+    assert!(e.contains("both.toml") && e.contains("either model"), "{e}");
+    let bare = camera("bare.toml", "survey = \"s.json\"\n");
+    let e = roomlight_err(&["camera", "--config", &bare]);
+    assert!(e.contains("bare.toml") && e.contains("model_out"), "{e}");
+    std::fs::write(d.join("bad.json"), "{\"problem\": 3}").expect("bad model");
+    let e = roomlight_err(&[
+        "optimum",
+        "--model",
+        d.join("bad.json").to_str().expect("utf-8"),
+    ]);
+    assert!(
+        e.contains("bad.json") && e.contains("not a room model"),
+        "{e}"
+    );
+    let node = d.join("node.toml");
+    std::fs::write(
+        &node,
+        "room = \"r\"\ntoken = \"t\"\ncamera = \"http://127.0.0.1:1\"\nhardware = \"http://127.0.0.1:1\"\nprojector = \"p\"\nrendered = true\nkind = \"fresnel\"\n",
+    )
+    .expect("node config");
+    let e = roomlight_err(&["node", "--config", node.to_str().expect("utf-8")]);
+    assert!(
+        e.contains("node.toml") && e.contains("kind \"fresnel\""),
+        "{e}"
+    );
+}
