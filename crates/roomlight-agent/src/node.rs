@@ -375,15 +375,7 @@ async fn session(
                     && assigned.iter().all(|n| nodes.contains_key(n))
                 {
                     started = true;
-                    display.flush().await;
-                    send(
-                        &tx,
-                        message(v1::node_message::Body::Shown(v1::Shown {
-                            seq: 0,
-                            pattern: false,
-                        })),
-                    )
-                    .await?;
+                    acknowledge(display, &tx, 0, false).await?;
                 }
             }
             Some(v1::room_message::Body::Errors(e)) => {
@@ -426,15 +418,7 @@ async fn session(
                     // This round is complete; rounds before it will never be.
                     applied.retain(|r, _| *r > e.round);
                     keeper.maybe(*epoch, memory);
-                    display.flush().await;
-                    send(
-                        &tx,
-                        message(v1::node_message::Body::Shown(v1::Shown {
-                            seq: e.round,
-                            pattern: false,
-                        })),
-                    )
-                    .await?;
+                    acknowledge(display, &tx, e.round, false).await?;
                 }
             }
             Some(v1::room_message::Body::Goodbye(g)) => {
@@ -455,15 +439,7 @@ async fn session(
                             );
                             continue;
                         }
-                        display.flush().await;
-                        send(
-                            &tx,
-                            message(v1::node_message::Body::Shown(v1::Shown {
-                                seq: show.seq,
-                                pattern: true,
-                            })),
-                        )
-                        .await?;
+                        acknowledge(display, &tx, show.seq, true).await?;
                         continue;
                     }
                     Some(Err(e)) => {
@@ -490,19 +466,28 @@ async fn session(
                         }
                     }
                 }
-                display.flush().await;
-                send(
-                    &tx,
-                    message(v1::node_message::Body::Shown(v1::Shown {
-                        seq: show.seq,
-                        pattern: true,
-                    })),
-                )
-                .await?;
+                acknowledge(display, &tx, show.seq, true).await?;
             }
             None => {}
         }
     }
+}
+
+/// Acknowledges frame `seq` (a round's, or with `pattern` a Show pattern's) once the display
+/// has everything shown so far.
+async fn acknowledge(
+    display: &mut impl Display,
+    tx: &mpsc::Sender<v1::NodeMessage>,
+    seq: u64,
+    pattern: bool,
+) -> Result<(), AgentError> {
+    display.flush().await;
+    tx.send(message(v1::node_message::Body::Shown(v1::Shown {
+        seq,
+        pattern,
+    })))
+    .await
+    .map_err(|_| AgentError::Protocol("the outgoing stream closed".into()))
 }
 
 /// A Show message's pattern: node values, or a whole frame.

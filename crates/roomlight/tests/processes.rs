@@ -71,6 +71,46 @@ fn calibrated(line: &str) -> Option<u64> {
     line.rsplit_once(" calibrated ")?.1.parse().ok()
 }
 
+/// Serves the small rendered room (a 640×480 camera) and starts a camera agent on it, `source`
+/// being the config lines that say where its model comes from; returns the two addresses and
+/// the camera agent's output.
+fn small_room_and_camera(
+    procs: &mut Procs,
+    d: &Path,
+    source: &str,
+) -> (String, String, mpsc::Receiver<String>) {
+    let sim_out = procs.spawn(
+        "sim",
+        &[
+            "sim",
+            "--scene",
+            "small",
+            "--camera",
+            "640x480",
+            "--seed",
+            "9",
+            "--listen",
+            "127.0.0.1:0",
+        ],
+        d,
+    );
+    let sim = address(&wait_line(&sim_out, Duration::from_secs(60), |l| {
+        l.starts_with("sim listening on")
+    }));
+    std::fs::write(
+        d.join("camera.toml"),
+        format!(
+            "room = \"small\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://{sim}\"\n{source}\nheartbeat_ms = 500\nmodel_rounds = 20\nmdns = false\n"
+        ),
+    )
+    .expect("camera config");
+    let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
+    let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
+        l.starts_with("camera listening on")
+    }));
+    (sim, camera, cam_out)
+}
+
 fn address(line: &str) -> String {
     line.rsplit(' ').next().expect("an address").to_string()
 }
@@ -373,35 +413,11 @@ fn the_rendered_room_converges_through_separate_processes() {
         .collect();
     assert!(projectors.len() >= 2, "{projectors:?}");
     let mut procs = Procs(Vec::new());
-    let sim_out = procs.spawn(
-        "sim",
-        &[
-            "sim",
-            "--scene",
-            "small",
-            "--camera",
-            "640x480",
-            "--seed",
-            "9",
-            "--listen",
-            "127.0.0.1:0",
-        ],
+    let (sim, camera, cam_out) = small_room_and_camera(
+        &mut procs,
         d,
+        "model = \"model.json\"\ncharts = \"charts.json\"",
     );
-    let sim = address(&wait_line(&sim_out, Duration::from_secs(60), |l| {
-        l.starts_with("sim listening on")
-    }));
-    std::fs::write(
-        d.join("camera.toml"),
-        format!(
-            "room = \"small\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://{sim}\"\nmodel = \"model.json\"\ncharts = \"charts.json\"\nheartbeat_ms = 500\nmodel_rounds = 20\nmdns = false\n"
-        ),
-    )
-    .expect("camera config");
-    let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
-    let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
-        l.starts_with("camera listening on")
-    }));
     for p in &projectors {
         std::fs::write(
             d.join(format!("{p}.toml")),
@@ -462,35 +478,11 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
         "the survey calibrates nothing"
     );
     let mut procs = Procs(Vec::new());
-    let sim_out = procs.spawn(
-        "sim",
-        &[
-            "sim",
-            "--scene",
-            "small",
-            "--camera",
-            "640x480",
-            "--seed",
-            "9",
-            "--listen",
-            "127.0.0.1:0",
-        ],
+    let (sim, camera, cam_out) = small_room_and_camera(
+        &mut procs,
         d,
+        "survey = \"survey.json\"\nmodel_out = \"model.json\"",
     );
-    let sim = address(&wait_line(&sim_out, Duration::from_secs(60), |l| {
-        l.starts_with("sim listening on")
-    }));
-    std::fs::write(
-        d.join("camera.toml"),
-        format!(
-            "room = \"small\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://{sim}\"\nsurvey = \"survey.json\"\nmodel_out = \"model.json\"\nheartbeat_ms = 500\nmodel_rounds = 20\nmdns = false\n"
-        ),
-    )
-    .expect("camera config");
-    let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
-    let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
-        l.starts_with("camera listening on")
-    }));
     let scene = roomlight_sim::scenes::small().expect("small scene");
     let luminaires: Vec<(String, bool, [f64; 3])> = scene
         .projectors
