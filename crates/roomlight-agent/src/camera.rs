@@ -1065,6 +1065,7 @@ async fn calibrate_hot(
     shared: &Shared,
     camera: &mut impl Camera,
     projector: &str,
+    errors: Option<&[LinearRgb]>,
     captures: &mut u64,
 ) -> bool {
     let needs_nodes = shared
@@ -1164,6 +1165,24 @@ async fn calibrate_hot(
                 }
             }
         }
+        // Joining a lit room: the new nodes start where they best fill what the room lacks
+        // now (the bounded least-squares fit of their columns to the current errors, the
+        // others held), not where they would light their charts alone; the others then adjust
+        // in the rounds.
+        if let Some(e) = errors.filter(|e| e.len() == problem.patches()) {
+            match joining_start(&problem, &nodes, e) {
+                Ok(x) => {
+                    for (&n, x) in nodes.iter().zip(x) {
+                        if let Some(slot) = live.start.get_mut(n as usize) {
+                            *slot = Some(x);
+                        }
+                    }
+                }
+                Err(err) => {
+                    tracing::warn!(%projector, error = %err, "no joining start: the conventional one")
+                }
+            }
+        }
         live.white = problem.white_response();
         live.problem = problem;
         live.uncalibrated.remove(projector);
@@ -1208,6 +1227,33 @@ async fn calibrate_hot(
     }
     shared.changed.notify_waiters();
     true
+}
+
+/// The values of `nodes` (new, dark) that best fill the room's current errors `e` with the
+/// other nodes held: `argmin ‖e − P_new x‖²` over `x ∈ [0, 1]`, per channel, solved exactly
+/// as a problem of its own (target `max(e, 0)`, black `max(−e, 0)`, so that target − black = e).
+fn joining_start(
+    problem: &Problem,
+    nodes: &[u32],
+    e: &[LinearRgb],
+) -> Result<Vec<LinearRgb>, String> {
+    let columns = nodes
+        .iter()
+        .filter_map(|&n| problem.columns().get(n as usize).cloned())
+        .collect();
+    let sub = Problem::new(
+        columns,
+        e.iter().map(|v| v.map(|c| (-c).max(0.0))).collect(),
+        e.iter().map(|v| v.map(|c| c.max(0.0))).collect(),
+        problem.noise().to_vec(),
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(roomlight_core::optimum::optimum(&sub)
+        .map_err(|e| e.to_string())?
+        .x
+        .into_iter()
+        .map(LinearRgb::clamp_unit)
+        .collect())
 }
 
 /// Leaves `newly` out of the model for good (marked in `excluded`): every one of `columns`
@@ -1397,7 +1443,11 @@ pub fn serve(
                     .map(|(id, _)| id.clone());
                 if let Some(projector) = hot {
                     if tokio::time::Instant::now() >= retry_hot_at {
-                        if calibrate_hot(&shared, &mut camera, &projector, &mut captures).await {
+                        // The room's errors without it, once a round has measured them.
+                        let errors = previous.is_some().then(|| aggregator.errors());
+                        if calibrate_hot(&shared, &mut camera, &projector, errors, &mut captures)
+                            .await
+                        {
                             calibrated_hot += 1;
                             failed_hot = 0;
                             continue;
