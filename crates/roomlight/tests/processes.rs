@@ -527,7 +527,8 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
         let problem: roomlight_core::Problem =
             serde_json::from_value(model["problem"].clone()).expect("problem");
         let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
-        (status(&ready).expect("status").0, model, best)
+        let (captures, g, _) = status(&ready).expect("status");
+        (captures, g, model, best)
     };
     let converge = |best: &roomlight_core::optimum::Optimum, count: usize, since: u64| {
         // Two-sided: a room measured below the model's optimum means a wrong model.
@@ -547,10 +548,17 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
         );
         assert!(captures - since < 30, "{line}");
     };
-    let (calibrated_at, first_model, first) = model_of(n - 1);
+    let (calibrated_at, _, first_model, first) = model_of(n - 1);
     converge(&first, n - 1, calibrated_at);
     start_node(&mut procs, &luminaires[joiner].0, false);
-    let (calibrated_at, model, best) = model_of(n);
+    let (calibrated_at, g_joined, model, best) = model_of(n);
+    // The joiner starts where it best fills what the room lacks: the very first capture with
+    // it is already better than the room could do without it.
+    assert!(
+        g_joined < first.objective,
+        "first capture after the join: G {g_joined:.4e}, G* without the joiner {:.4e}",
+        first.objective
+    );
     // The room without the joiner, on the patches the final model still measures (the
     // joiner's light may leave more out), for a fair comparison of the optima.
     let problem: roomlight_core::Problem =
