@@ -607,6 +607,16 @@ async fn a_restarted_node_relights_from_its_state_file_before_it_reconnects() {
         .expect("readable")
         .expect("written");
     assert_eq!(saved.values.len(), p0.len());
+    // With the attenuation the camera agent sent each node.
+    assert_eq!(saved.attenuation.len(), p0.len());
+    for (n, column) in &saved.attenuation {
+        assert!(p0.contains(n), "node {n} is not p0's");
+        assert_eq!(
+            column,
+            &sb.problem.columns()[*n as usize],
+            "node {n}'s column"
+        );
+    }
     let mut display = sb.room.display();
     for &n in &p0 {
         roomlight_agent::hardware::Display::show(&mut display, n, LinearRgb::ZERO);

@@ -51,6 +51,10 @@ pub struct SavedState {
     /// the wire (so that a restarted node can draw its values before it reconnects).
     #[serde(default)]
     pub assignment: Option<Assignment>,
+    /// Node id → its attenuation column as the camera agent last sent it (sent back in Hello
+    /// with the values).
+    #[serde(default)]
+    pub attenuation: Vec<(u32, AttenuationColumn)>,
 }
 
 impl SavedState {
@@ -58,7 +62,7 @@ impl SavedState {
     pub fn load(path: &Path) -> Result<Option<Self>, AgentError> {
         match std::fs::read_to_string(path) {
             Ok(text) => {
-                let state: Self = serde_json::from_str(&text).map_err(|e| {
+                let mut state: Self = serde_json::from_str(&text).map_err(|e| {
                     AgentError::Protocol(format!("state file {}: {e}", path.display()))
                 })?;
                 if state.values.iter().any(|(_, v)| !v.is_finite()) {
@@ -69,6 +73,17 @@ impl SavedState {
                 }
                 if let Some(a) = &state.assignment {
                     a.validate(&format!("state file {}", path.display()))?;
+                }
+                // Deserialised columns are not checked: build them anew.
+                for (node, column) in &mut state.attenuation {
+                    *column =
+                        AttenuationColumn::new(column.support().to_vec(), column.values().to_vec())
+                            .map_err(|e| {
+                                AgentError::Protocol(format!(
+                                    "state file {}: attenuation of node {node}: {e}",
+                                    path.display()
+                                ))
+                            })?;
                 }
                 Ok(Some(state))
             }
@@ -147,6 +162,7 @@ pub async fn run(
     let mut memory: HashMap<u32, LinearRgb> = HashMap::new();
     let mut epoch = 0;
     let mut assignment: Option<Assignment> = None;
+    let mut attenuation: HashMap<u32, AttenuationColumn> = HashMap::new();
     // Relight at once from the state file, before any camera agent is reachable.
     if let Some(path) = &config.state_file
         && let Some(saved) = SavedState::load(path)?
@@ -155,6 +171,7 @@ pub async fn run(
             display.assign(a);
         }
         assignment = saved.assignment;
+        attenuation = saved.attenuation.into_iter().collect();
         for &(node, value) in &saved.values {
             display.show(node, value);
             memory.insert(node, value);
@@ -166,6 +183,7 @@ pub async fn run(
         path: config.state_file.clone(),
         last: None,
         assignment,
+        attenuation,
     };
     let mut backoff = MIN_BACKOFF;
     loop {
@@ -216,6 +234,8 @@ struct Keeper {
     last: Option<std::time::Instant>,
     /// The assignment received over the wire, kept with the values.
     assignment: Option<Assignment>,
+    /// Each node's last attenuation column.
+    attenuation: HashMap<u32, AttenuationColumn>,
 }
 
 impl Keeper {
@@ -232,10 +252,17 @@ impl Keeper {
         let Some(path) = &self.path else { return };
         let mut values: Vec<(u32, LinearRgb)> = memory.iter().map(|(&n, &v)| (n, v)).collect();
         values.sort_by_key(|(n, _)| *n);
+        let mut attenuation: Vec<(u32, AttenuationColumn)> = self
+            .attenuation
+            .iter()
+            .map(|(&n, c)| (n, c.clone()))
+            .collect();
+        attenuation.sort_by_key(|(n, _)| *n);
         if let Err(e) = (SavedState {
             calibration_epoch: epoch,
             values,
             assignment: self.assignment.clone(),
+            attenuation,
         })
         .save(path)
         {
@@ -284,7 +311,10 @@ async fn session(
                     .map(|(&node, &x)| v1::NodeState {
                         node,
                         x: Some(roomlight_proto::convert::to_rgb(x)),
-                        attenuation: None,
+                        attenuation: keeper
+                            .attenuation
+                            .get(&node)
+                            .map(|c| to_sparse(c.support(), c.values())),
                     })
                     .collect(),
             }),
@@ -321,6 +351,7 @@ async fn session(
                 // Values from another calibration mean nothing now: start afresh.
                 if !w.state_accepted {
                     memory.clear();
+                    keeper.attenuation.clear();
                 }
                 *epoch = w.calibration_epoch;
             }
@@ -367,6 +398,7 @@ async fn session(
                     .or_else(|| memory.get(&a.node).copied())
                     .or(offered)
                     .unwrap_or(config.start);
+                keeper.attenuation.insert(a.node, column.clone());
                 let state = NodeState::new(column, &white, config.rule, start)?;
                 display.show(a.node, state.shown());
                 nodes.insert(a.node, state);
@@ -637,6 +669,33 @@ mod tests {
         let mut empty = assign(vec![0], vec![1.0], vec![]);
         empty.height = 0;
         refused(empty, "a 4×0 projector");
+    }
+
+    /// A state file whose attenuation is not a valid column (unsorted support) is refused
+    /// with a message that names the file and the node; a valid one reads back as written.
+    #[test]
+    fn state_files_check_their_attenuation() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("p.state.json");
+        let column = AttenuationColumn::new(
+            vec![1, 4],
+            vec![LinearRgb::splat(0.5), LinearRgb::splat(0.25)],
+        )
+        .expect("column");
+        let saved = SavedState {
+            calibration_epoch: 3,
+            values: vec![(7, LinearRgb::splat(0.4))],
+            assignment: None,
+            attenuation: vec![(7, column)],
+        };
+        saved.save(&path).expect("save");
+        assert_eq!(SavedState::load(&path).expect("load"), Some(saved));
+        let text = std::fs::read_to_string(&path).expect("read");
+        std::fs::write(&path, text.replace("[1,4]", "[4,1]")).expect("corrupt");
+        let e = SavedState::load(&path)
+            .expect_err("unsorted support")
+            .to_string();
+        assert!(e.contains("p.state.json") && e.contains("node 7"), "{e}");
     }
 
     /// Whole-frame patterns are read as sent; codes outside [0, 1], unknown axes or codings and
