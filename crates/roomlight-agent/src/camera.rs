@@ -1419,8 +1419,8 @@ pub fn serve(
             let mut aggregator = ErrorAggregator::new(target.len());
             let mut captures = 0u64;
             let mut calibrated_hot = 0u64;
-            let mut failed_hot = 0u32;
-            let mut retry_hot_at = tokio::time::Instant::now();
+            // Projector → when to try its calibration again, and its failures so far.
+            let mut retry: HashMap<String, (tokio::time::Instant, u32)> = HashMap::new();
             let mut previous: Option<f64> = None;
             let mut quiet = 0u32;
             // A stop request ends the rounds between two rounds, never inside one.
@@ -1435,38 +1435,49 @@ pub fn serve(
                 if !present {
                     continue;
                 }
-                let hot = shared
-                    .registry()
-                    .peers
-                    .iter()
-                    .find(|(_, p)| !p.calibrated)
-                    .map(|(id, _)| id.clone());
-                if let Some(projector) = hot {
-                    if tokio::time::Instant::now() >= retry_hot_at {
-                        // The room's errors without it, once a round has measured them.
-                        let errors = previous.is_some().then(|| aggregator.errors());
-                        if calibrate_hot(&shared, &mut camera, &projector, errors, &mut captures)
-                            .await
-                        {
-                            calibrated_hot += 1;
-                            failed_hot = 0;
-                            continue;
-                        }
-                        // Tried again, backing off to 3.2 s (the cause is logged each time).
-                        failed_hot = (failed_hot + 1).min(4);
-                        retry_hot_at = tokio::time::Instant::now()
-                            + Duration::from_millis(200) * (1 << failed_hot);
-                        // Projectors kept dark for a bring-up light up now rather than wait
-                        // for one that may never be measured.
-                        let unlit = shared
-                            .registry()
-                            .peers
-                            .values()
-                            .any(|p| p.calibrated && p.shown.is_none());
-                        if unlit {
-                            light_all(&shared).await;
-                        }
+                // Projectors waiting for their calibration; the next one whose retry is due.
+                let now = tokio::time::Instant::now();
+                let (waiting, due) = {
+                    let reg = shared.registry();
+                    let waiting: Vec<String> = reg
+                        .peers
+                        .iter()
+                        .filter(|(_, p)| !p.calibrated)
+                        .map(|(id, _)| id.clone())
+                        .collect();
+                    let due = waiting
+                        .iter()
+                        .find(|id| retry.get(*id).is_none_or(|(at, _)| now >= *at))
+                        .cloned();
+                    (waiting, due)
+                };
+                retry.retain(|id, _| waiting.contains(id));
+                if let Some(projector) = due {
+                    // The room's errors without it, once a round has measured them.
+                    let errors = previous.is_some().then(|| aggregator.errors());
+                    if calibrate_hot(&shared, &mut camera, &projector, errors, &mut captures).await
+                    {
+                        calibrated_hot += 1;
+                        retry.remove(&projector);
+                        continue;
                     }
+                    // Tried again after the others, backing off to 3.2 s (the cause is logged
+                    // each time).
+                    let failures = retry.get(&projector).map_or(0, |r| r.1).saturating_add(1);
+                    let wait = Duration::from_millis(200) * (1 << failures.min(4));
+                    retry.insert(projector, (tokio::time::Instant::now() + wait, failures));
+                    // Projectors kept dark for a bring-up light up now rather than wait for one
+                    // that may never be measured.
+                    let unlit = shared
+                        .registry()
+                        .peers
+                        .values()
+                        .any(|p| p.calibrated && p.shown.is_none());
+                    if unlit {
+                        light_all(&shared).await;
+                    }
+                }
+                if !waiting.is_empty() {
                     // Meanwhile the calibrated projectors go on with their rounds: one that
                     // cannot be calibrated must not stop the others' corrections.
                     let others = shared
@@ -1475,8 +1486,14 @@ pub fn serve(
                         .values()
                         .any(|p| p.calibrated && p.shown.is_some());
                     if !others {
+                        let next = retry
+                            .values()
+                            .map(|(at, _)| *at)
+                            .min()
+                            .unwrap_or_else(tokio::time::Instant::now);
                         tokio::select! {
-                            () = tokio::time::sleep_until(retry_hot_at) => {}
+                            () = tokio::time::sleep_until(next) => {}
+                            () = shared.changed.notified() => {}
                             () = cancel.cancelled() => break,
                         }
                         continue;
