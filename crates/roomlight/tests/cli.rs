@@ -104,8 +104,8 @@ fn demo_quick_writes_a_report_whose_figures_meet_the_bars() {
     // without the leaver (the truth: a noiseless camera's view of the room). The measured
     // model's own excess is looser: the joiner's columns, one capture per node, and the
     // others', Hadamard, leave the model a little off where the room is, and on a loaded
-    // machine (late nodes left out of rounds) the loop has ended 2% above it by the model while
-    // 12% below the truth's optimum (CI, 2026-11-21); 0.3% on a quiet one.
+    // machine (late nodes left out of rounds) the loop has ended 2% above it by the model
+    // (CI, 2026-11-21; 0.3% on a quiet one), its true excess −0.12 (−0.14 on a quiet one).
     let hot = &metrics["hot_join"];
     assert!(number(hot, "calibration_captures") >= 2.0, "{hot}");
     assert!(number(hot, "final_excess") < 5e-2, "{hot}");
