@@ -398,6 +398,40 @@ async fn a_wrong_token_another_room_or_version_is_refused_with_a_clear_status() 
     }
 }
 
+/// Attaches `projector` by hand: Hello, then (with `shown`) the acknowledgement of its start.
+/// Returns the sender of its further messages and the camera agent's stream to it.
+async fn attach_by_hand(
+    endpoint: &str,
+    projector: &str,
+    shown: bool,
+) -> (
+    tokio::sync::mpsc::Sender<roomlight_proto::v1::NodeMessage>,
+    tonic::Streaming<roomlight_proto::v1::RoomMessage>,
+) {
+    use roomlight_proto::v1;
+    let mut client = v1::room_client::RoomClient::connect(endpoint.to_string())
+        .await
+        .expect("connect");
+    let (tx, rx) = tokio::sync::mpsc::channel(64);
+    tx.send(hello(projector)).await.expect("queue hello");
+    if shown {
+        tx.send(v1::NodeMessage {
+            body: Some(v1::node_message::Body::Shown(v1::Shown {
+                seq: 0,
+                pattern: false,
+            })),
+        })
+        .await
+        .expect("queue");
+    }
+    let inbound = client
+        .attach(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .expect("admitted")
+        .into_inner();
+    (tx, inbound)
+}
+
 fn hello(projector: &str) -> roomlight_proto::v1::NodeMessage {
     use roomlight_proto::v1;
     v1::NodeMessage {
@@ -474,24 +508,7 @@ async fn malformed_contributions_are_refused_without_disturbing_the_others() {
     sb.join("p1");
     // p2 is a rogue: it answers every round with NaN contributions for a node it does not own
     // and for its own nodes, and acknowledges nothing.
-    let mut client = v1::room_client::RoomClient::connect(sb.endpoint.clone())
-        .await
-        .expect("connect");
-    let (tx, rx) = tokio::sync::mpsc::channel(64);
-    tx.send(hello("p2")).await.expect("queue hello");
-    tx.send(v1::NodeMessage {
-        body: Some(v1::node_message::Body::Shown(v1::Shown {
-            seq: 0,
-            pattern: false,
-        })),
-    })
-    .await
-    .expect("queue");
-    let mut inbound = client
-        .attach(tokio_stream::wrappers::ReceiverStream::new(rx))
-        .await
-        .expect("admitted")
-        .into_inner();
+    let (tx, mut inbound) = attach_by_hand(&sb.endpoint, "p2", true).await;
     let rogue = tokio::spawn(async move {
         use tokio_stream::StreamExt;
         while let Some(Ok(m)) = inbound.next().await {
@@ -865,24 +882,7 @@ async fn a_round_does_not_wait_for_a_projector_that_left_during_it() {
         cancel.clone(),
     );
     // p1 attaches by hand, shows its start, and goes away as soon as it has its first errors.
-    let mut client = v1::room_client::RoomClient::connect(endpoint.clone())
-        .await
-        .expect("connect");
-    let (tx, rx) = tokio::sync::mpsc::channel(8);
-    tx.send(hello("p1")).await.expect("queue hello");
-    tx.send(v1::NodeMessage {
-        body: Some(v1::node_message::Body::Shown(v1::Shown {
-            seq: 0,
-            pattern: false,
-        })),
-    })
-    .await
-    .expect("queue");
-    let mut inbound = client
-        .attach(tokio_stream::wrappers::ReceiverStream::new(rx))
-        .await
-        .expect("admitted")
-        .into_inner();
+    let (tx, mut inbound) = attach_by_hand(&endpoint, "p1", true).await;
     let node = NodeConfig {
         endpoint,
         room: "lab".into(),
@@ -907,7 +907,6 @@ async fn a_round_does_not_wait_for_a_projector_that_left_during_it() {
     .expect("p1 gets its errors");
     drop(inbound);
     drop(tx);
-    drop(client);
     // Well inside the deadline: the round p1 left finishes, and more follow with p0 alone.
     tokio::time::timeout(Duration::from_secs(20), async {
         loop {
@@ -970,18 +969,12 @@ async fn a_projector_that_cannot_be_calibrated_does_not_stop_the_room() {
     let mut sb = Sandbox::start_hot(5, "p2", PlantConfig::default()).await;
     sb.join("p0");
     sb.join("p1");
-    let mut client = v1::room_client::RoomClient::connect(sb.endpoint.clone())
-        .await
-        .expect("connect");
-    let (tx, rx) = tokio::sync::mpsc::channel(16);
-    tx.send(hello("p2")).await.expect("hello");
-    let _stream = client
-        .attach(tokio_stream::wrappers::ReceiverStream::new(rx))
-        .await
-        .expect("p2 admitted");
+    let (tx, _stream) = attach_by_hand(&sb.endpoint, "p2", false).await;
     // Heartbeats keep it attached; it never acknowledges a pattern.
     let beats = tokio::spawn(async move {
+        let mut every = tokio::time::interval(Duration::from_millis(100));
         loop {
+            every.tick().await;
             let beat = v1::NodeMessage {
                 body: Some(v1::node_message::Body::Heartbeat(v1::Heartbeat {
                     sent_unix_ms: 0,
@@ -990,7 +983,6 @@ async fn a_projector_that_cannot_be_calibrated_does_not_stop_the_room() {
             if tx.send(beat).await.is_err() {
                 return;
             }
-            tokio::time::sleep(Duration::from_millis(100)).await;
         }
     });
     let attached = sb

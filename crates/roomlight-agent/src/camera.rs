@@ -623,25 +623,15 @@ async fn collect(
 
 /// One capture the nodes can act on: the camera's stale frames discarded first (every frame
 /// counted). `None` when the camera failed or handed over the wrong number of patches (logged).
-async fn capture_fresh(
+async fn capture_fresh<C: Camera>(
     shared: &Shared,
-    camera: &mut impl Camera,
+    camera: &mut C,
     captures: &mut u64,
 ) -> Option<Vec<LinearRgb>> {
-    let mut last = None;
-    for _ in 0..=shared.config.stale_frames {
-        match camera.capture().await {
-            Ok(y) => {
-                *captures += 1;
-                last = Some(y);
-            }
-            Err(e) => {
-                tracing::warn!(error = %e, "capture failed");
-                return None;
-            }
-        }
-    }
-    let y = last?;
+    let y = latest(shared, camera, captures, async |c: &mut C| {
+        c.capture().await
+    })
+    .await?;
     let patches = shared.live().problem.patches();
     if y.len() != patches {
         tracing::error!(
@@ -768,20 +758,34 @@ async fn capture_measured(
 }
 
 /// One whole image, the camera's stale frames discarded first (every frame counted).
-async fn capture_image_fresh(
+async fn capture_image_fresh<C: Camera>(
     shared: &Shared,
-    camera: &mut impl Camera,
+    camera: &mut C,
     captures: &mut u64,
 ) -> Option<LinearImage> {
+    latest(shared, camera, captures, async |c: &mut C| {
+        c.capture_image().await
+    })
+    .await
+}
+
+/// The last of `stale_frames + 1` captures taken with `take` (every one counted); `None` when
+/// one failed (logged).
+async fn latest<C: Camera, T>(
+    shared: &Shared,
+    camera: &mut C,
+    captures: &mut u64,
+    mut take: impl AsyncFnMut(&mut C) -> Result<T, crate::AgentError>,
+) -> Option<T> {
     let mut last = None;
     for _ in 0..=shared.config.stale_frames {
-        match camera.capture_image().await {
-            Ok(image) => {
+        match take(camera).await {
+            Ok(v) => {
                 *captures += 1;
-                last = Some(image);
+                last = Some(v);
             }
             Err(e) => {
-                tracing::warn!(error = %e, "image capture failed");
+                tracing::warn!(error = %e, "capture failed");
                 return None;
             }
         }

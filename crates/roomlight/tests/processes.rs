@@ -71,6 +71,29 @@ fn calibrated(line: &str) -> Option<u64> {
     line.rsplit_once(" calibrated ")?.1.parse().ok()
 }
 
+/// `roomlight calibrate --scene small --camera 640x480 ARG --out .` in `d`, which must succeed.
+fn calibrate_small(d: &Path, arg: &str) {
+    let out = Command::new(env!("CARGO_BIN_EXE_roomlight"))
+        .args([
+            "calibrate",
+            "--scene",
+            "small",
+            "--camera",
+            "640x480",
+            arg,
+            "--out",
+            ".",
+        ])
+        .current_dir(d)
+        .output()
+        .expect("run calibrate");
+    assert!(
+        out.status.success(),
+        "calibrate {arg}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// Serves the small rendered room (a 640×480 camera) and starts a camera agent on it, `source`
 /// being the config lines that say where its model comes from; returns the two addresses and
 /// the camera agent's output.
@@ -379,26 +402,7 @@ fn the_rendered_room_is_served_images_in_and_out() {
 fn the_rendered_room_converges_through_separate_processes() {
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();
-    let calibrated = Command::new(env!("CARGO_BIN_EXE_roomlight"))
-        .args([
-            "calibrate",
-            "--scene",
-            "small",
-            "--camera",
-            "640x480",
-            "--seed",
-            "2",
-            "--out",
-            ".",
-        ])
-        .current_dir(d)
-        .output()
-        .expect("run calibrate");
-    assert!(
-        calibrated.status.success(),
-        "calibrate: {}",
-        String::from_utf8_lossy(&calibrated.stderr)
-    );
+    calibrate_small(d, "--seed=2");
     let model: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
             .expect("json");
@@ -446,33 +450,15 @@ fn the_rendered_room_converges_through_separate_processes() {
 /// simulator: every luminaire gets nodes, each response recovers the scene's hidden gamma
 /// within 2%, and the room converges to within 1% of the optimum of the model built over the
 /// wire — first without one luminaire, then again after it joined the lit room (its optimum
-/// lower: the joiner's light is measured and used). Then a node is killed with SIGKILL and restarted: it relights from its state file
-/// (values and weights), is admitted without being calibrated again, and the room converges
-/// again. Last the camera agent is killed and restarted: it resumes the model it wrote and the
+/// lower: the joiner's light is measured and used). Then a node is killed with SIGKILL and
+/// restarted: it relights from its state file (values and weights), is admitted without being
+/// calibrated again, and the room converges again. Last the camera agent is killed and restarted: it resumes the model it wrote and the
 /// room is within 1% again, nothing calibrated anew. Nothing is left behind.
 #[test]
 fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();
-    let surveyed = Command::new(env!("CARGO_BIN_EXE_roomlight"))
-        .args([
-            "calibrate",
-            "--scene",
-            "small",
-            "--camera",
-            "640x480",
-            "--survey-only",
-            "--out",
-            ".",
-        ])
-        .current_dir(d)
-        .output()
-        .expect("run calibrate --survey-only");
-    assert!(
-        surveyed.status.success(),
-        "survey: {}",
-        String::from_utf8_lossy(&surveyed.stderr)
-    );
+    calibrate_small(d, "--survey-only");
     assert!(
         !d.join("model.json").exists(),
         "the survey calibrates nothing"
