@@ -202,8 +202,20 @@ impl Shared {
         self.live.read().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// Each of `nodes`' attenuation, `s` on its support and start, as messages.
-    fn attenuation_messages(&self, nodes: &[u32]) -> Vec<Result<v1::RoomMessage, Status>> {
+    /// Sends `body` to a node agent, counting its bytes; false when the node has left.
+    async fn send(
+        &self,
+        tx: &mpsc::Sender<Result<v1::RoomMessage, Status>>,
+        body: v1::room_message::Body,
+    ) -> bool {
+        let message = v1::RoomMessage { body: Some(body) };
+        self.bytes_out
+            .fetch_add(message.encoded_len() as u64, Ordering::Relaxed);
+        tx.send(Ok(message)).await.is_ok()
+    }
+
+    /// Each of `nodes`' attenuation, `s` on its support and start, as message bodies.
+    fn attenuation_bodies(&self, nodes: &[u32]) -> Vec<v1::room_message::Body> {
         let live = self.live();
         nodes
             .iter()
@@ -212,20 +224,18 @@ impl Shared {
                 let s = live
                     .problem
                     .white_response_on_support(&live.white, n as usize);
-                Some(room_message(v1::room_message::Body::Attenuation(
-                    v1::Attenuation {
-                        node: n,
-                        p: Some(to_sparse(column.support(), column.values())),
-                        s: Some(to_sparse(column.support(), &s)),
-                        start: live
-                            .start
-                            .get(n as usize)
-                            .copied()
-                            .flatten()
-                            .filter(|x| x.is_finite())
-                            .map(|x| to_rgb(x.clamp_unit())),
-                    },
-                )))
+                Some(v1::room_message::Body::Attenuation(v1::Attenuation {
+                    node: n,
+                    p: Some(to_sparse(column.support(), column.values())),
+                    s: Some(to_sparse(column.support(), &s)),
+                    start: live
+                        .start
+                        .get(n as usize)
+                        .copied()
+                        .flatten()
+                        .filter(|x| x.is_finite())
+                        .map(|x| to_rgb(x.clamp_unit())),
+                }))
             })
             .collect()
     }
@@ -350,7 +360,12 @@ impl v1::room_server::Room for Service {
             )),
         ];
         if calibrated {
-            hello_msgs.extend(shared.attenuation_messages(&nodes));
+            hello_msgs.extend(
+                shared
+                    .attenuation_bodies(&nodes)
+                    .into_iter()
+                    .map(room_message),
+            );
         }
         for m in hello_msgs {
             tx.send(m)
@@ -653,18 +668,11 @@ async fn show_pattern(
     pattern: v1::show::Pattern,
 ) -> bool {
     let seq = shared.pattern_seq.fetch_add(1, Ordering::Relaxed) + 1;
-    let show = v1::Show {
+    let show = v1::room_message::Body::Show(v1::Show {
         seq,
         pattern: Some(pattern),
-    };
-    shared
-        .bytes_out
-        .fetch_add(show.encoded_len() as u64, Ordering::Relaxed);
-    if tx
-        .send(room_message(v1::room_message::Body::Show(show)))
-        .await
-        .is_err()
-    {
+    });
+    if !shared.send(tx, show).await {
         return false;
     }
     let shown = wait_for(shared, shared.config.deadline, |r| {
@@ -1039,15 +1047,8 @@ async fn segment_over_wire(
     if let Some(peer) = shared.registry().peers.get_mut(projector) {
         peer.nodes = ids.clone();
     }
-    let message = assign_message(&assignment);
-    shared
-        .bytes_out
-        .fetch_add(message.encoded_len() as u64, Ordering::Relaxed);
-    if tx
-        .send(room_message(v1::room_message::Body::Assign(message)))
-        .await
-        .is_err()
-    {
+    let assign = v1::room_message::Body::Assign(assign_message(&assignment));
+    if !shared.send(&tx, assign).await {
         return false;
     }
     tracing::info!(%projector, nodes = ids.len(), decoded = format!("{:.1}%", 100.0 * decoded), gamma = ?assignment.response.gamma, "segmented over the wire");
@@ -1308,13 +1309,8 @@ async fn light_all(shared: &Shared) {
         .map(|p| (p.tx.clone(), p.nodes.clone()))
         .collect();
     for (tx, nodes) in outbox {
-        for m in shared.attenuation_messages(&nodes) {
-            if let Ok(msg) = &m {
-                shared
-                    .bytes_out
-                    .fetch_add(msg.encoded_len() as u64, Ordering::Relaxed);
-            }
-            if tx.send(m).await.is_err() {
+        for body in shared.attenuation_bodies(&nodes) {
+            if !shared.send(&tx, body).await {
                 break;
             }
         }

@@ -71,6 +71,23 @@ fn calibrated(line: &str) -> Option<u64> {
     line.rsplit_once(" calibrated ")?.1.parse().ok()
 }
 
+/// The model file `d/model.json`: as JSON, its problem, and the problem's optimum.
+fn model_in(
+    d: &Path,
+) -> (
+    serde_json::Value,
+    roomlight_core::Problem,
+    roomlight_core::optimum::Optimum,
+) {
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
+            .expect("json");
+    let problem: roomlight_core::Problem =
+        serde_json::from_value(model["problem"].clone()).expect("problem");
+    let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
+    (model, problem, best)
+}
+
 /// `roomlight calibrate --scene small --camera 640x480 ARG --out .` in `d`, which must succeed.
 fn calibrate_small(d: &Path, arg: &str) {
     let out = Command::new(env!("CARGO_BIN_EXE_roomlight"))
@@ -201,12 +218,7 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
         procs.spawn(p, &["node", "--config", &format!("{p}.toml")], d);
     }
     // G* of the room, from the model the simulator wrote.
-    let model: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
-            .expect("json");
-    let problem: roomlight_core::Problem =
-        serde_json::from_value(model["problem"].clone()).expect("problem");
-    let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
+    let (_, _, best) = model_in(d);
     let converged = |l: &str| {
         status(l).is_some_and(|(c, g, live)| live == 3 && c >= 10 && best.excess(g) < 1e-3)
     };
@@ -403,12 +415,7 @@ fn the_rendered_room_converges_through_separate_processes() {
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();
     calibrate_small(d, "--seed=2");
-    let model: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
-            .expect("json");
-    let problem: roomlight_core::Problem =
-        serde_json::from_value(model["problem"].clone()).expect("problem");
-    let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
+    let (model, _, best) = model_in(d);
     let projectors: Vec<String> = model["owners"]
         .as_object()
         .expect("owners")
@@ -507,14 +514,9 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
             status(l).is_some_and(|(_, _, live)| live == count)
                 && calibrated(l) == Some(count as u64)
         });
-        let model: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
-                .expect("json");
-        let problem: roomlight_core::Problem =
-            serde_json::from_value(model["problem"].clone()).expect("problem");
-        let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
+        let (model, problem, best) = model_in(d);
         let (captures, g, _) = status(&ready).expect("status");
-        (captures, g, model, best)
+        (captures, g, model, problem, best)
     };
     let converge = |best: &roomlight_core::optimum::Optimum, count: usize, since: u64| {
         // Two-sided: a room measured below the model's optimum means a wrong model.
@@ -534,10 +536,10 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
         );
         assert!(captures - since < 30, "{line}");
     };
-    let (calibrated_at, _, first_model, first) = model_of(n - 1);
+    let (calibrated_at, _, _, without, first) = model_of(n - 1);
     converge(&first, n - 1, calibrated_at);
     start_node(&mut procs, &luminaires[joiner].0, false);
-    let (calibrated_at, g_joined, model, best) = model_of(n);
+    let (calibrated_at, g_joined, model, problem, best) = model_of(n);
     // The joiner starts where it best fills what the room lacks: the very first capture with
     // it is already better than the room could do without it.
     assert!(
@@ -547,10 +549,6 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
     );
     // The room without the joiner, on the patches the final model still measures (the
     // joiner's light may leave more out), for a fair comparison of the optima.
-    let problem: roomlight_core::Problem =
-        serde_json::from_value(model["problem"].clone()).expect("problem");
-    let without: roomlight_core::Problem =
-        serde_json::from_value(first_model["problem"].clone()).expect("problem");
     let out: Vec<bool> = (0..problem.patches())
         .map(|i| {
             problem.target()[i] == problem.black()[i]
