@@ -10,6 +10,7 @@
 use crate::CalibError;
 use crate::image_io::LinearImage;
 use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
 
 /// Which coordinate a pattern encodes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -225,21 +226,30 @@ impl Manifest {
                     Pattern::White => true,
                     Pattern::Black => false,
                     Pattern::Bit { axis, bit, inverse } => {
-                        let (v, bits) = match axis {
-                            Axis::Column => (i % w, self.column_bits),
-                            Axis::Row => (i / w, self.row_bits),
+                        let v = match axis {
+                            Axis::Column => i % w,
+                            Axis::Row => i / w,
                         };
-                        let g = |b: u32| (gray(v) >> (bits - 1 - b)) & 1 == 1;
-                        let encoded = match self.base_bit(bits) {
-                            Some(base) if base != bit => g(bit) != g(base),
-                            _ => g(bit),
-                        };
-                        encoded != inverse
+                        self.encoded_bit(axis, bit, v) != inverse
                     }
                 };
                 f32::from(u8::from(on))
             })
             .collect()
+    }
+
+    /// The value `bit` of `axis` shows at projector coordinate `v` (before the inverse): the
+    /// Gray code's bit, XOR-ed with the base bit under XOR coding.
+    pub fn encoded_bit(&self, axis: Axis, bit: u32, v: u32) -> bool {
+        let bits = match axis {
+            Axis::Column => self.column_bits,
+            Axis::Row => self.row_bits,
+        };
+        let g = |b: u32| (gray(v) >> (bits - 1 - b)) & 1 == 1;
+        match self.base_bit(bits) {
+            Some(base) if base != bit => g(bit) != g(base),
+            _ => g(bit),
+        }
     }
 
     /// The bit every other bit is XOR-ed with, for an axis of `bits` bits.
@@ -278,6 +288,9 @@ pub struct DecodeConfig {
     pub min_margin_share: f32,
     /// How many untrusted bits a pixel may have and still be decoded (0 or 1).
     pub max_uncertain_bits: usize,
+    /// Decode pixels with more untrusted bits from their decoded neighbours (XOR coding only;
+    /// see [`decode`]).
+    pub fill_from_neighbours: bool,
 }
 
 impl DecodeConfig {
@@ -287,6 +300,7 @@ impl DecodeConfig {
         Self {
             min_margin_share: 0.5,
             max_uncertain_bits: 0,
+            fill_from_neighbours: false,
             ..Self::default()
         }
     }
@@ -300,6 +314,7 @@ impl Default for DecodeConfig {
             min_direct_share: 0.005,
             min_margin_share: 0.4,
             max_uncertain_bits: 1,
+            fill_from_neighbours: true,
         }
     }
 }
@@ -352,9 +367,25 @@ impl Correspondence {
 
 /// Decodes one projector from its captures, looked up by pattern. Every capture must have the
 /// camera's size.
+///
+/// Two passes: each pixel on its own (at most one untrusted bit), then, with XOR coding and
+/// [`DecodeConfig::fill_from_neighbours`], pixels with more untrusted bits from their decoded
+/// neighbours ([`fill_from_neighbours`]).
 pub fn decode<'a>(
     manifest: &Manifest,
     config: &DecodeConfig,
+    capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
+) -> Result<Correspondence, CalibError> {
+    decode_where(manifest, config, None, capture)
+}
+
+/// [`decode`] over the camera pixels `ours` marks (all when `None`): projectors coded at the
+/// same time ([`group_disjoint`]) each decode the pixels they light most, and the second pass
+/// does not grow into another's. A mask of another size than the captures is refused.
+pub fn decode_where<'a>(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    ours: Option<&[bool]>,
     mut capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
 ) -> Result<Correspondence, CalibError> {
     let find = |pattern: Pattern| {
@@ -378,6 +409,14 @@ pub fn decode<'a>(
     let white = intensity(white_file)?;
     let black = intensity(find(Pattern::Black)?)?;
     let n = (w * h) as usize;
+    if let Some(mask) = ours
+        && mask.len() != n
+    {
+        return Err(CalibError::Invalid {
+            field: "decode mask",
+            problem: format!("{} pixels, the captures have {w}x{h}", mask.len()),
+        });
+    }
     // Pairs (pattern − black, inverse − black) per axis and bit.
     let mut pairs: Vec<(Axis, u32, Vec<f32>, Vec<f32>)> = Vec::new();
     for (axis, bits) in [
@@ -431,18 +470,12 @@ pub fn decode<'a>(
     sorted.sort_by(f32::total_cmp);
     let p99 = sorted.get(sorted.len() * 99 / 100).copied().unwrap_or(0.0);
     let reach = (config.min_direct_share * p99).max(6.0 * config.noise_floor);
-    let mut map = vec![None; n];
-    let mut confidence = vec![0.0f32; n];
-    for i in 0..n {
+    // One reading per pattern pair: the difference `d` and, where the direct light decides it,
+    // the encoded value it shows (`None`: untrusted), with the noise of the difference.
+    let reading = |i: usize, out: &mut Vec<Reading>| {
         let (ld, lg) = (direct[i], global[i]);
-        // NaN (a corrupt capture) counts as not reached.
-        if ld.is_nan() || ld < reach || white[i] - black[i] < reach {
-            continue;
-        }
-        // (value, trusted) of every encoded bit, per axis, most significant first.
-        let mut read: [Vec<(bool, bool)>; 2] = [Vec::new(), Vec::new()];
-        let mut worst = f32::INFINITY;
-        for (axis, _, p, q) in &pairs {
+        out.clear();
+        out.extend(pairs.iter().map(|(axis, bit, p, q)| {
             let (a, b) = (p[i], q[i]);
             let d = a - b;
             // Noise of a difference of two pixels around their level.
@@ -455,21 +488,50 @@ pub fn decode<'a>(
             let trusted = if d.abs() < margin {
                 None
             } else if xor || ld > lg {
-                // High-frequency pairs see the same global light: the sign is the direct part's.
+                // High-frequency pairs see the same global light: the sign is the direct
+                // part's.
                 Some(d > 0.0)
             } else if a < ld && b > lg {
-                // Global light dominates a coarse stripe: trust only what direct light explains.
+                // Global light dominates a coarse stripe: trust only what direct light
+                // explains.
                 Some(false)
             } else if a > lg && b < ld {
                 Some(true)
             } else {
                 None
             };
-            if trusted.is_some() {
-                worst = worst.min(d.abs() / ld);
+            Reading {
+                axis: *axis,
+                bit: *bit,
+                d,
+                sigma,
+                trusted,
             }
-            read[usize::from(*axis == Axis::Row)]
-                .push((trusted.unwrap_or(d > 0.0), trusted.is_some()));
+        }));
+    };
+    let reached = |i: usize| {
+        // NaN (a corrupt capture) counts as not reached.
+        ours.is_none_or(|m| m[i])
+            && !(direct[i].is_nan() || direct[i] < reach || white[i] - black[i] < reach)
+    };
+    let mut map = vec![None; n];
+    let mut confidence = vec![0.0f32; n];
+    let mut readings = Vec::with_capacity(pairs.len());
+    for i in 0..n {
+        if !reached(i) {
+            continue;
+        }
+        let ld = direct[i];
+        // (value, trusted) of every encoded bit, per axis, most significant first.
+        let mut read: [Vec<(bool, bool)>; 2] = [Vec::new(), Vec::new()];
+        let mut worst = f32::INFINITY;
+        reading(i, &mut readings);
+        for r in &readings {
+            if r.trusted.is_some() {
+                worst = worst.min(r.d.abs() / ld);
+            }
+            read[usize::from(r.axis == Axis::Row)]
+                .push((r.trusted.unwrap_or(r.d > 0.0), r.trusted.is_some()));
         }
         // Undo the XOR with the base bit; a bit is trusted only if its base is too.
         let mut codes = [0u32; 2];
@@ -502,6 +564,20 @@ pub fn decode<'a>(
         let c = worst.min(1.0);
         confidence[i] = if uncertain == 1 { 0.5 * c } else { c };
     }
+    // The fill correlates the differences with candidate codes: that needs every pair's sign to
+    // be the direct light's, true of XOR coding's high-frequency patterns only.
+    if config.fill_from_neighbours && xor {
+        fill_from_neighbours(
+            manifest,
+            w as usize,
+            h as usize,
+            &reached,
+            &reading,
+            &direct,
+            &mut map,
+            &mut confidence,
+        );
+    }
     Ok(Correspondence {
         width: w,
         height: h,
@@ -512,6 +588,168 @@ pub fn decode<'a>(
         direct,
         global,
     })
+}
+
+/// One pattern pair at one camera pixel: `d` = pattern − inverse, its noise, and the encoded
+/// value it shows where the direct light decides it.
+struct Reading {
+    axis: Axis,
+    bit: u32,
+    d: f32,
+    sigma: f32,
+    trusted: Option<bool>,
+}
+
+/// How far (projector pixels) a candidate may lie from the neighbours' prediction.
+const FILL_RADIUS: i64 = 8;
+/// The share of the measured differences (by magnitude) a filled pixel's code must agree with:
+/// a pixel in shadow next to a lit surface sees that surface's code in its inter-reflected
+/// light, which agrees with no single position that well.
+const FILL_AGREEMENT: f32 = 0.9;
+/// How many times a pixel is tried as its neighbours fill in.
+const FILL_TRIES: u8 = 3;
+
+/// The second pass of [`decode`]: a reached pixel with more than one untrusted bit (a weak
+/// direct signal next to strong global light, or a surface at grazing incidence where
+/// pattern-dependent inter-reflection flips weak bits) is decoded from its decoded neighbours,
+/// growing inwards from them. Per axis, the neighbours predict its coordinate (a linear
+/// extrapolation of two neighbours in a row where there are such, else the neighbours
+/// themselves); of the coordinates within [`FILL_RADIUS`] of the prediction that agree with
+/// every trusted bit, the one whose code correlates best with the measured differences is taken
+/// when it agrees with [`FILL_AGREEMENT`] of them and beats every candidate more than one pixel
+/// away by six noise standard deviations and half the direct light. Otherwise the pixel stays
+/// unknown: across a depth edge the prediction is wrong and no candidate agrees clearly.
+#[allow(clippy::too_many_arguments)]
+fn fill_from_neighbours(
+    manifest: &Manifest,
+    w: usize,
+    h: usize,
+    reached: &impl Fn(usize) -> bool,
+    reading: &impl Fn(usize, &mut Vec<Reading>),
+    direct: &[f32],
+    map: &mut [Option<(u32, u32)>],
+    confidence: &mut [f32],
+) {
+    const AROUND: [(isize, isize); 8] = [
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+        (-1, 0),
+        (1, 0),
+        (-1, 1),
+        (0, 1),
+        (1, 1),
+    ];
+    let at = |i: usize, (dx, dy): (isize, isize), k: isize| -> Option<usize> {
+        let (x, y) = ((i % w) as isize + dx * k, (i / w) as isize + dy * k);
+        (x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h)
+            .then(|| y as usize * w + x as usize)
+    };
+    let mut tries = vec![0u8; w * h];
+    let mut readings = Vec::new();
+    let mut queue: VecDeque<usize> = VecDeque::new();
+    let push_around =
+        |i: usize, map: &[Option<(u32, u32)>], tries: &mut [u8], queue: &mut VecDeque<usize>| {
+            for dir in AROUND {
+                if let Some(j) = at(i, dir, 1)
+                    && map[j].is_none()
+                    && tries[j] < FILL_TRIES
+                    && reached(j)
+                {
+                    tries[j] += 1;
+                    queue.push_back(j);
+                }
+            }
+        };
+    for i in 0..w * h {
+        if map[i].is_some() {
+            push_around(i, map, &mut tries, &mut queue);
+        }
+    }
+    while let Some(i) = queue.pop_front() {
+        if map[i].is_some() {
+            continue;
+        }
+        // Predictions per axis from the neighbours.
+        let (mut extrapolated, mut adjacent): ([Vec<i64>; 2], [Vec<i64>; 2]) = Default::default();
+        for dir in AROUND {
+            let Some(a) = at(i, dir, 1).and_then(|j| map[j]) else {
+                continue;
+            };
+            let b = at(i, dir, 2).and_then(|j| map[j]);
+            for (k, (va, vb)) in [(a.0, b.map(|b| b.0)), (a.1, b.map(|b| b.1))]
+                .into_iter()
+                .enumerate()
+            {
+                adjacent[k].push(i64::from(va));
+                if let Some(vb) = vb {
+                    extrapolated[k].push(2 * i64::from(va) - i64::from(vb));
+                }
+            }
+        }
+        reading(i, &mut readings);
+        let ld = direct[i];
+        let mut found = [0u32; 2];
+        let mut gaps = [0.0f32; 2];
+        let mut ok = true;
+        for (k, axis) in [Axis::Column, Axis::Row].into_iter().enumerate() {
+            let preds = if extrapolated[k].is_empty() {
+                &mut adjacent[k]
+            } else {
+                &mut extrapolated[k]
+            };
+            if preds.is_empty() {
+                ok = false;
+                break;
+            }
+            preds.sort_unstable();
+            let centre = preds[preds.len() / 2];
+            let size = i64::from(match axis {
+                Axis::Column => manifest.width,
+                Axis::Row => manifest.height,
+            });
+            let ours: Vec<&Reading> = readings.iter().filter(|r| r.axis == axis).collect();
+            let noise = ours.iter().map(|r| r.sigma).sum::<f32>() / ours.len().max(1) as f32;
+            let candidates: Vec<(i64, f32)> = ((centre - FILL_RADIUS).max(0)
+                ..=(centre + FILL_RADIUS).min(size - 1))
+                .filter_map(|v| {
+                    let mut score = 0.0f32;
+                    for r in &ours {
+                        let e = manifest.encoded_bit(axis, r.bit, v as u32);
+                        if r.trusted.is_some_and(|t| t != e) {
+                            return None;
+                        }
+                        score += if e { r.d } else { -r.d };
+                    }
+                    Some((v, score))
+                })
+                .collect();
+            let Some(&(best, score)) = candidates.iter().max_by(|a, b| a.1.total_cmp(&b.1)) else {
+                ok = false;
+                break;
+            };
+            let rival = candidates
+                .iter()
+                .filter(|(v, _)| (v - best).abs() > 1)
+                .map(|c| c.1)
+                .fold(f32::NEG_INFINITY, f32::max);
+            let gap = score - rival;
+            let total: f32 = ours.iter().map(|r| r.d.abs()).sum();
+            if !(score >= FILL_AGREEMENT * total && gap >= (6.0 * noise).max(0.5 * ld)) {
+                ok = false;
+                break;
+            }
+            found[k] = best as u32;
+            gaps[k] = gap;
+        }
+        if !ok {
+            continue;
+        }
+        map[i] = Some((found[0], found[1]));
+        // Below every first-pass decode: the inverse map prefers measured pixels.
+        confidence[i] = 0.25 * (gaps[0].min(gaps[1]) / (2.0 * ld).max(f32::MIN_POSITIVE)).min(1.0);
+        push_around(i, map, &mut tries, &mut queue);
+    }
 }
 
 /// Groups projectors whose footprints (camera pixels each lights directly) do not overlap, so

@@ -4,7 +4,7 @@
 use anyhow::{Context, Result};
 use roomlight_calib::charts::{PatchStatus, sample_charts};
 use roomlight_calib::graycode::{
-    Coding, Correspondence, DecodeConfig, Manifest, decode, group_disjoint,
+    Coding, Correspondence, DecodeConfig, Manifest, decode, decode_where, group_disjoint,
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{NodeConfig, segment};
@@ -152,13 +152,22 @@ pub fn run(quick: bool) -> Result<()> {
         n + 1
     );
     println!(
-        "{:<14} {:>9} {:>12} {:>14} {:>10}",
+        "{:<18} {:>9} {:>12} {:>14} {:>10}",
         "projector", "reached", "within ±1", "off by > 2", "decoded"
     );
     let config = DecodeConfig::default();
     let mut decode_secs = Vec::new();
     let mut decoded_all: Vec<Option<Correspondence>> = vec![None; n];
-    for group in &groups {
+    // Every group, then each member of a shared group alone (as `roomlight calibrate` codes
+    // them): what coding at the same time costs in accuracy.
+    let alone_runs: Vec<Vec<usize>> = groups
+        .iter()
+        .filter(|g| g.len() > 1)
+        .flatten()
+        .map(|&k| vec![k])
+        .collect();
+    for (run, group) in groups.iter().chain(&alone_runs).enumerate() {
+        let alone = run >= groups.len();
         let longest = group
             .iter()
             .map(|&k| manifests[k].patterns.len())
@@ -192,7 +201,11 @@ pub fn run(quick: bool) -> Result<()> {
             } else {
                 config
             };
-            let mut decoded = decode(m, &cfg, |f| {
+            // In a group, a pixel belongs to the member whose white light raises it most.
+            let ours: Vec<bool> = (0..gains[k].len())
+                .map(|i| !group.iter().any(|&o| o != k && gains[o][i] > gains[k][i]))
+                .collect();
+            let decoded = decode_where(m, &cfg, (group.len() > 1).then_some(&ours[..]), |f| {
                 let j = m
                     .patterns
                     .iter()
@@ -201,14 +214,6 @@ pub fn run(quick: bool) -> Result<()> {
                 Ok(&captures[j])
             })?;
             decode_secs.push(t.elapsed().as_secs_f64());
-            // In a group, a pixel belongs to the member whose white light raises it most.
-            if group.len() > 1 {
-                for (i, d) in decoded.map.iter_mut().enumerate() {
-                    if group.iter().any(|&o| o != k && gains[o][i] > gains[k][i]) {
-                        *d = None;
-                    }
-                }
-            }
             let truth = room.true_correspondence(k);
             let (reached, close, far) = accuracy(&truth, &decoded, m.width);
             // Of the decoded pixels off by more than 2, the share the simulator says this
@@ -281,8 +286,12 @@ pub fn run(quick: bool) -> Result<()> {
                 ""
             };
             println!(
-                "{:<14} {:>9} {:>11.2}% {:>13.3}% {:>9.1}% {:>12.2}% of {:>7}{kind}",
-                p.name,
+                "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}% {:>12.2}% of {:>7}{kind}",
+                if alone {
+                    format!("{} alone", p.name)
+                } else {
+                    p.name.clone()
+                },
                 reached,
                 100.0 * close,
                 100.0 * far,
@@ -292,7 +301,7 @@ pub fn run(quick: bool) -> Result<()> {
             );
             if far > 0.0 {
                 println!(
-                    "{:<14} of the decoded pixels, {:.3}% lie where the simulator has no direct correspondence for it",
+                    "{:<18} of the decoded pixels, {:.3}% lie where the simulator has no direct correspondence for it",
                     "",
                     100.0 * outside
                 );
