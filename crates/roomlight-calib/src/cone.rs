@@ -220,16 +220,33 @@ pub fn shape_ring(
         });
     }
     let tw = texture.projector_width as usize;
+    let in_node = |m: &Option<(u32, u32)>| {
+        m.map(|(x, y)| y as usize * tw + x as usize)
+            .filter(|&p| node.weights.get(p).is_some_and(|w| *w > 0.0))
+    };
+    // Where the texture projector gives little light (under a tenth of its median over the
+    // node: grazing surfaces, pixels lit only through inter-reflection) the ratio means nothing,
+    // and one such outlier would set the scale of the whole node.
+    let mut gains: Vec<f32> = texture
+        .map
+        .iter()
+        .zip(gain)
+        .filter(|(m, g)| in_node(m).is_some() && g.is_finite())
+        .map(|(_, g)| *g)
+        .collect();
+    gains.sort_by(f32::total_cmp);
+    let floor = gains
+        .get(gains.len() / 2)
+        .map_or(1e-6, |median| (0.1 * median).max(1e-6));
     let mut sum = vec![0.0f64; node.weights.len()];
     let mut count = vec![0u32; node.weights.len()];
     for (i, m) in texture.map.iter().enumerate() {
-        if let Some((x, y)) = m {
-            let p = *y as usize * tw + *x as usize;
-            // Where the texture projector gives (almost) no light the ratio means nothing.
-            if node.weights[p] > 0.0 && gain[i] > 1e-6 {
-                sum[p] += f64::from((missing[i] / gain[i]).max(0.0));
-                count[p] += 1;
-            }
+        if let Some(p) = in_node(m)
+            && gain[i] > floor
+            && missing[i].is_finite()
+        {
+            sum[p] += f64::from((missing[i] / gain[i]).max(0.0));
+            count[p] += 1;
         }
     }
     let measured: Vec<f64> = sum
