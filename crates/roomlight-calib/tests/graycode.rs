@@ -70,6 +70,23 @@ fn gray_code_round_trips_and_neighbours_differ_in_one_bit() {
     }
 }
 
+/// Decodes captures listed in the manifest's order.
+fn decode_captures(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    caps: &[LinearImage],
+) -> roomlight_calib::graycode::Correspondence {
+    decode(manifest, config, |f| {
+        let i = manifest
+            .patterns
+            .iter()
+            .position(|p| p.file == f.file)
+            .expect("pattern");
+        Ok(&caps[i])
+    })
+    .expect("decode")
+}
+
 /// (share of reached pixels decoded within ±1, share of decoded pixels off by more than 2).
 fn accuracy(
     room: &Room,
@@ -114,15 +131,7 @@ fn standard_projectors_decode_within_a_pixel_under_interreflection_noise_and_amb
         let p = &room.projectors()[k].pinhole;
         let manifest = Manifest::with_coding(p.width, p.height, coding).expect("manifest");
         let caps = pattern_captures(&room, k, &manifest, ambient, 1);
-        let decoded = decode(&manifest, &DecodeConfig::default(), |f| {
-            let i = manifest
-                .patterns
-                .iter()
-                .position(|p| p.file == f.file)
-                .expect("pattern");
-            Ok(&caps[i])
-        })
-        .expect("decode");
+        let decoded = decode_captures(&manifest, &DecodeConfig::default(), &caps);
         let (close, far, reached) = accuracy(&room, k, &decoded);
         println!(
             "projector {k} {coding:?}: {:.2}% within ±1, {:.3}% off by > 2",
@@ -203,17 +212,7 @@ fn strip_captures(manifest: &Manifest, weak: f32) -> Vec<LinearImage> {
 fn pixels_with_several_weak_bits_are_decoded_from_their_neighbours_but_not_across_a_depth_edge() {
     let manifest = Manifest::new(320, 64).expect("manifest");
     let caps = strip_captures(&manifest, 0.3);
-    let run = |config: &DecodeConfig| {
-        decode(&manifest, config, |f| {
-            let i = manifest
-                .patterns
-                .iter()
-                .position(|p| p.file == f.file)
-                .expect("pattern");
-            Ok(&caps[i])
-        })
-        .expect("decode")
-    };
+    let run = |config: &DecodeConfig| decode_captures(&manifest, config, &caps);
     let truth = |u: u32, v: u32| (if u < 70 { 3 * u + 10 } else { 3 * u + 47 }, 2 * v + 5);
     let tally = |c: &roomlight_calib::graycode::Correspondence, cols: std::ops::Range<u32>| {
         let (mut close, mut far, mut unknown) = (0, 0, 0);
