@@ -670,7 +670,7 @@ fn fill_from_neighbours(
         if map[i].is_some() {
             continue;
         }
-        // Predictions per axis from the neighbours.
+        // Predictions per axis from the neighbours: extrapolations where there are any.
         let (mut extrapolated, mut adjacent): ([Vec<i64>; 2], [Vec<i64>; 2]) = Default::default();
         for dir in AROUND {
             let Some(a) = at(i, dir, 1).and_then(|j| map[j]) else {
@@ -687,69 +687,73 @@ fn fill_from_neighbours(
                 }
             }
         }
+        let mut predictions = [0, 1].map(|k| {
+            if extrapolated[k].is_empty() {
+                std::mem::take(&mut adjacent[k])
+            } else {
+                std::mem::take(&mut extrapolated[k])
+            }
+        });
         reading(i, &mut readings);
         let ld = direct[i];
-        let mut found = [0u32; 2];
-        let mut gaps = [0.0f32; 2];
-        let mut ok = true;
-        for (k, axis) in [Axis::Column, Axis::Row].into_iter().enumerate() {
-            let preds = if extrapolated[k].is_empty() {
-                &mut adjacent[k]
-            } else {
-                &mut extrapolated[k]
-            };
-            if preds.is_empty() {
-                ok = false;
-                break;
-            }
-            preds.sort_unstable();
-            let centre = preds[preds.len() / 2];
-            let size = i64::from(match axis {
-                Axis::Column => manifest.width,
-                Axis::Row => manifest.height,
-            });
-            let ours: Vec<&Reading> = readings.iter().filter(|r| r.axis == axis).collect();
-            let noise = ours.iter().map(|r| r.sigma).sum::<f32>() / ours.len().max(1) as f32;
-            let candidates: Vec<(i64, f32)> = ((centre - FILL_RADIUS).max(0)
-                ..=(centre + FILL_RADIUS).min(size - 1))
-                .filter_map(|v| {
-                    let mut score = 0.0f32;
-                    for r in &ours {
-                        let e = manifest.encoded_bit(axis, r.bit, v as u32);
-                        if r.trusted.is_some_and(|t| t != e) {
-                            return None;
-                        }
-                        score += if e { r.d } else { -r.d };
-                    }
-                    Some((v, score))
-                })
-                .collect();
-            let Some(&(best, score)) = candidates.iter().max_by(|a, b| a.1.total_cmp(&b.1)) else {
-                ok = false;
-                break;
-            };
-            let rival = candidates
-                .iter()
-                .filter(|(v, _)| (v - best).abs() > 1)
-                .map(|c| c.1)
-                .fold(f32::NEG_INFINITY, f32::max);
-            let gap = score - rival;
-            let total: f32 = ours.iter().map(|r| r.d.abs()).sum();
-            if !(score >= FILL_AGREEMENT * total && gap >= (6.0 * noise).max(0.5 * ld)) {
-                ok = false;
-                break;
-            }
-            found[k] = best as u32;
-            gaps[k] = gap;
-        }
-        if !ok {
+        let (Some((x, x_gap)), Some((y, y_gap))) = (
+            best_on_axis(manifest, Axis::Column, &readings, &mut predictions[0], ld),
+            best_on_axis(manifest, Axis::Row, &readings, &mut predictions[1], ld),
+        ) else {
             continue;
-        }
-        map[i] = Some((found[0], found[1]));
-        // Below every first-pass decode: the inverse map prefers measured pixels.
-        confidence[i] = 0.25 * (gaps[0].min(gaps[1]) / (2.0 * ld).max(f32::MIN_POSITIVE)).min(1.0);
+        };
+        map[i] = Some((x, y));
+        // At most a quarter: where a measured pixel lands on the same projector pixel the
+        // inverse map mostly prefers it.
+        confidence[i] = 0.25 * (x_gap.min(y_gap) / (2.0 * ld).max(f32::MIN_POSITIVE)).min(1.0);
         push_around(i, map, &mut tries, &mut queue);
     }
+}
+
+/// One axis of [`fill_from_neighbours`]: the coordinate near the median of `predictions` whose
+/// code agrees with every trusted reading and best with all of them, with its lead over every
+/// candidate more than one pixel away; `None` when no candidate is clear.
+fn best_on_axis(
+    manifest: &Manifest,
+    axis: Axis,
+    readings: &[Reading],
+    predictions: &mut [i64],
+    ld: f32,
+) -> Option<(u32, f32)> {
+    predictions.sort_unstable();
+    let centre = *predictions.get(predictions.len() / 2)?;
+    let size = i64::from(match axis {
+        Axis::Column => manifest.width,
+        Axis::Row => manifest.height,
+    });
+    let ours: Vec<&Reading> = readings.iter().filter(|r| r.axis == axis).collect();
+    let noise = ours.iter().map(|r| r.sigma).sum::<f32>() / ours.len().max(1) as f32;
+    let candidates: Vec<(i64, f32)> = ((centre - FILL_RADIUS).max(0)
+        ..=(centre + FILL_RADIUS).min(size - 1))
+        .filter_map(|v| {
+            let mut score = 0.0f32;
+            for r in &ours {
+                let e = manifest.encoded_bit(axis, r.bit, v as u32);
+                if r.trusted.is_some_and(|t| t != e) {
+                    return None;
+                }
+                score += if e { r.d } else { -r.d };
+            }
+            Some((v, score))
+        })
+        .collect();
+    let &(best, score) = candidates.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    // No rival at all (every other candidate disagrees with a trusted bit): an infinite lead.
+    let rival = candidates
+        .iter()
+        .filter(|(v, _)| (v - best).abs() > 1)
+        .map(|c| c.1)
+        .fold(f32::NEG_INFINITY, f32::max);
+    let gap = score - rival;
+    let total: f32 = ours.iter().map(|r| r.d.abs()).sum();
+    // NaN differences (a corrupt capture) fail both comparisons.
+    (score >= FILL_AGREEMENT * total && gap >= (6.0 * noise).max(0.5 * ld))
+        .then_some((best as u32, gap))
 }
 
 /// Groups projectors whose footprints (camera pixels each lights directly) do not overlap, so

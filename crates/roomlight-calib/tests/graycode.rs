@@ -5,7 +5,7 @@ mod common;
 use common::pattern_captures;
 
 use roomlight_calib::graycode::{
-    DecodeConfig, Manifest, bits_for, decode, gray, gray_inverse, group_disjoint,
+    DecodeConfig, Manifest, bits_for, decode_where, gray, gray_inverse, group_disjoint,
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_sim::{Room, scenes};
@@ -70,13 +70,14 @@ fn gray_code_round_trips_and_neighbours_differ_in_one_bit() {
     }
 }
 
-/// Decodes captures listed in the manifest's order.
+/// Decodes captures listed in the manifest's order, over the pixels `ours` marks (all: `None`).
 fn decode_captures(
     manifest: &Manifest,
     config: &DecodeConfig,
+    ours: Option<&[bool]>,
     caps: &[LinearImage],
-) -> roomlight_calib::graycode::Correspondence {
-    decode(manifest, config, |f| {
+) -> Result<roomlight_calib::graycode::Correspondence, roomlight_calib::CalibError> {
+    decode_where(manifest, config, ours, |f| {
         let i = manifest
             .patterns
             .iter()
@@ -84,7 +85,6 @@ fn decode_captures(
             .expect("pattern");
         Ok(&caps[i])
     })
-    .expect("decode")
 }
 
 /// (share of reached pixels decoded within ±1, share of decoded pixels off by more than 2).
@@ -131,7 +131,8 @@ fn standard_projectors_decode_within_a_pixel_under_interreflection_noise_and_amb
         let p = &room.projectors()[k].pinhole;
         let manifest = Manifest::with_coding(p.width, p.height, coding).expect("manifest");
         let caps = pattern_captures(&room, k, &manifest, ambient, 1);
-        let decoded = decode_captures(&manifest, &DecodeConfig::default(), &caps);
+        let decoded =
+            decode_captures(&manifest, &DecodeConfig::default(), None, &caps).expect("decode");
         let (close, far, reached) = accuracy(&room, k, &decoded);
         println!(
             "projector {k} {coding:?}: {:.2}% within ±1, {:.3}% off by > 2",
@@ -212,7 +213,8 @@ fn strip_captures(manifest: &Manifest, weak: f32) -> Vec<LinearImage> {
 fn pixels_with_several_weak_bits_are_decoded_from_their_neighbours_but_not_across_a_depth_edge() {
     let manifest = Manifest::new(320, 64).expect("manifest");
     let caps = strip_captures(&manifest, 0.3);
-    let run = |config: &DecodeConfig| decode_captures(&manifest, config, &caps);
+    let run =
+        |config: &DecodeConfig| decode_captures(&manifest, config, None, &caps).expect("decode");
     let truth = |u: u32, v: u32| (if u < 70 { 3 * u + 10 } else { 3 * u + 47 }, 2 * v + 5);
     let tally = |c: &roomlight_calib::graycode::Correspondence, cols: std::ops::Range<u32>| {
         let (mut close, mut far, mut unknown) = (0, 0, 0);
@@ -269,4 +271,30 @@ fn pixels_with_several_weak_bits_are_decoded_from_their_neighbours_but_not_acros
     let measured = filled.confidence[5];
     let grown = filled.confidence[50];
     assert!(grown > 0.0 && grown < measured, "{grown} vs {measured}");
+}
+
+#[test]
+fn a_decode_mask_keeps_the_other_pixels_unknown_and_must_match_the_captures() {
+    let manifest = Manifest::new(320, 64).expect("manifest");
+    let caps = strip_captures(&manifest, 1.0);
+    // Only the left half is ours: the right half, which decodes without the mask, stays unknown.
+    let ours: Vec<bool> = (0..96 * 24).map(|i| i % 96 < 48).collect();
+    let whole = decode_captures(&manifest, &DecodeConfig::default(), None, &caps).expect("decode");
+    assert!(
+        whole.map.iter().all(Option::is_some),
+        "the whole strip decodes"
+    );
+    let decoded =
+        decode_captures(&manifest, &DecodeConfig::default(), Some(&ours), &caps).expect("decode");
+    for (i, m) in decoded.map.iter().enumerate() {
+        assert_eq!(m.is_some(), ours[i], "pixel {i}");
+    }
+    let short = vec![true; 10];
+    let err = decode_captures(&manifest, &DecodeConfig::default(), Some(&short), &caps)
+        .expect_err("a mask of the wrong size");
+    let text = err.to_string();
+    assert!(
+        text.contains("decode mask") && text.contains("96x24"),
+        "{text}"
+    );
 }

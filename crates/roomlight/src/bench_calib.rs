@@ -195,17 +195,19 @@ pub fn run(quick: bool) -> Result<()> {
         }
         for &k in group {
             let m = &manifests[k];
+            // In a group, a pixel belongs to the member whose white light raises it most.
+            let ours: Option<Vec<bool>> = (group.len() > 1).then(|| {
+                (0..gains[k].len())
+                    .map(|i| !group.iter().any(|&o| o != k && gains[o][i] > gains[k][i]))
+                    .collect()
+            });
             let t = Instant::now();
             let cfg = if room.projectors()[k].kind == ProjectorKind::LargeAperture {
                 DecodeConfig::strict()
             } else {
                 config
             };
-            // In a group, a pixel belongs to the member whose white light raises it most.
-            let ours: Vec<bool> = (0..gains[k].len())
-                .map(|i| !group.iter().any(|&o| o != k && gains[o][i] > gains[k][i]))
-                .collect();
-            let decoded = decode_where(m, &cfg, (group.len() > 1).then_some(&ours[..]), |f| {
+            let decoded = decode_where(m, &cfg, ours.as_deref(), |f| {
                 let j = m
                     .patterns
                     .iter()
