@@ -161,6 +161,11 @@ pub enum SimError {
 struct ProjectorMap {
     /// `(probe, projector pixel, factor)`: irradiance at the probe per unit pixel light.
     entries: Vec<(u32, u32, f32)>,
+    /// `(probe, [x0, y0, x1, y1], factor)`: irradiance at the probe per unit of the mean light
+    /// over a rectangle of pixels (half-open): a radiosity element's sample integrates the
+    /// frame over the patch of surface it stands for, as a real wall does, instead of taking
+    /// one pixel (fine stripes would alias into its reflected light).
+    boxes: Vec<(u32, [u32; 4], f32)>,
     /// Sum of the factors per probe: the uniform-frame fast path.
     white: Vec<f32>,
 }
@@ -177,8 +182,10 @@ struct Probes {
     lights: Vec<Vec<f32>>,
 }
 
-/// One surface sample of a probe: `(probe, point, normal, weight)`.
-type Sample = (u32, V3, V3, f32);
+/// One surface sample of a probe: `(probe, point, normal, weight, cell)`, where `cell` holds
+/// the corners of the patch of surface the sample stands for when its light is integrated
+/// over that patch (radiosity elements), `None` for a point sample.
+type Sample = (u32, V3, V3, f32, Option<[V3; 4]>);
 
 /// What a camera pixel sees.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -256,7 +263,7 @@ impl Room {
                         });
                         camera_albedo.push(albedo);
                         camera_interp.push(geometry.element_weights(hit.face, hit.point));
-                        camera_samples.push((index, hit.point, hit.normal, 1.0));
+                        camera_samples.push((index, hit.point, hit.normal, 1.0, None));
                     }
                     None => {
                         pixels.push(PixelInfo {
@@ -295,7 +302,10 @@ impl Room {
                     let s = (i as f32 + (a as f32 + 0.5) / 3.0) / ns as f32;
                     let t = (j as f32 + (b as f32 + 0.5) / 3.0) / nt as f32;
                     let (p, n) = face.geom.point(s, t);
-                    samples.push((e as u32, p, n, 1.0 / 9.0));
+                    let (ds, dt) = (0.5 / (3.0 * ns as f32), 0.5 / (3.0 * nt as f32));
+                    let cell = [(-ds, -dt), (ds, -dt), (ds, dt), (-ds, dt)]
+                        .map(|(a, b)| face.geom.point(s + a, t + b).0);
+                    samples.push((e as u32, p, n, 1.0 / 9.0, Some(cell)));
                 }
             }
         }
@@ -323,7 +333,7 @@ impl Room {
                         let p = center + chart.right * (a * half) + chart.up * (b * half);
                         albedo.push(roomlight_core::colorchecker::reflectance(k));
                         interp.push(room.geometry.element_weights(face, p));
-                        samples.push((id, p, chart.normal, 1.0));
+                        samples.push((id, p, chart.normal, 1.0, None));
                     }
                 }
             }
@@ -344,14 +354,50 @@ impl Room {
         for projector in &self.projectors {
             let mut map = ProjectorMap {
                 entries: Vec::new(),
+                boxes: Vec::new(),
                 white: vec![0.0; count],
             };
-            for &(probe, p, n, weight) in samples {
+            let pin = &projector.pinhole;
+            for &(probe, p, n, weight, cell) in samples {
                 let lifted = p + n * EPS;
+                // Half the extent, in projector pixels, of the cell's image around the sample's.
+                let half = cell.and_then(|corners| {
+                    let (u, v) = pin.project(p)?;
+                    let (mut hx, mut hy) = (0.0f32, 0.0f32);
+                    for c in corners {
+                        let (cu, cv) = pin.project(c)?;
+                        (hx, hy) = (hx.max((cu - u).abs()), hy.max((cv - v).abs()));
+                    }
+                    Some((hx, hy))
+                });
                 projector.footprint(p, n, |lens, px, factor| {
-                    if self.geometry.visible(lens, lifted) {
-                        map.entries.push((probe, px, factor * weight));
-                        map.white[probe as usize] += factor * weight;
+                    if !self.geometry.visible(lens, lifted) {
+                        return;
+                    }
+                    map.white[probe as usize] += factor * weight;
+                    match half {
+                        Some((hx, hy)) => {
+                            let (x, y) =
+                                ((px % pin.width) as f32 + 0.5, (px / pin.width) as f32 + 0.5);
+                            let clip = |v: f32, max: u32| (v.round().max(0.0) as u32).min(max);
+                            let mut b = [
+                                clip(x - hx, pin.width),
+                                clip(y - hy, pin.height),
+                                clip(x + hx, pin.width),
+                                clip(y + hy, pin.height),
+                            ];
+                            // At least the sample's own pixel.
+                            if b[2] <= b[0] || b[3] <= b[1] {
+                                b = [
+                                    px % pin.width,
+                                    px / pin.width,
+                                    px % pin.width + 1,
+                                    px / pin.width + 1,
+                                ];
+                            }
+                            map.boxes.push((probe, b, factor * weight));
+                        }
+                        None => map.entries.push((probe, px, factor * weight)),
                     }
                 });
             }
@@ -360,7 +406,7 @@ impl Room {
         let mut lights = Vec::with_capacity(self.lights.len());
         for light in &self.lights {
             let mut factor = vec![0.0f32; count];
-            for &(probe, p, n, weight) in samples {
+            for &(probe, p, n, weight, _) in samples {
                 let lifted = p + n * EPS;
                 let mut sum = 0.0;
                 light.samples_to(p, n, |q, f| {
@@ -533,11 +579,27 @@ impl Room {
                         e[probe as usize] +=
                             projector.light(img.pixels[px as usize]) * f64::from(f);
                     }
+                    if !map.boxes.is_empty() {
+                        let table = SummedArea::new(img.width, img.height, |i| {
+                            projector.light(img.pixels[i])
+                        });
+                        for &(probe, b, f) in &map.boxes {
+                            e[probe as usize] += table.mean(b) * f64::from(f);
+                        }
+                    }
                 }
                 Frame::Linear(img) => {
                     for &(probe, px, f) in &map.entries {
                         e[probe as usize] +=
                             projector.light_linear(img.pixels[px as usize]) * f64::from(f);
+                    }
+                    if !map.boxes.is_empty() {
+                        let table = SummedArea::new(img.width, img.height, |i| {
+                            projector.light_linear(img.pixels[i])
+                        });
+                        for &(probe, b, f) in &map.boxes {
+                            e[probe as usize] += table.mean(b) * f64::from(f);
+                        }
                     }
                 }
             }
@@ -620,6 +682,17 @@ impl Room {
             capture,
             Self::aggregate_patches(&self.values(&self.patch_probes, frames, preset, &indirect)).0,
         ))
+    }
+
+    /// Direct irradiance on every radiosity element (each the mean over its surface) for these
+    /// frames and LED preset: the light inter-reflection starts from.
+    pub fn element_irradiance(
+        &self,
+        frames: &[Frame],
+        preset: Option<usize>,
+    ) -> Result<Vec<LinearRgb>, SimError> {
+        self.check_frames(frames)?;
+        Ok(self.direct(&self.element_probes, frames, preset))
     }
 
     /// The noiseless capture for these frames (one per projector) and LED preset.
@@ -797,6 +870,43 @@ impl Room {
     }
 }
 
+/// Summed-area table of a projector frame's light: the mean over any rectangle in O(1).
+struct SummedArea {
+    width: usize,
+    sums: Vec<[f64; 3]>,
+}
+
+impl SummedArea {
+    fn new(width: u32, height: u32, light: impl Fn(usize) -> LinearRgb) -> Self {
+        let (w, h) = (width as usize, height as usize);
+        let mut sums = vec![[0.0f64; 3]; (w + 1) * (h + 1)];
+        for y in 0..h {
+            let mut row = [0.0f64; 3];
+            for x in 0..w {
+                let l = light(y * w + x);
+                for (r, v) in row.iter_mut().zip(l.0) {
+                    *r += v;
+                }
+                let above = sums[y * (w + 1) + x + 1];
+                sums[(y + 1) * (w + 1) + x + 1] = [0, 1, 2].map(|c| above[c] + row[c]);
+            }
+        }
+        Self { width: w, sums }
+    }
+
+    /// Mean light over the half-open rectangle `[x0, x1) × [y0, y1)`; black when it is empty.
+    fn mean(&self, [x0, y0, x1, y1]: [u32; 4]) -> LinearRgb {
+        let (x0, y0, x1, y1) = (x0 as usize, y0 as usize, x1 as usize, y1 as usize);
+        let area = ((x1.saturating_sub(x0)) * (y1.saturating_sub(y0))) as f64;
+        if area == 0.0 {
+            return LinearRgb::ZERO;
+        }
+        let at = |x: usize, y: usize| self.sums[y * (self.width + 1) + x];
+        let (a, b, c, d) = (at(x1, y1), at(x0, y1), at(x1, y0), at(x0, y0));
+        LinearRgb([0, 1, 2].map(|k| (a[k] - b[k] - c[k] + d[k]) / area))
+    }
+}
+
 /// Camera noise: shot noise growing with √value, read noise, and saturation (DESIGN §7).
 #[derive(Debug, Clone)]
 pub struct CameraNoise {
@@ -828,15 +938,28 @@ impl CameraNoise {
 
     /// Adds noise to a noiseless capture and clips at zero and saturation.
     pub fn expose(&mut self, capture: &Capture) -> Capture {
+        self.expose_longer(capture, 1.0)
+    }
+
+    /// A capture with an exposure `factor` times the scene's, in the units of a normal one
+    /// (divided by `factor`): read noise shrinks by `factor`, shot noise by its square root,
+    /// and saturation comes at `1/factor` of the normal level. A factor that is not a finite
+    /// number ≥ 1 is taken as 1.
+    pub fn expose_longer(&mut self, capture: &Capture, factor: f64) -> Capture {
+        let f = if factor.is_finite() && factor >= 1.0 {
+            factor
+        } else {
+            1.0
+        };
         let pixels = capture
             .pixels
             .iter()
             .map(|p| {
                 p.map(|v| {
-                    let v = f64::from(v.max(0.0));
+                    let v = f64::from(v.max(0.0)) * f;
                     let sigma = (self.shot * self.shot * v + self.read * self.read).sqrt();
                     let z: f64 = StandardNormal.sample(&mut self.rng);
-                    (v + sigma * z).clamp(0.0, self.saturation) as f32
+                    ((v + sigma * z).clamp(0.0, self.saturation) / f) as f32
                 })
             })
             .collect();

@@ -441,3 +441,65 @@ fn the_true_correspondence_points_at_the_pixels_that_light_the_camera_pixel() {
         .target_irradiance(0, &Frame::Uniform([1.0; 3]))
         .expect("target irradiance");
 }
+
+#[test]
+fn radiosity_elements_integrate_fine_stripes_and_keep_coarse_ones() {
+    // A real wall integrates a projector's light over its surface: one-pixel stripes reach a
+    // radiosity element as their mean, whatever sample points the element has. (Sampling the
+    // frame at 3×3 points per element aliased such stripes into each element's light: its
+    // inter-reflected light then carried a code of its own.)
+    let room = Room::build(empty_room(0.5, true)).expect("room");
+    let (w, h) = (200u32, 200u32);
+    let frame = |on: &dyn Fn(u32, u32) -> bool| {
+        vec![Frame::Image(ProjectorImage {
+            width: w,
+            height: h,
+            pixels: (0..w * h)
+                .map(|i| [f32::from(u8::from(on(i % w, i / w))); 3])
+                .collect(),
+        })]
+    };
+    let white = room
+        .element_irradiance(&[Frame::Uniform([1.0; 3])], None)
+        .expect("white");
+    let peak = white.iter().map(|e| e[1]).fold(0.0, f64::max);
+    let lit: Vec<usize> = (0..white.len())
+        .filter(|&i| white[i][1] > 0.05 * peak)
+        .collect();
+    assert!(lit.len() > 10, "{} elements lit", lit.len());
+    for (name, on) in [
+        (
+            "columns",
+            &(|x: u32, _: u32| x.is_multiple_of(2)) as &dyn Fn(u32, u32) -> bool,
+        ),
+        ("rows", &|_: u32, y: u32| y.is_multiple_of(2)),
+    ] {
+        let e = room.element_irradiance(&frame(on), None).expect("stripes");
+        let mut dev: Vec<f64> = lit
+            .iter()
+            .map(|&i| (e[i][1] / white[i][1] - 0.5).abs())
+            .collect();
+        dev.sort_by(f64::total_cmp);
+        let (median, worst) = (dev[dev.len() / 2], dev[dev.len() - 1]);
+        println!("{name}: share of white per element − 0.5: median {median:.4}, worst {worst:.4}");
+        assert!(median < 0.01 && worst < 0.05, "{name}: {median} / {worst}");
+    }
+    // The left half of the frame lit: elements lit only from the left half keep their full
+    // light, the ones lit only from the right get none, the ones across the edge between.
+    let e = room
+        .element_irradiance(&frame(&|x: u32, _: u32| x < w / 2), None)
+        .expect("half");
+    let shares: Vec<f64> = lit.iter().map(|&i| e[i][1] / white[i][1]).collect();
+    let full = shares.iter().filter(|s| (**s - 1.0).abs() < 1e-6).count();
+    let none = shares.iter().filter(|s| s.abs() < 1e-6).count();
+    assert!(
+        full > lit.len() / 4 && none > lit.len() / 4,
+        "{full} full, {none} dark of {}",
+        lit.len()
+    );
+    let (lo, hi) = shares
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), s| (a.min(*s), b.max(*s)));
+    // The white sums its factors in f32: a rounding above 1.
+    assert!(lo >= -1e-6 && hi <= 1.0 + 1e-6, "shares {lo} to {hi}");
+}
