@@ -260,6 +260,34 @@ impl Manifest {
         }
     }
 
+    /// The pattern with only the projector pixels `shown` marks lit (the others black): the
+    /// second pass of [`Correspondence::second_pass_mask`]. A mask of another size than the
+    /// projector is refused.
+    pub fn pattern_image_where(
+        &self,
+        pattern: Pattern,
+        shown: &[bool],
+    ) -> Result<LinearImage, CalibError> {
+        if shown.len() != (self.width * self.height) as usize {
+            return Err(CalibError::Invalid {
+                field: "pattern mask",
+                problem: format!(
+                    "{} pixels, the projector has {}x{}",
+                    shown.len(),
+                    self.width,
+                    self.height
+                ),
+            });
+        }
+        let mut image = self.pattern_image(pattern);
+        for (px, &on) in image.pixels.iter_mut().zip(shown) {
+            if !on {
+                *px = [0.0; 3];
+            }
+        }
+        Ok(image)
+    }
+
     /// The pattern as an image (white where on).
     pub fn pattern_image(&self, pattern: Pattern) -> LinearImage {
         LinearImage {
@@ -306,6 +334,60 @@ impl DecodeConfig {
     }
 }
 
+impl DecodeConfig {
+    /// The same decoder for captures exposed `factor` times as long and scaled back to the
+    /// units of a normal one: read noise shrinks by `factor`, shot noise by its square root.
+    /// A factor that is not a finite number ≥ 1 is taken as 1.
+    pub fn exposed_longer(self, factor: f32) -> Self {
+        let f = if factor.is_finite() && factor >= 1.0 {
+            factor
+        } else {
+            1.0
+        };
+        Self {
+            noise_floor: self.noise_floor / f,
+            shot_noise: self.shot_noise / f.sqrt(),
+            ..self
+        }
+    }
+}
+
+/// The exposure factor (1 to `longest`) of a second pass from its white frame captured at the
+/// normal exposure: the camera pixels it decodes (`among`) must stay below `saturation` (per
+/// channel, capture units) with a margin. Light being additive, no masked pattern gives a pixel
+/// more than the masked white; its 99.9th percentile over `among` sets the factor (the
+/// brightest 0.1% may clip and stay unknown). Nothing to decode or nothing lit: `longest`.
+pub fn second_pass_exposure(
+    white: &LinearImage,
+    among: &[bool],
+    saturation: f32,
+    longest: f32,
+) -> f32 {
+    let longest = if longest.is_finite() {
+        longest.max(1.0)
+    } else {
+        1.0
+    };
+    let mut levels: Vec<f32> = white
+        .pixels
+        .iter()
+        .zip(among)
+        .filter(|(_, a)| **a)
+        .map(|(p, _)| p[0].max(p[1]).max(p[2]))
+        .filter(|v| v.is_finite())
+        .collect();
+    if levels.is_empty() {
+        return longest;
+    }
+    let k = (levels.len() - 1) * 999 / 1000;
+    let (_, top, _) = levels.select_nth_unstable_by(k, f32::total_cmp);
+    // At zero light any exposure is safe: the longest.
+    if *top <= 0.0 {
+        return longest;
+    }
+    (0.8 * saturation / *top).clamp(1.0, longest)
+}
+
 impl Default for DecodeConfig {
     fn default() -> Self {
         Self {
@@ -339,12 +421,157 @@ pub struct Correspondence {
     pub direct: Vec<f32>,
     /// Global light `Lg` per pixel.
     pub global: Vec<f32>,
+    /// The direct light from which a pixel counts as reached (capture units).
+    pub reach: f32,
 }
 
 impl Correspondence {
     /// Share of camera pixels with a decoded projector pixel.
     pub fn decoded_share(&self) -> f64 {
         self.map.iter().filter(|m| m.is_some()).count() as f64 / self.map.len().max(1) as f64
+    }
+
+    /// Projector pixels the decoded surfaces cover: every 2×2 block of decoded camera pixels
+    /// whose projector coordinates lie within [`COVER_SPAN`] of each other (one surface, no
+    /// depth edge between them) marks the projector rectangle they span, grown by `margin`
+    /// pixels; a decoded pixel outside such blocks marks only its own.
+    pub fn covered(&self, margin: u32) -> Vec<bool> {
+        let (pw, ph) = (
+            self.projector_width as usize,
+            self.projector_height as usize,
+        );
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut blocks = vec![false; pw * ph];
+        let mut points = Vec::new();
+        let mut mark = |x0: u32, x1: u32, y0: u32, y1: u32| {
+            for y in y0 as usize..=(y1 as usize).min(ph.saturating_sub(1)) {
+                for x in x0 as usize..=(x1 as usize).min(pw.saturating_sub(1)) {
+                    blocks[y * pw + x] = true;
+                }
+            }
+        };
+        for y in 0..h {
+            for x in 0..w {
+                let Some(a) = self.map[y * w + x] else {
+                    continue;
+                };
+                points.push(a);
+                if x + 1 == w || y + 1 == h {
+                    continue;
+                }
+                let block = [
+                    self.map[y * w + x + 1],
+                    self.map[(y + 1) * w + x],
+                    self.map[(y + 1) * w + x + 1],
+                ];
+                let (mut x0, mut x1, mut y0, mut y1) = (a.0, a.0, a.1, a.1);
+                let mut whole = true;
+                for b in block {
+                    let Some(b) = b else {
+                        whole = false;
+                        break;
+                    };
+                    (x0, x1, y0, y1) = (x0.min(b.0), x1.max(b.0), y0.min(b.1), y1.max(b.1));
+                }
+                if whole && x1 - x0 <= COVER_SPAN && y1 - y0 <= COVER_SPAN {
+                    mark(x0, x1, y0, y1);
+                }
+            }
+        }
+        let mut covered = dilate(&blocks, pw, ph, margin);
+        for (x, y) in points {
+            if let Some(c) = covered.get_mut(y as usize * pw + x as usize) {
+                *c = true;
+            }
+        }
+        covered
+    }
+
+    /// The projector pixels a second structured-light pass shows: those the first pass did not
+    /// cover ([`Correspondence::covered`]). Dark surfaces beside bright ones (a wall at grazing
+    /// incidence in a corner with a lit floor) decode wrongly or not at all in the first pass,
+    /// because the bright surface's inter-reflected light carries its own code onto them; with
+    /// the bright surface left black, their direct light decides. The share of shown pixels is
+    /// returned with the mask.
+    pub fn second_pass_mask(&self, margin: u32) -> (Vec<bool>, f64) {
+        let shown: Vec<bool> = self.covered(margin).into_iter().map(|c| !c).collect();
+        let share = shown.iter().filter(|s| **s).count() as f64 / shown.len().max(1) as f64;
+        (shown, share)
+    }
+
+    /// The camera pixels a second pass decodes: those this pass found reached by direct light
+    /// (`direct ≥ reach`) but could not decode. A pixel the first pass did not see reached gets
+    /// no direct light worth decoding; in a second pass that shows only a few projector pixels
+    /// their inter-reflected light can carry a consistent code (the lab's wall-front: 6% of
+    /// its frame shown gave 234,000 such pixels, 71% of them off).
+    pub fn reached_unknown(&self) -> Vec<bool> {
+        self.map
+            .iter()
+            .zip(&self.direct)
+            .map(|(m, d)| m.is_none() && *d >= self.reach)
+            .collect()
+    }
+
+    /// Takes every pixel this correspondence leaves unknown and a second pass (`other`, same
+    /// camera and projector, showing the projector pixels `shown` marks) decodes onto a shown
+    /// pixel or one beside it; returns how many were taken. A pixel decoded onto a black part
+    /// of the frame was lit by reflected light, not directly: it stays unknown. Another camera
+    /// or projector size, or a mask of another size, is refused.
+    pub fn merge_second_pass(
+        &mut self,
+        other: &Correspondence,
+        shown: &[bool],
+    ) -> Result<usize, CalibError> {
+        if (
+            self.width,
+            self.height,
+            self.projector_width,
+            self.projector_height,
+        ) != (
+            other.width,
+            other.height,
+            other.projector_width,
+            other.projector_height,
+        ) {
+            return Err(CalibError::Invalid {
+                field: "second pass",
+                problem: format!(
+                    "camera {}x{} and projector {}x{}, the first pass has camera {}x{} and projector {}x{}",
+                    other.width,
+                    other.height,
+                    other.projector_width,
+                    other.projector_height,
+                    self.width,
+                    self.height,
+                    self.projector_width,
+                    self.projector_height
+                ),
+            });
+        }
+        let (pw, ph) = (
+            self.projector_width as usize,
+            self.projector_height as usize,
+        );
+        if shown.len() != pw * ph {
+            return Err(CalibError::Invalid {
+                field: "second pass mask",
+                problem: format!("{} pixels, the projector has {pw}x{ph}", shown.len()),
+            });
+        }
+        let near_shown = dilate(shown, pw, ph, 1);
+        let mut taken = 0;
+        for i in 0..self.map.len() {
+            if self.map[i].is_none()
+                && other.map[i].is_some_and(|(x, y)| near_shown[y as usize * pw + x as usize])
+            {
+                self.map[i] = other.map[i];
+                self.confidence[i] = other.confidence[i];
+                self.direct[i] = other.direct[i];
+                self.global[i] = other.global[i];
+                taken += 1;
+            }
+        }
+        Ok(taken)
     }
 
     /// The 16-bit map of the `graycode decode` command: R = column + 1, G = row + 1 (0 where
@@ -587,7 +814,89 @@ pub fn decode_where<'a>(
         confidence,
         direct,
         global,
+        reach,
     })
+}
+
+/// A first pass that leaves more than this share of its decoded pixels reached but unknown
+/// ([`Correspondence::reached_unknown`]) gets a second pass ([`second_pass`]). In the lab only
+/// floor-right does (5.8%: a face at grazing incidence in a corner with a lit floor); the others
+/// leave 0.04–2.6% and a second pass would add almost nothing for its captures.
+pub const SECOND_PASS_WORTH: f64 = 0.03;
+/// Projector pixels within this distance of a decoded surface stay black in a second pass.
+pub const SECOND_PASS_MARGIN: u32 = 1;
+/// The longest exposure of a second pass, as a multiple of the normal one, when the camera
+/// allows it (in the lab: floor-right's second pass needs ×6; ×64 decoded no more pixels).
+pub const SECOND_PASS_LONGEST: f32 = 16.0;
+
+/// What a [`second_pass`] did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SecondPass {
+    /// Share of the projector frame shown.
+    pub shown: f64,
+    /// Exposure as a multiple of the normal one.
+    pub exposure: f32,
+    /// Captures taken (the masked white at the normal exposure, then the pattern set).
+    pub captures: usize,
+    /// Camera pixels it decoded that the first pass had left unknown.
+    pub taken: usize,
+}
+
+/// A second structured-light pass over the projector pixels the first did not cover
+/// ([`Correspondence::second_pass_mask`]), when the first left enough reached pixels unknown
+/// ([`SECOND_PASS_WORTH`]); `None` otherwise. `shoot(image, exposure)` shows `image` on this
+/// projector (the others black) and returns a capture `exposure` times as long, scaled back to
+/// the units of a normal one. The exposure comes from the masked white at the normal exposure
+/// ([`second_pass_exposure`], at most `longest`); the pass decodes only the pixels the first
+/// found reached but could not decode and merges them into `first`
+/// ([`Correspondence::merge_second_pass`]).
+pub fn second_pass<E: From<CalibError>>(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    first: &mut Correspondence,
+    saturation: f32,
+    longest: f32,
+    mut shoot: impl FnMut(&LinearImage, f32) -> Result<LinearImage, E>,
+) -> Result<Option<SecondPass>, E> {
+    let todo = first.reached_unknown();
+    let unknown = todo.iter().filter(|t| **t).count();
+    let decoded = first.map.iter().filter(|m| m.is_some()).count();
+    if (unknown as f64) <= SECOND_PASS_WORTH * decoded as f64 {
+        return Ok(None);
+    }
+    let (shown, share) = first.second_pass_mask(SECOND_PASS_MARGIN);
+    let white = shoot(&manifest.pattern_image_where(Pattern::White, &shown)?, 1.0)?;
+    let exposure = second_pass_exposure(&white, &todo, saturation, longest);
+    let mut captures = Vec::with_capacity(manifest.patterns.len());
+    for p in &manifest.patterns {
+        captures.push(shoot(
+            &manifest.pattern_image_where(p.pattern, &shown)?,
+            exposure,
+        )?);
+    }
+    let second = decode_where(
+        manifest,
+        &config.exposed_longer(exposure),
+        Some(&todo),
+        |f| {
+            let j = manifest
+                .patterns
+                .iter()
+                .position(|p| p.file == f.file)
+                .ok_or_else(|| CalibError::File {
+                    file: f.file.clone(),
+                    problem: "not in the manifest".into(),
+                })?;
+            Ok(&captures[j])
+        },
+    )?;
+    let taken = first.merge_second_pass(&second, &shown)?;
+    Ok(Some(SecondPass {
+        shown: share,
+        exposure,
+        captures: captures.len() + 1,
+        taken,
+    }))
 }
 
 /// One pattern pair at one camera pixel: `d` = pattern − inverse, its noise, and the encoded
@@ -598,6 +907,40 @@ struct Reading {
     d: f32,
     sigma: f32,
     trusted: Option<bool>,
+}
+
+/// How far apart (projector pixels, per axis) the coordinates of a 2×2 block of camera pixels
+/// may lie and still be one surface in [`Correspondence::covered`]: a camera pixel spans a few
+/// projector pixels on a minified surface, a depth edge many.
+pub const COVER_SPAN: u32 = 8;
+
+/// `mask` grown by `r` pixels (a square neighbourhood), rows then columns.
+fn dilate(mask: &[bool], w: usize, h: usize, r: u32) -> Vec<bool> {
+    let r = r as usize;
+    if r == 0 {
+        return mask.to_vec();
+    }
+    let mut rows = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            if mask[y * w + x] {
+                for v in &mut rows[y * w + x.saturating_sub(r)..=y * w + (x + r).min(w - 1)] {
+                    *v = true;
+                }
+            }
+        }
+    }
+    let mut out = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            if rows[y * w + x] {
+                for yy in y.saturating_sub(r)..=(y + r).min(h - 1) {
+                    out[yy * w + x] = true;
+                }
+            }
+        }
+    }
+    out
 }
 
 /// How far (projector pixels) a candidate may lie from the neighbours' prediction.

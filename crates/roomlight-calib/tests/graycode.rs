@@ -5,7 +5,8 @@ mod common;
 use common::pattern_captures;
 
 use roomlight_calib::graycode::{
-    DecodeConfig, Manifest, bits_for, decode_where, gray, gray_inverse, group_disjoint,
+    DecodeConfig, Manifest, Pattern, bits_for, decode_where, gray, gray_inverse, group_disjoint,
+    second_pass,
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_sim::{Room, scenes};
@@ -186,11 +187,7 @@ fn strip_captures(manifest: &Manifest, weak: f32) -> Vec<LinearImage> {
                     let on = values[(y * manifest.width + x) as usize];
                     // Every third bit pair is weak on the weak side (not the white/black pair).
                     let factor = match pf.pattern {
-                        roomlight_calib::graycode::Pattern::Bit { bit, .. }
-                            if u >= WEAK && bit % 3 == 1 =>
-                        {
-                            weak
-                        }
+                        Pattern::Bit { bit, .. } if u >= WEAK && bit % 3 == 1 => weak,
                         _ => 1.0,
                     };
                     let direct = 0.3 * (0.5 + factor * (on - 0.5));
@@ -297,4 +294,140 @@ fn a_decode_mask_keeps_the_other_pixels_unknown_and_must_match_the_captures() {
         text.contains("decode mask") && text.contains("96x24"),
         "{text}"
     );
+}
+
+/// A strip where a dim face (columns 40 on, 3% of the light) sits beside a bright surface
+/// (columns 0–39) whose light it reflects coherently, from three places at once: camera pixel
+/// `(x, y)` sees projector pixel `(x, y)`. `exposure` as in [`second_pass`]'s `shoot`.
+fn corner_capture(frame: &LinearImage, exposure: f32) -> LinearImage {
+    let (w, h) = (frame.width, frame.height);
+    let light = |x: u32, y: u32| frame.pixels[(y * w + x) as usize][0];
+    // What the bright surface reflects: only its own light.
+    let bright = |x: u32, y: u32| if x < 40 { light(x, y) } else { 0.0 };
+    let pixels = (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let v = if x < 40 {
+                0.02 + light(x, y)
+            } else {
+                0.02 + 0.03 * light(x, y)
+                    + 0.08 * (bright(x - 20, y) + bright(x - 27, y) + bright(x - 33, y))
+            };
+            // A longer exposure saturates sooner, in the units of a normal one.
+            [(v * exposure).min(1.0) / exposure; 3]
+        })
+        .collect();
+    LinearImage {
+        width: w,
+        height: h,
+        pixels,
+    }
+}
+
+#[test]
+fn a_second_pass_with_the_bright_surface_black_decodes_the_face_its_reflection_hid() {
+    let manifest = Manifest::new(64, 16).expect("manifest");
+    let config = DecodeConfig::default();
+    let caps: Vec<LinearImage> = manifest
+        .patterns
+        .iter()
+        .map(|p| corner_capture(&manifest.pattern_image(p.pattern), 1.0))
+        .collect();
+    let mut first = decode_captures(&manifest, &config, None, &caps).expect("decode");
+    // The first pass: the bright surface exactly, the dim face unknown (its strongest bits are
+    // its neighbour's), nothing wrong.
+    for (i, m) in first.map.iter().enumerate() {
+        let (x, y) = (i as u32 % 64, i as u32 / 64);
+        match m {
+            Some(d) => assert_eq!(*d, (x, y), "first pass, pixel {i}"),
+            None => assert!(x >= 40, "first pass left bright pixel {i} unknown"),
+        }
+    }
+    let unknown_before = first.map.iter().filter(|m| m.is_none()).count();
+    assert!(unknown_before >= 20 * 16, "{unknown_before} unknown");
+    assert_eq!(
+        first.reached_unknown().iter().filter(|r| **r).count(),
+        unknown_before,
+        "the face is reached: its light is pattern-dependent"
+    );
+    let mut shown_frames = Vec::new();
+    let done = second_pass(
+        &manifest,
+        &config,
+        &mut first,
+        1.0,
+        16.0,
+        |img, exposure| -> Result<LinearImage, roomlight_calib::CalibError> {
+            shown_frames.push(exposure);
+            Ok(corner_capture(img, exposure))
+        },
+    )
+    .expect("second pass")
+    .expect("worth it: most of the face unknown");
+    // The masked white (normal exposure), then every pattern at the longer one: the face gets
+    // 0.02 + 0.03 at most with the bright surface black, so 0.8 / 0.05 = 16, the longest.
+    assert_eq!(done.captures, 1 + manifest.patterns.len());
+    assert_eq!(shown_frames.len(), done.captures);
+    assert!((shown_frames[0] - 1.0).abs() < 1e-6);
+    assert!((done.exposure - 16.0).abs() < 1e-3, "{}", done.exposure);
+    // Columns 0–40 black (the bright surface and a margin of one), 41–63 shown.
+    assert!((done.shown - 23.0 / 64.0).abs() < 1e-9, "{}", done.shown);
+    // Every face pixel whose projector pixel was shown is now decoded exactly; column 40 (black
+    // in the second pass) stays unknown.
+    for (i, m) in first.map.iter().enumerate() {
+        let (x, y) = (i as u32 % 64, i as u32 / 64);
+        if x == 40 {
+            assert_eq!(*m, None, "pixel {i}");
+        } else {
+            assert_eq!(*m, Some((x, y)), "second pass, pixel {i}");
+        }
+    }
+    assert_eq!(done.taken, 23 * 16);
+
+    // Nothing left to decode: no second pass, no capture.
+    let mut again = first.clone();
+    for m in &mut again.map {
+        m.get_or_insert((0, 0));
+    }
+    let none = second_pass(
+        &manifest,
+        &config,
+        &mut again,
+        1.0,
+        16.0,
+        |_, _| -> Result<LinearImage, roomlight_calib::CalibError> {
+            panic!("no capture may be taken")
+        },
+    )
+    .expect("no second pass");
+    assert_eq!(none, None);
+
+    // Masks and passes of another size are refused, naming what does not match.
+    let err = manifest
+        .pattern_image_where(Pattern::White, &[true; 10])
+        .expect_err("a mask of the wrong size");
+    assert!(err.to_string().contains("pattern mask"), "{err}");
+    let other = decode_captures(
+        &Manifest::new(32, 16).expect("manifest"),
+        &config,
+        None,
+        &Manifest::new(32, 16)
+            .expect("manifest")
+            .patterns
+            .iter()
+            .map(|p| {
+                corner_capture(
+                    &Manifest::new(32, 16)
+                        .expect("manifest")
+                        .pattern_image(p.pattern),
+                    1.0,
+                )
+            })
+            .collect::<Vec<_>>(),
+    );
+    let other = other.expect("decode");
+    let err = first
+        .merge_second_pass(&other, &vec![true; 64 * 16])
+        .expect_err("another projector size");
+    assert!(err.to_string().contains("second pass"), "{err}");
 }
