@@ -4,7 +4,8 @@
 use anyhow::{Context, Result};
 use roomlight_calib::charts::{PatchStatus, sample_charts};
 use roomlight_calib::graycode::{
-    Coding, Correspondence, DecodeConfig, Manifest, decode, decode_where, group_disjoint,
+    Coding, Correspondence, DecodeConfig, Manifest, SECOND_PASS_LONGEST, decode, decode_where,
+    group_disjoint, second_pass,
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{NodeConfig, segment};
@@ -15,6 +16,11 @@ use std::time::Instant;
 /// A camera pixel belongs to a projector's footprint when that projector at white raises it by
 /// this share of its brightest pixel. Inter-reflected light stays below it in the lab.
 const FOOTPRINT_SHARE: f32 = 0.1;
+/// The same for a defocused projector: its blur's tail carries plain Gray code's coarse stripes
+/// (which inter-reflection does not average away) well below a tenth of its peak. At 0.1 the
+/// lab grouped floor-right with the large aperture, and 0.32% of floor-right's decoded pixels
+/// came out off by more than 2 (none coded alone).
+const FOOTPRINT_SHARE_DEFOCUSED: f32 = 0.01;
 
 fn shoot_preset(room: &Room, preset: Option<usize>) -> Result<LinearImage> {
     let frames = vec![Frame::Black; room.projectors().len()];
@@ -96,6 +102,11 @@ pub fn run(quick: bool) -> Result<()> {
     let mut footprints = Vec::with_capacity(n);
     let mut gains: Vec<Vec<f32>> = Vec::with_capacity(n);
     for k in 0..n {
+        let share = if room.projectors()[k].kind == ProjectorKind::LargeAperture {
+            FOOTPRINT_SHARE_DEFOCUSED
+        } else {
+            FOOTPRINT_SHARE
+        };
         let mut frames = vec![Frame::Black; n];
         frames[k] = Frame::Uniform([1.0; 3]);
         let white = shoot(&frames)?.intensity();
@@ -109,7 +120,7 @@ pub fn run(quick: bool) -> Result<()> {
             white
                 .iter()
                 .zip(&black)
-                .map(|(w, b)| w - b > FOOTPRINT_SHARE * peak)
+                .map(|(w, b)| w - b > share * peak)
                 .collect::<Vec<bool>>(),
         );
     }
@@ -158,6 +169,7 @@ pub fn run(quick: bool) -> Result<()> {
     let config = DecodeConfig::default();
     let mut decode_secs = Vec::new();
     let mut decoded_all: Vec<Option<Correspondence>> = vec![None; n];
+
     // Every group, then each member of a shared group alone (as `roomlight calibrate` codes
     // them): what coding at the same time costs in accuracy.
     let alone_runs: Vec<Vec<usize>> = groups
@@ -311,6 +323,70 @@ pub fn run(quick: bool) -> Result<()> {
             decoded_all[k] = Some(decoded);
         }
     }
+    // Second pass (one projector at a time, as `roomlight calibrate` does) where the first
+    // left enough reached pixels unknown.
+    let mut second_captures = 0usize;
+    let saturation = room.scene().camera.saturation as f32;
+    for k in 0..n {
+        if room.projectors()[k].kind != ProjectorKind::Standard {
+            continue;
+        }
+        let Some(first) = decoded_all[k].as_mut() else {
+            continue;
+        };
+        let m = &manifests[k];
+        let left = first.reached_unknown().iter().filter(|u| **u).count();
+        let decoded_before = first.map.iter().filter(|d| d.is_some()).count();
+        let name = &room.projectors()[k].name;
+        let t = Instant::now();
+        let done = second_pass(
+            m,
+            &config,
+            first,
+            saturation,
+            SECOND_PASS_LONGEST,
+            |img, exposure| -> Result<LinearImage> {
+                let mut frames = vec![Frame::Black; n];
+                frames[k] = Frame::Image(ProjectorImage {
+                    width: img.width,
+                    height: img.height,
+                    pixels: img.pixels.clone(),
+                });
+                Ok(image(&noise.expose_longer(
+                    &room.render(&frames, None)?,
+                    f64::from(exposure),
+                )))
+            },
+        )?;
+        let Some(done) = done else {
+            println!(
+                "{name:<18} second pass: not needed ({left} reached pixels unknown, {:.2}% of {decoded_before} decoded)",
+                100.0 * left as f64 / decoded_before.max(1) as f64
+            );
+            continue;
+        };
+        second_captures += done.captures;
+        let truth = room.true_correspondence(k);
+        let (reached, close, far) = accuracy(&truth, first, m.width);
+        println!(
+            "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}%   second pass: {left} reached pixels unknown ({:.2}% of {decoded_before}), {:.1}% of the frame shown, exposure ×{:.1}, {} captures, {} pixels added, {:.2} s with rendering",
+            format!("{name} +2nd"),
+            reached,
+            100.0 * close,
+            100.0 * far,
+            100.0 * first.decoded_share(),
+            100.0 * left as f64 / decoded_before.max(1) as f64,
+            100.0 * done.shown,
+            done.exposure,
+            done.captures,
+            done.taken,
+            t.elapsed().as_secs_f64()
+        );
+    }
+    println!(
+        "second pass: {second_captures} more captures ({} in all one projector at a time)",
+        alone + second_captures
+    );
     // Charts and nodes on the same room.
     let charts = crate::pipeline::chart_corners(&room)?;
     let preset = room

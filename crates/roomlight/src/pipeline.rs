@@ -16,7 +16,9 @@ use roomlight_calib::attenuation::{Attenuation, Scheme, plan, solve};
 use roomlight_calib::charts::{
     ChartCorners, PatchSample, PatchStatus, SampleConfig, sample_charts,
 };
-use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig, Manifest, decode};
+use roomlight_calib::graycode::{
+    Coding, Correspondence, DecodeConfig, Manifest, SECOND_PASS_LONGEST, decode, second_pass,
+};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{NodeConfig as SplitConfig, segment};
 use roomlight_calib::response::{Response, fit_response, ramp_codes};
@@ -232,33 +234,64 @@ impl FrameBuilder {
 }
 
 /// Shows one projector's structured light (every other projector black), captures each
-/// pattern with `shoot` and decodes the camera → projector map.
+/// pattern with `shoot(frames, exposure)` (the exposure a multiple of the normal one, the
+/// capture scaled back to its units) and decodes the camera → projector map. With XOR coding,
+/// a second pass over what the first left uncovered follows where it is worth its captures
+/// ([`second_pass`]).
 pub fn decode_projector(
     room: &Room,
     k: usize,
     coding: Coding,
-    mut shoot: impl FnMut(&[Frame]) -> Result<LinearImage>,
+    mut shoot: impl FnMut(&[Frame], f32) -> Result<LinearImage>,
 ) -> Result<Correspondence> {
     let p = &room.projectors()[k].pinhole;
     let manifest = Manifest::with_coding(p.width, p.height, coding)?;
-    let mut caps = Vec::with_capacity(manifest.patterns.len());
-    for pat in &manifest.patterns {
-        let img = manifest.pattern_image(pat.pattern);
-        let mut frames = vec![Frame::Black; room.projectors().len()];
+    let n = room.projectors().len();
+    let frames_with = |img: &LinearImage| {
+        let mut frames = vec![Frame::Black; n];
         frames[k] = Frame::Image(ProjectorImage {
             width: img.width,
             height: img.height,
-            pixels: img.pixels,
+            pixels: img.pixels.clone(),
         });
-        caps.push(shoot(&frames)?);
+        frames
+    };
+    let mut caps = Vec::with_capacity(manifest.patterns.len());
+    for pat in &manifest.patterns {
+        caps.push(shoot(
+            &frames_with(&manifest.pattern_image(pat.pattern)),
+            1.0,
+        )?);
     }
-    Ok(decode(&manifest, &DecodeConfig::default(), |f| {
+    let config = DecodeConfig::default();
+    let mut corr = decode(&manifest, &config, |f| {
         Ok(&caps[manifest
             .patterns
             .iter()
             .position(|p| p.file == f.file)
             .unwrap_or(0)])
-    })?)
+    })?;
+    if coding == Coding::Xor04 {
+        let done = second_pass(
+            &manifest,
+            &config,
+            &mut corr,
+            room.scene().camera.saturation as f32,
+            SECOND_PASS_LONGEST,
+            |img, exposure| shoot(&frames_with(img), exposure),
+        )?;
+        if let Some(done) = done {
+            tracing::info!(
+                projector = %room.projectors()[k].name,
+                shown = done.shown,
+                exposure = done.exposure,
+                captures = done.captures,
+                decoded = done.taken,
+                "second structured-light pass"
+            );
+        }
+    }
+    Ok(corr)
 }
 
 /// Calibrates the standard luminaires of `room`: structured light, nodes, black level and
@@ -299,10 +332,13 @@ pub fn calibrate(
         bar.set_length(len as u64);
         bar.set_message(name.to_string());
     };
-    let mut shoot = |frames: &[Frame]| -> Result<LinearImage> {
+    let mut shoot = |frames: &[Frame], exposure: f32| -> Result<LinearImage> {
         captures.set(captures.get() + 1);
         bar.inc(1);
-        Ok(image(&noise.expose(&room.render(frames, None)?)))
+        Ok(image(&noise.expose_longer(
+            &room.render(frames, None)?,
+            f64::from(exposure),
+        )))
     };
     // 1. Structured light, one projector at a time.
     let t = Instant::now();
@@ -341,7 +377,7 @@ pub fn calibrate(
         for &code in &codes {
             let mut frames = vec![Frame::Black; n];
             frames[k] = Frame::Uniform([code as f32; 3]);
-            ramp.push(shoot(&frames)?);
+            ramp.push(shoot(&frames, 1.0)?);
         }
         let (measured, noise) = roomlight_calib::response::footprint_ramp(&ramp, c);
         responses[k] = fit_response(&codes, &measured, &noise)
@@ -451,12 +487,16 @@ pub fn calibrate(
             .collect();
         builder.frames(&x)
     };
-    let black = sample_charts(&shoot(&on_off(&vec![false; nodes]))?, &corners, &config)?;
+    let black = sample_charts(
+        &shoot(&on_off(&vec![false; nodes]), 1.0)?,
+        &corners,
+        &config,
+    )?;
     let rows = plan(nodes, Scheme::Hadamard);
     stage("attenuation", rows.len());
     let mut measured: Vec<Vec<PatchSample>> = Vec::with_capacity(rows.len());
     for on in &rows {
-        measured.push(sample_charts(&shoot(&on_off(on))?, &corners, &config)?);
+        measured.push(sample_charts(&shoot(&on_off(on), 1.0)?, &corners, &config)?);
     }
     let attenuation = solve(Scheme::Hadamard, nodes, &black, &measured)?;
     let columns: Vec<Vec<(u32, LinearRgb)>> = attenuation

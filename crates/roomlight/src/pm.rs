@@ -97,8 +97,11 @@ fn image(c: &Capture) -> LinearImage {
 
 /// Decodes the texture projector's structured light through the evaluation camera.
 fn decode_texture(room: &Room, k: usize, noise: &mut CameraNoise) -> Result<Correspondence> {
-    crate::pipeline::decode_projector(room, k, Coding::Gray, |frames| {
-        Ok(image(&noise.expose(&room.render(frames, None)?)))
+    crate::pipeline::decode_projector(room, k, Coding::Gray, |frames, exposure| {
+        Ok(image(&noise.expose_longer(
+            &room.render(frames, None)?,
+            f64::from(exposure),
+        )))
     })
 }
 
