@@ -75,6 +75,21 @@ fn accuracy_where(
     )
 }
 
+/// Projector `k`'s direct signal per camera pixel (its direct light at white × the albedo
+/// there) and its typical level (99th percentile over the pixels it lights).
+fn direct_signal(room: &Room, k: usize) -> (Vec<f32>, f32) {
+    let factor: Vec<f32> = room
+        .direct_factor(k)
+        .iter()
+        .zip(room.pixel_albedo())
+        .map(|(f, a)| f * (a[0] + a[1] + a[2]) as f32 / 3.0)
+        .collect();
+    let mut lit: Vec<f32> = factor.iter().copied().filter(|f| *f > 0.0).collect();
+    lit.sort_by(f32::total_cmp);
+    let typical = lit.get(lit.len() * 99 / 100).copied().unwrap_or(0.0);
+    (factor, typical)
+}
+
 pub fn run(quick: bool) -> Result<()> {
     let scene = if quick {
         // The small room's own camera (256×192) sees a chart patch as a few pixels: too few to
@@ -163,8 +178,8 @@ pub fn run(quick: bool) -> Result<()> {
         n + 1
     );
     println!(
-        "{:<18} {:>9} {:>12} {:>14} {:>10}",
-        "projector", "reached", "within ±1", "off by > 2", "decoded"
+        "{:<18} {:>9} {:>12} {:>14} {:>10}   within ±1 where its direct light is ≥ 2% of its typical",
+        "projector", "reached", "within ±1", "off by > 2", "decoded",
     );
     let config = DecodeConfig::default();
     let mut decode_secs = Vec::new();
@@ -244,16 +259,7 @@ pub fn run(quick: bool) -> Result<()> {
             // grazing surfaces, black chart frames) is under 2% of its typical (99th percentile)
             // level: there the direct light cannot be told from noise and global light, and
             // unknown is the right answer.
-            let albedo = room.pixel_albedo();
-            let factor: Vec<f32> = room
-                .direct_factor(k)
-                .iter()
-                .zip(albedo)
-                .map(|(f, a)| f * (a[0] + a[1] + a[2]) as f32 / 3.0)
-                .collect();
-            let mut lit: Vec<f32> = factor.iter().copied().filter(|f| *f > 0.0).collect();
-            lit.sort_by(f32::total_cmp);
-            let typical = lit.get(lit.len() * 99 / 100).copied().unwrap_or(0.0);
+            let (factor, typical) = direct_signal(&room, k);
             let (reached_lit, close_lit, _) =
                 accuracy_where(&truth, &decoded, m.width, |i| factor[i] >= 0.02 * typical);
             if let Some(dir) = std::env::var_os("ROOMLIGHT_DIAG") {
@@ -368,6 +374,14 @@ pub fn run(quick: bool) -> Result<()> {
         second_captures += done.captures;
         let truth = room.true_correspondence(k);
         let (reached, close, far) = accuracy(&truth, first, m.width);
+        // How much direct light the pixels still unknown get.
+        let (factor, typical) = direct_signal(&room, k);
+        let mut missed: Vec<f32> = (0..truth.len())
+            .filter(|&i| truth[i].is_some() && first.map[i].is_none())
+            .map(|i| factor[i] / typical.max(f32::MIN_POSITIVE))
+            .collect();
+        missed.sort_by(f32::total_cmp);
+        let under = |share: f32| missed.iter().filter(|m| **m < share).count();
         println!(
             "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}%   second pass: {left} reached pixels unknown ({:.2}% of {decoded_before}), {:.1}% of the frame shown, exposure ×{:.1}, {} captures, {} pixels added, {:.2} s with rendering",
             format!("{name} +2nd"),
@@ -381,6 +395,15 @@ pub fn run(quick: bool) -> Result<()> {
             done.captures,
             done.taken,
             t.elapsed().as_secs_f64()
+        );
+        println!(
+            "{:<18} still unknown: {} reached pixels; their direct light is a median {:.2}% of its typical, under 0.5% on {}, under 1% on {}, under 2% on {}",
+            "",
+            missed.len(),
+            100.0 * missed.get(missed.len() / 2).copied().unwrap_or(0.0),
+            under(0.005),
+            under(0.01),
+            under(0.02)
         );
     }
     println!(
