@@ -500,9 +500,9 @@ impl Correspondence {
     /// code onto them; with the bright surface left black, their direct light decides. Decoded
     /// pixels on the dark surface itself stay shown, so that all of it is lit. The share of
     /// shown pixels is returned with the mask.
-    pub fn second_pass_mask(&self, margin: u32) -> (Vec<bool>, f64) {
+    pub fn second_pass_mask(&self, config: &DecodeConfig, margin: u32) -> (Vec<bool>, f64) {
         let mut left: Vec<f32> = self
-            .reached_unknown()
+            .reached_unknown(config)
             .iter()
             .zip(&self.direct)
             .filter(|(u, _)| **u)
@@ -526,15 +526,41 @@ impl Correspondence {
     }
 
     /// The camera pixels a second pass decodes: those this pass found reached by direct light
-    /// (`direct ≥ reach`) but could not decode. A pixel the first pass did not see reached gets
-    /// no direct light worth decoding; in a second pass that shows only a few projector pixels
-    /// their inter-reflected light can carry a consistent code (the lab's wall-front: 6% of
-    /// its frame shown gave 234,000 such pixels, 71% of them off).
-    pub fn reached_unknown(&self) -> Vec<bool> {
-        self.map
-            .iter()
-            .zip(&self.direct)
-            .map(|(m, d)| m.is_none() && *d >= self.reach)
+    /// (`direct ≥ reach`) but could not decode, inside a reached region (at least
+    /// [`SOLID_NEIGHBOURS`] of the 8 neighbours reached, decoded or not). A pixel lit only by
+    /// inter-reflected light can pass the reach threshold by noise alone (the direct light is
+    /// the largest of many noisy differences), but such pixels are scattered, not a surface; in
+    /// a second pass that shows only a few projector pixels their inter-reflected light can
+    /// carry a consistent code (the lab's wall-front: 6% of its frame shown, before this test
+    /// and the simulator's area-integrated elements, gave 234,000 such pixels, 71% off).
+    pub fn reached_unknown(&self, config: &DecodeConfig) -> Vec<bool> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let reached: Vec<bool> = (0..w * h)
+            .map(|i| {
+                let (ld, lg) = (self.direct[i], self.global[i]);
+                // The noise of one pattern − inverse difference at the pixel's level.
+                let level = (0.5 * (lg + ld)).max(0.0);
+                let sigma = (2.0
+                    * (config.noise_floor * config.noise_floor
+                        + config.shot_noise * config.shot_noise * level))
+                    .sqrt();
+                self.map[i].is_some() || (ld >= self.reach && ld >= SECOND_PASS_SNR * sigma)
+            })
+            .collect();
+        (0..w * h)
+            .map(|i| {
+                if self.map[i].is_some() || !reached[i] {
+                    return false;
+                }
+                let (x, y) = (i % w, i / w);
+                let around = (y.saturating_sub(1)..=(y + 1).min(h - 1))
+                    .flat_map(|yy| {
+                        (x.saturating_sub(1)..=(x + 1).min(w - 1)).map(move |xx| (xx, yy))
+                    })
+                    .filter(|&(xx, yy)| (xx, yy) != (x, y) && reached[yy * w + xx])
+                    .count();
+                around >= SOLID_NEIGHBOURS
+            })
             .collect()
     }
 
@@ -585,10 +611,34 @@ impl Correspondence {
             });
         }
         let near_shown = dilate(shown, pw, ph, 1);
+        // How many camera pixels land on each projector pixel: on a directly lit surface about
+        // as many as in the first pass; a few shown pixels that light the room only through
+        // its reflection give one code to a wide area.
+        let per_pixel = |c: &Correspondence| {
+            let mut n = vec![0u32; pw * ph];
+            for (x, y) in c.map.iter().flatten() {
+                if let Some(v) = n.get_mut(*y as usize * pw + *x as usize) {
+                    *v += 1;
+                }
+            }
+            n
+        };
+        let mut first: Vec<u32> = per_pixel(self).into_iter().filter(|n| *n > 0).collect();
+        let typical = if first.is_empty() {
+            1
+        } else {
+            let k = (first.len() - 1) * 99 / 100;
+            *first.select_nth_unstable(k).1
+        };
+        let crowd = per_pixel(other);
+        let most = SECOND_PASS_CROWD * typical.max(1);
         let mut taken = 0;
         for i in 0..self.map.len() {
             if self.map[i].is_none()
-                && other.map[i].is_some_and(|(x, y)| near_shown[y as usize * pw + x as usize])
+                && other.map[i].is_some_and(|(x, y)| {
+                    let p = y as usize * pw + x as usize;
+                    near_shown[p] && crowd[p] <= most
+                })
             {
                 self.map[i] = other.map[i];
                 self.confidence[i] = other.confidence[i];
@@ -852,6 +902,20 @@ pub const SECOND_PASS_WORTH: f64 = 0.03;
 /// A decoded surface is black in a second pass when its direct light is at least this many
 /// times the median of the pixels left to decode.
 pub const SECOND_PASS_BRIGHTER: f32 = 2.0;
+/// The direct light (the largest pattern − inverse difference) a pixel needs, in noise standard
+/// deviations of one difference, to count as reached for a second pass: the largest of about
+/// 20 differences of pure noise is a median 2.5 of them (measured: 2.4–2.9 on inter-reflected
+/// light in the small room; 4.4 on the lab's dim face).
+pub const SECOND_PASS_SNR: f32 = 3.5;
+/// A second pass decodes the unknown pixels within this many pixels of
+/// [`Correspondence::reached_unknown`]'s.
+pub const SECOND_PASS_GROW: u32 = 4;
+/// Of a pixel's 8 neighbours, how many must be reached for it to be part of a reached surface
+/// ([`Correspondence::reached_unknown`]).
+pub const SOLID_NEIGHBOURS: usize = 6;
+/// A second pass's pixel is refused when more camera pixels than this many times the first
+/// pass's 99th percentile land on its projector pixel ([`Correspondence::merge_second_pass`]).
+pub const SECOND_PASS_CROWD: u32 = 4;
 /// Projector pixels within this distance of a bright decoded surface stay black in a second
 /// pass. None: in the lab a margin of one pixel blacked out the edge of the dim face next to the
 /// lit floor (floor-right 97.7% within ±1 after the second pass, 98.7% without it, none off by
@@ -890,13 +954,25 @@ pub fn second_pass<E: From<CalibError>>(
     longest: f32,
     mut shoot: impl FnMut(&LinearImage, f32) -> Result<LinearImage, E>,
 ) -> Result<Option<SecondPass>, E> {
-    let todo = first.reached_unknown();
+    let todo = first.reached_unknown(config);
     let unknown = todo.iter().filter(|t| **t).count();
     let decoded = first.map.iter().filter(|m| m.is_some()).count();
     if (unknown as f64) <= SECOND_PASS_WORTH * decoded as f64 {
         return Ok(None);
     }
-    let (shown, share) = first.second_pass_mask(SECOND_PASS_MARGIN);
+    let (shown, share) = first.second_pass_mask(config, SECOND_PASS_MARGIN);
+    // The unknown pixels within a few pixels of those regions too: a dim surface's weakest
+    // pixels (and those on the image border) fail the test by themselves.
+    let todo: Vec<bool> = dilate(
+        &todo,
+        first.width as usize,
+        first.height as usize,
+        SECOND_PASS_GROW,
+    )
+    .into_iter()
+    .zip(&first.map)
+    .map(|(t, m)| t && m.is_none())
+    .collect();
     let white = shoot(&manifest.pattern_image_where(Pattern::White, &shown)?, 1.0)?;
     let exposure = second_pass_exposure(&white, &todo, saturation, longest);
     let mut captures = Vec::with_capacity(manifest.patterns.len());

@@ -341,9 +341,13 @@ pub fn run(quick: bool) -> Result<()> {
             continue;
         };
         let m = &manifests[k];
-        let left = first.reached_unknown().iter().filter(|u| **u).count();
-        let decoded_before = first.map.iter().filter(|d| d.is_some()).count();
         let name = &room.projectors()[k].name;
+        let left = first
+            .reached_unknown(&config)
+            .iter()
+            .filter(|u| **u)
+            .count();
+        let decoded_before = first.map.iter().filter(|d| d.is_some()).count();
         let t = Instant::now();
         let done = second_pass(
             m,
