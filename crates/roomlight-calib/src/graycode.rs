@@ -9,6 +9,7 @@
 
 use crate::CalibError;
 use crate::image_io::LinearImage;
+use crate::nodes::dilate;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -1021,35 +1022,6 @@ struct Reading {
 /// may lie and still be one surface in [`Correspondence::covered`]: a camera pixel spans a few
 /// projector pixels on a minified surface, a depth edge many.
 pub const COVER_SPAN: u32 = 8;
-
-/// `mask` grown by `r` pixels (a square neighbourhood), rows then columns.
-fn dilate(mask: &[bool], w: usize, h: usize, r: u32) -> Vec<bool> {
-    let r = r as usize;
-    if r == 0 {
-        return mask.to_vec();
-    }
-    let mut rows = vec![false; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            if mask[y * w + x] {
-                for v in &mut rows[y * w + x.saturating_sub(r)..=y * w + (x + r).min(w - 1)] {
-                    *v = true;
-                }
-            }
-        }
-    }
-    let mut out = vec![false; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            if rows[y * w + x] {
-                for yy in y.saturating_sub(r)..=(y + r).min(h - 1) {
-                    out[yy * w + x] = true;
-                }
-            }
-        }
-    }
-    out
-}
 
 /// How far (projector pixels) a candidate may lie from the neighbours' prediction.
 const FILL_RADIUS: i64 = 8;
