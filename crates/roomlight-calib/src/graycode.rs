@@ -357,7 +357,8 @@ impl DecodeConfig {
 /// normal exposure: the camera pixels it decodes (`among`) must stay below `saturation` (per
 /// channel, capture units) with a margin. Light being additive, no masked pattern gives a pixel
 /// more than the masked white; its 99.9th percentile over `among` sets the factor (the
-/// brightest 0.1% may clip and stay unknown). Nothing to decode or nothing lit: `longest`.
+/// brightest 0.1% may clip and stay unknown). Nothing to decode or nothing lit: `longest`;
+/// a saturation that is not a positive number: 1.
 pub fn second_pass_exposure(
     white: &LinearImage,
     among: &[bool],
@@ -386,7 +387,13 @@ pub fn second_pass_exposure(
     if *top <= 0.0 {
         return longest;
     }
-    (0.8 * saturation / *top).clamp(1.0, longest)
+    let factor = 0.8 * saturation / *top;
+    // A saturation that is not a positive number: the normal exposure.
+    if factor.is_finite() {
+        factor.clamp(1.0, longest)
+    } else {
+        1.0
+    }
 }
 
 impl Default for DecodeConfig {

@@ -6,7 +6,7 @@ use common::pattern_captures;
 
 use roomlight_calib::graycode::{
     DecodeConfig, Manifest, Pattern, bits_for, decode_where, gray, gray_inverse, group_disjoint,
-    second_pass,
+    second_pass, second_pass_exposure,
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_sim::{Room, scenes};
@@ -414,6 +414,18 @@ fn a_second_pass_with_the_bright_surface_black_decodes_the_face_its_reflection_h
     }
     assert_no_second_pass(&manifest, &config, &mut again);
 
+    // The exposure stays a number from 1 to the longest whatever the camera reports.
+    let white = corner_capture(&manifest.pattern_image(Pattern::White), 1.0);
+    let all = vec![true; 64 * 16];
+    for (saturation, longest, expected) in [
+        (f32::NAN, 16.0, 1.0),
+        (-1.0, 16.0, 1.0),
+        (1.0, f32::INFINITY, 1.0),
+        (100.0, 16.0, 16.0),
+    ] {
+        let e = second_pass_exposure(&white, &all, saturation, longest);
+        assert!((e - expected).abs() < 1e-6, "{saturation}, {longest}: {e}");
+    }
     // Masks and passes of another size are refused, naming what does not match.
     let err = manifest
         .pattern_image_where(Pattern::White, &[true; 10])
