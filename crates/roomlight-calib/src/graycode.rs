@@ -982,6 +982,7 @@ pub fn second_pass<E: From<CalibError>>(
     .map(|(t, m)| t && m.is_none())
     .collect();
     let white = shoot(&manifest.pattern_image_where(Pattern::White, &shown)?, 1.0)?;
+    white.expect_size(first.width, first.height, "second pass white")?;
     let exposure = second_pass_exposure(&white, &todo, saturation, longest);
     let mut captures = Vec::with_capacity(manifest.patterns.len());
     for p in &manifest.patterns {

@@ -378,6 +378,7 @@ fn a_second_pass_with_the_bright_surface_black_decodes_the_face_its_reflection_h
         .merge_second_pass(&crowded, &vec![true; 64 * 16])
         .expect("same sizes");
     assert_eq!(taken, 0);
+    let before = first.clone();
     let mut shown_frames = Vec::new();
     let done = second_pass(
         &manifest,
@@ -426,6 +427,25 @@ fn a_second_pass_with_the_bright_surface_black_decodes_the_face_its_reflection_h
         let e = second_pass_exposure(&white, &all, saturation, longest);
         assert!((e - expected).abs() < 1e-6, "{saturation}, {longest}: {e}");
     }
+    // A camera that answers with another size is refused and the first pass left as it was.
+    let mut unchanged = before.clone();
+    let err = second_pass(
+        &manifest,
+        &config,
+        &mut unchanged,
+        1.0,
+        16.0,
+        |_, _| -> Result<LinearImage, roomlight_calib::CalibError> {
+            Ok(LinearImage {
+                width: 10,
+                height: 10,
+                pixels: vec![[0.5; 3]; 100],
+            })
+        },
+    )
+    .expect_err("a capture of the wrong size");
+    assert!(err.to_string().contains("second pass white"), "{err}");
+    assert_eq!(unchanged, before);
     // Masks and passes of another size are refused, naming what does not match.
     let err = manifest
         .pattern_image_where(Pattern::White, &[true; 10])
