@@ -543,3 +543,56 @@ fn assert_no_second_pass(
     .expect("no second pass");
     assert_eq!(done, None);
 }
+
+#[test]
+fn a_second_pass_decodes_the_labs_grazing_face_beside_a_lit_floor() {
+    // The lab at a small camera resolution: floor-right lights a face at grazing incidence
+    // beside the floor it lights brightly; the floor's reflected light hides the face's code
+    // from the first pass.
+    let mut scene = scenes::lab().expect("lab");
+    scene.camera.resolution = [320, 240];
+    let room = Room::build(scene).expect("room");
+    let k = room.projector("floor-right").expect("floor-right");
+    let p = &room.projectors()[k].pinhole;
+    let manifest = Manifest::new(p.width, p.height).expect("manifest");
+    let config = DecodeConfig::default();
+    let caps = pattern_captures(&room, k, &manifest, None, 7);
+    let mut first = decode_captures(&manifest, &config, None, &caps).expect("decode");
+    let (close1, far1, reached) = accuracy(&room, k, &first);
+    let mut noise = roomlight_sim::CameraNoise::with_seed(&room, 8);
+    let n = room.projectors().len();
+    let done = second_pass(
+        &manifest,
+        &config,
+        &mut first,
+        1.0,
+        16.0,
+        |img, exposure| -> Result<LinearImage, roomlight_calib::CalibError> {
+            let mut frames = vec![roomlight_sim::Frame::Black; n];
+            frames[k] = roomlight_sim::Frame::Image(roomlight_sim::ProjectorImage {
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels.clone(),
+            });
+            Ok(common::to_image(&noise.expose_longer(
+                &room.render(&frames, None).expect("render"),
+                f64::from(exposure),
+            )))
+        },
+    )
+    .expect("second pass")
+    .expect("the face calls for a second pass");
+    let (close2, far2, _) = accuracy(&room, k, &first);
+    println!(
+        "floor-right, {reached} pixels reached: {:.2}% within ±1 ({:.3}% off by > 2), after {done:?}: {:.2}% ({:.3}%)",
+        100.0 * close1,
+        100.0 * far1,
+        100.0 * close2,
+        100.0 * far2
+    );
+    // Measured: 93.70% -> 99.61%, none off by more than 2, 408 pixels added.
+    assert!(close1 < 0.96, "the first pass alone: {close1}");
+    assert!(close2 >= 0.98 && far2 <= 0.001, "{close2} / {far2}");
+    assert_eq!(done.captures, manifest.patterns.len() + 1);
+    assert!(done.taken > 0);
+}
