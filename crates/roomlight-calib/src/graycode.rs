@@ -333,9 +333,7 @@ impl DecodeConfig {
             ..Self::default()
         }
     }
-}
 
-impl DecodeConfig {
     /// The same decoder for captures exposed `factor` times as long and scaled back to the
     /// units of a normal one: read noise shrinks by `factor`, shot noise by its square root.
     /// A factor that is not a finite number ≥ 1 is taken as 1.
@@ -350,49 +348,6 @@ impl DecodeConfig {
             shot_noise: self.shot_noise / f.sqrt(),
             ..self
         }
-    }
-}
-
-/// The exposure factor (1 to `longest`) of a second pass from its white frame captured at the
-/// normal exposure: the camera pixels it decodes (`among`) must stay below `saturation` (per
-/// channel, capture units) with a margin. Light being additive, no masked pattern gives a pixel
-/// more than the masked white; its 99.9th percentile over `among` sets the factor (the
-/// brightest 0.1% may clip and stay unknown). Nothing to decode or nothing lit: `longest`;
-/// a saturation that is not a positive number: 1.
-pub fn second_pass_exposure(
-    white: &LinearImage,
-    among: &[bool],
-    saturation: f32,
-    longest: f32,
-) -> f32 {
-    let longest = if longest.is_finite() {
-        longest.max(1.0)
-    } else {
-        1.0
-    };
-    let mut levels: Vec<f32> = white
-        .pixels
-        .iter()
-        .zip(among)
-        .filter(|(_, a)| **a)
-        .map(|(p, _)| p[0].max(p[1]).max(p[2]))
-        .filter(|v| v.is_finite())
-        .collect();
-    if levels.is_empty() {
-        return longest;
-    }
-    let k = (levels.len() - 1) * 999 / 1000;
-    let (_, top, _) = levels.select_nth_unstable_by(k, f32::total_cmp);
-    // At zero light any exposure is safe: the longest.
-    if *top <= 0.0 {
-        return longest;
-    }
-    let factor = 0.8 * saturation / *top;
-    // A saturation that is not a positive number: the normal exposure.
-    if factor.is_finite() {
-        factor.clamp(1.0, longest)
-    } else {
-        1.0
     }
 }
 
@@ -500,28 +455,27 @@ impl Correspondence {
     }
 
     /// The projector pixels a second structured-light pass shows: all but those that light
-    /// decoded surfaces brighter than the pixels left to decode ([`Correspondence::covered`]
+    /// decoded surfaces brighter than the pixels `left` to decode ([`Correspondence::covered`]
     /// over the decoded pixels whose direct light is at least [`SECOND_PASS_BRIGHTER`] times
-    /// the median of [`Correspondence::reached_unknown`]'s). Dark surfaces beside bright ones
-    /// (a wall at grazing incidence in a corner with a lit floor) decode wrongly or not at all
-    /// in the first pass, because the bright surface's inter-reflected light carries its own
-    /// code onto them; with the bright surface left black, their direct light decides. Decoded
-    /// pixels on the dark surface itself stay shown, so that all of it is lit. The share of
-    /// shown pixels is returned with the mask.
-    pub fn second_pass_mask(&self, config: &DecodeConfig, margin: u32) -> (Vec<bool>, f64) {
-        let mut left: Vec<f32> = self
-            .reached_unknown(config)
+    /// the median of `left`'s, which is [`Correspondence::reached_unknown`]). Dark surfaces
+    /// beside bright ones (a wall at grazing incidence in a corner with a lit floor) decode
+    /// wrongly or not at all in the first pass, because the bright surface's inter-reflected
+    /// light carries its own code onto them; with the bright surface left black, their direct
+    /// light decides. Decoded pixels on the dark surface itself stay shown, so that all of it
+    /// is lit. The share of shown pixels is returned with the mask.
+    pub fn second_pass_mask(&self, left: &[bool], margin: u32) -> (Vec<bool>, f64) {
+        let mut levels: Vec<f32> = left
             .iter()
             .zip(&self.direct)
             .filter(|(u, _)| **u)
             .map(|(_, d)| *d)
             .collect();
         // Nothing left to decode: every decoded surface counts (a threshold of zero).
-        let threshold = if left.is_empty() {
+        let threshold = if levels.is_empty() {
             0.0
         } else {
-            let k = left.len() / 2;
-            SECOND_PASS_BRIGHTER * *left.select_nth_unstable_by(k, f32::total_cmp).1
+            let k = levels.len() / 2;
+            SECOND_PASS_BRIGHTER * *levels.select_nth_unstable_by(k, f32::total_cmp).1
         };
         let bright: Vec<bool> = self.direct.iter().map(|d| *d >= threshold).collect();
         let shown: Vec<bool> = self
@@ -924,9 +878,14 @@ pub const SOLID_NEIGHBOURS: usize = 6;
 /// A second pass's pixel is refused when more camera pixels than this many times the first
 /// pass's 99th percentile land on its projector pixel ([`Correspondence::merge_second_pass`]).
 pub const SECOND_PASS_CROWD: u32 = 4;
+/// How far apart (projector pixels, per axis) the coordinates of a 2×2 block of camera pixels
+/// may lie and still be one surface in [`Correspondence::covered`]: a camera pixel spans a few
+/// projector pixels on a minified surface, a depth edge many.
+pub const COVER_SPAN: u32 = 8;
+
 /// Projector pixels within this distance of a bright decoded surface stay black in a second
 /// pass. None: in the lab a margin of one pixel blacked out the edge of the dim face next to the
-/// lit floor (floor-right 97.7% within ±1 after the second pass, 98.7% without it, none off by
+/// lit floor (floor-right 97.9% within ±1 after the second pass, 98.9% without it, none off by
 /// more than 2 either way).
 pub const SECOND_PASS_MARGIN: u32 = 0;
 /// The longest exposure of a second pass, as a multiple of the normal one, when the camera
@@ -968,7 +927,7 @@ pub fn second_pass<E: From<CalibError>>(
     if (unknown as f64) <= SECOND_PASS_WORTH * decoded as f64 {
         return Ok(None);
     }
-    let (shown, share) = first.second_pass_mask(config, SECOND_PASS_MARGIN);
+    let (shown, share) = first.second_pass_mask(&todo, SECOND_PASS_MARGIN);
     // The unknown pixels within a few pixels of those regions too: a dim surface's weakest
     // pixels (and those on the image border) fail the test by themselves.
     let todo: Vec<bool> = dilate(
@@ -1016,6 +975,49 @@ pub fn second_pass<E: From<CalibError>>(
     }))
 }
 
+/// The exposure factor (1 to `longest`) of a second pass from its white frame captured at the
+/// normal exposure: the camera pixels it decodes (`among`) must stay below `saturation` (per
+/// channel, capture units) with a margin. Light being additive, no masked pattern gives a pixel
+/// more than the masked white; its 99.9th percentile over `among` sets the factor (the
+/// brightest 0.1% may clip and stay unknown). Nothing to decode or nothing lit: `longest`;
+/// a saturation that is not a positive number: 1.
+pub fn second_pass_exposure(
+    white: &LinearImage,
+    among: &[bool],
+    saturation: f32,
+    longest: f32,
+) -> f32 {
+    let longest = if longest.is_finite() {
+        longest.max(1.0)
+    } else {
+        1.0
+    };
+    let mut levels: Vec<f32> = white
+        .pixels
+        .iter()
+        .zip(among)
+        .filter(|(_, a)| **a)
+        .map(|(p, _)| p[0].max(p[1]).max(p[2]))
+        .filter(|v| v.is_finite())
+        .collect();
+    if levels.is_empty() {
+        return longest;
+    }
+    let k = (levels.len() - 1) * 999 / 1000;
+    let (_, top, _) = levels.select_nth_unstable_by(k, f32::total_cmp);
+    // At zero light any exposure is safe: the longest.
+    if *top <= 0.0 {
+        return longest;
+    }
+    let factor = 0.8 * saturation / *top;
+    // A saturation that is not a positive number: the normal exposure.
+    if factor.is_finite() {
+        factor.clamp(1.0, longest)
+    } else {
+        1.0
+    }
+}
+
 /// One pattern pair at one camera pixel: `d` = pattern − inverse, its noise, and the encoded
 /// value it shows where the direct light decides it.
 struct Reading {
@@ -1025,11 +1027,6 @@ struct Reading {
     sigma: f32,
     trusted: Option<bool>,
 }
-
-/// How far apart (projector pixels, per axis) the coordinates of a 2×2 block of camera pixels
-/// may lie and still be one surface in [`Correspondence::covered`]: a camera pixel spans a few
-/// projector pixels on a minified surface, a depth edge many.
-pub const COVER_SPAN: u32 = 8;
 
 /// How far (projector pixels) a candidate may lie from the neighbours' prediction.
 const FILL_RADIUS: i64 = 8;

@@ -359,7 +359,7 @@ fn a_second_pass_with_the_bright_surface_black_decodes_the_face_its_reflection_h
     // surfaces brighter than what is left to decode go black.
     let mut probe = first.clone();
     probe.map[5 * 64 + 50] = Some((50, 5));
-    let (shown, _) = probe.second_pass_mask(&config, 0);
+    let (shown, _) = probe.second_pass_mask(&probe.reached_unknown(&config), 0);
     assert!(shown[5 * 64 + 50] && !shown[5 * 64 + 10]);
     // A second pass that gives one projector pixel to the whole face (the code of a small lit
     // patch reflected over the room) is refused: about one camera pixel lands on each
@@ -380,17 +380,10 @@ fn a_second_pass_with_the_bright_surface_black_decodes_the_face_its_reflection_h
     assert_eq!(taken, 0);
     let before = first.clone();
     let mut shown_frames = Vec::new();
-    let done = second_pass(
-        &manifest,
-        &config,
-        &mut first,
-        1.0,
-        16.0,
-        |img, exposure| -> Result<LinearImage, roomlight_calib::CalibError> {
-            shown_frames.push(exposure);
-            Ok(corner_capture(img, exposure))
-        },
-    )
+    let done = second_pass_at(&manifest, &config, &mut first, |img, exposure| {
+        shown_frames.push(exposure);
+        Ok(corner_capture(img, exposure))
+    })
     .expect("second pass")
     .expect("worth it: most of the face unknown");
     // The masked white (normal exposure), then every pattern at the longer one: the face gets
@@ -429,20 +422,13 @@ fn a_second_pass_with_the_bright_surface_black_decodes_the_face_its_reflection_h
     }
     // A camera that answers with another size is refused and the first pass left as it was.
     let mut unchanged = before.clone();
-    let err = second_pass(
-        &manifest,
-        &config,
-        &mut unchanged,
-        1.0,
-        16.0,
-        |_, _| -> Result<LinearImage, roomlight_calib::CalibError> {
-            Ok(LinearImage {
-                width: 10,
-                height: 10,
-                pixels: vec![[0.5; 3]; 100],
-            })
-        },
-    )
+    let err = second_pass_at(&manifest, &config, &mut unchanged, |_, _| {
+        Ok(LinearImage {
+            width: 10,
+            height: 10,
+            pixels: vec![[0.5; 3]; 100],
+        })
+    })
     .expect_err("a capture of the wrong size");
     assert!(err.to_string().contains("second pass white"), "{err}");
     assert_eq!(unchanged, before);
@@ -524,22 +510,25 @@ fn no_second_pass_where_the_first_decoded_every_lit_surface() {
     assert_no_second_pass(&manifest, &config, &mut first);
 }
 
+/// [`second_pass`] with the test cameras' saturation (1) and the longest exposure (×16).
+fn second_pass_at(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    first: &mut roomlight_calib::graycode::Correspondence,
+    shoot: impl FnMut(&LinearImage, f32) -> Result<LinearImage, roomlight_calib::CalibError>,
+) -> Result<Option<roomlight_calib::graycode::SecondPass>, roomlight_calib::CalibError> {
+    second_pass(manifest, config, first, 1.0, 16.0, shoot)
+}
+
 /// [`second_pass`] decides against a second pass without taking a capture.
 fn assert_no_second_pass(
     manifest: &Manifest,
     config: &DecodeConfig,
     first: &mut roomlight_calib::graycode::Correspondence,
 ) {
-    let done = second_pass(
-        manifest,
-        config,
-        first,
-        1.0,
-        16.0,
-        |_, _| -> Result<LinearImage, roomlight_calib::CalibError> {
-            panic!("no capture may be taken")
-        },
-    )
+    let done = second_pass_at(manifest, config, first, |_, _| {
+        panic!("no capture may be taken")
+    })
     .expect("no second pass");
     assert_eq!(done, None);
 }
@@ -561,25 +550,18 @@ fn a_second_pass_decodes_the_labs_grazing_face_beside_a_lit_floor() {
     let (close1, far1, reached) = accuracy(&room, k, &first);
     let mut noise = roomlight_sim::CameraNoise::with_seed(&room, 8);
     let n = room.projectors().len();
-    let done = second_pass(
-        &manifest,
-        &config,
-        &mut first,
-        1.0,
-        16.0,
-        |img, exposure| -> Result<LinearImage, roomlight_calib::CalibError> {
-            let mut frames = vec![roomlight_sim::Frame::Black; n];
-            frames[k] = roomlight_sim::Frame::Image(roomlight_sim::ProjectorImage {
-                width: img.width,
-                height: img.height,
-                pixels: img.pixels.clone(),
-            });
-            Ok(common::to_image(&noise.expose_longer(
-                &room.render(&frames, None).expect("render"),
-                f64::from(exposure),
-            )))
-        },
-    )
+    let done = second_pass_at(&manifest, &config, &mut first, |img, exposure| {
+        let mut frames = vec![roomlight_sim::Frame::Black; n];
+        frames[k] = roomlight_sim::Frame::Image(roomlight_sim::ProjectorImage {
+            width: img.width,
+            height: img.height,
+            pixels: img.pixels.clone(),
+        });
+        Ok(common::to_image(&noise.expose_longer(
+            &room.render(&frames, None).expect("render"),
+            f64::from(exposure),
+        )))
+    })
     .expect("second pass")
     .expect("the face calls for a second pass");
     let (close2, far2, _) = accuracy(&room, k, &first);

@@ -247,19 +247,19 @@ pub fn decode_projector(
     let p = &room.projectors()[k].pinhole;
     let manifest = Manifest::with_coding(p.width, p.height, coding)?;
     let n = room.projectors().len();
-    let frames_with = |img: &LinearImage| {
+    let frames_with = |img: LinearImage| {
         let mut frames = vec![Frame::Black; n];
         frames[k] = Frame::Image(ProjectorImage {
             width: img.width,
             height: img.height,
-            pixels: img.pixels.clone(),
+            pixels: img.pixels,
         });
         frames
     };
     let mut caps = Vec::with_capacity(manifest.patterns.len());
     for pat in &manifest.patterns {
         caps.push(shoot(
-            &frames_with(&manifest.pattern_image(pat.pattern)),
+            &frames_with(manifest.pattern_image(pat.pattern)),
             1.0,
         )?);
     }
@@ -278,7 +278,7 @@ pub fn decode_projector(
             &mut corr,
             room.scene().camera.saturation as f32,
             SECOND_PASS_LONGEST,
-            |img, exposure| shoot(&frames_with(img), exposure),
+            |img, exposure| shoot(&frames_with(img.clone()), exposure),
         )?;
         if let Some(done) = done {
             tracing::info!(
