@@ -169,6 +169,9 @@ struct Live {
     start: Vec<Option<LinearRgb>>,
     /// The weights and responses of the projectors segmented over the wire.
     assignments: HashMap<String, Assignment>,
+    /// Per projector segmented over the wire (standard, lighting a chart): the share of the
+    /// light it gives each camera pixel, which projectors segmented later leave to it.
+    claims: HashMap<String, Vec<f32>>,
     /// The chart of each node segmented over the wire (for its conventional start).
     charts: HashMap<u32, usize>,
     /// Patches some projector's light made unmeasurable during its calibration over the wire
@@ -877,31 +880,76 @@ fn assign_message(a: &Assignment) -> v1::Assign {
 /// Levels of the response ramp shown over the wire (DESIGN §4: at least 9).
 const RAMP_LEVELS: usize = 9;
 
+/// A projector decoded over the wire and its response fitted, not yet segmented.
+struct Decoded {
+    projector: String,
+    tx: mpsc::Sender<Result<v1::RoomMessage, Status>>,
+    width: u32,
+    height: u32,
+    large: bool,
+    corr: roomlight_calib::graycode::Correspondence,
+    response: roomlight_calib::response::Response,
+}
+
 /// Calibrates a projector the model does not know, over the wire (DESIGN §4.2–4.4, §4.7): its
 /// node agent shows structured light and a response ramp while the other projectors keep their
 /// values (the decode compares each pattern with its inverse and the response fit subtracts the
 /// ramp's first level, so their light cancels); the camera agent decodes and segments it
 /// (off the runtime's threads), appends its nodes to the model with empty columns, records
 /// each node's chart for its conventional start, and sends it the nodes' weights and the
-/// response. False when the projector left, a pattern was not shown, the camera failed, or
-/// the decode or the response fit was refused (logged; it is tried again).
+/// response. At bring-up (no projector lit yet) every other projector waiting for its nodes is
+/// decoded too and all are segmented together, feathered against each other; a projector that
+/// joins a lit room takes what the others' weights leave ([`assign_decoded`]). False when the
+/// projector left, a pattern was not shown, the camera failed, or the decode or the response
+/// fit was refused (logged; it is tried again).
 async fn segment_over_wire(
     shared: &Shared,
     camera: &mut impl Camera,
     projector: &str,
     captures: &mut u64,
 ) -> bool {
-    let Some(survey) = shared.survey.clone() else {
+    let Some(first) = decode_over_wire(shared, camera, projector, captures).await else {
         return false;
     };
-    let Some((tx, width, height, kind)) = shared
+    let mut batch = vec![first];
+    let others: Vec<String> = {
+        let reg = shared.registry();
+        if reg.peers.values().all(|p| p.shown.is_none()) {
+            reg.peers
+                .iter()
+                .filter(|(id, p)| *id != projector && !p.calibrated && p.nodes.is_empty())
+                .map(|(id, _)| id.clone())
+                .collect()
+        } else {
+            Vec::new()
+        }
+    };
+    for other in others {
+        if let Some(d) = decode_over_wire(shared, camera, &other, captures).await {
+            batch.push(d);
+        }
+    }
+    assign_decoded(shared, batch)
+        .await
+        .iter()
+        .any(|p| p == projector)
+}
+
+/// Shows a projector's structured light and response ramp, decodes the one and fits the other
+/// (off the runtime's threads). `None` when it left, a pattern was not shown, the camera failed
+/// or the decode or fit was refused (logged).
+async fn decode_over_wire(
+    shared: &Shared,
+    camera: &mut impl Camera,
+    projector: &str,
+    captures: &mut u64,
+) -> Option<Decoded> {
+    let survey = shared.survey.clone()?;
+    let (tx, width, height, kind) = shared
         .registry()
         .peers
         .get(projector)
-        .map(|p| (p.tx.clone(), p.width, p.height, p.kind))
-    else {
-        return false;
-    };
+        .map(|p| (p.tx.clone(), p.width, p.height, p.kind))?;
     // A large aperture's defocus blurs XOR-04's fine stripes: plain Gray code, one node.
     let large = kind == v1::ProjectorKind::LargeAperture;
     let coding = if large { Coding::Gray } else { Coding::Xor04 };
@@ -912,7 +960,7 @@ async fn segment_over_wire(
         (Ok(m), Ok(c)) => (m, c),
         (Err(e), _) | (_, Err(e)) => {
             tracing::error!(%projector, error = %e, "cannot calibrate over the wire");
-            return false;
+            return None;
         }
     };
     tracing::info!(%projector, width, height, patterns = manifest.patterns.len(), "structured light over the wire");
@@ -922,24 +970,14 @@ async fn segment_over_wire(
             pattern: file.pattern,
             coding,
         };
-        let Some(image) =
-            show_and_capture_image(shared, camera, projector, &tx, pattern, captures).await
-        else {
-            return false;
-        };
-        images.push(image);
+        images
+            .push(show_and_capture_image(shared, camera, projector, &tx, pattern, captures).await?);
     }
     let mut ramp = Vec::with_capacity(codes.len());
     for &code in &codes {
         let pattern = Pattern::Uniform([code as f32; 3]);
-        let Some(image) =
-            show_and_capture_image(shared, camera, projector, &tx, pattern, captures).await
-        else {
-            return false;
-        };
-        ramp.push(image);
+        ramp.push(show_and_capture_image(shared, camera, projector, &tx, pattern, captures).await?);
     }
-    let name = projector.to_string();
     let worked = tokio::task::spawn_blocking(move || {
         let corr = roomlight_calib::graycode::decode(&manifest, &DecodeConfig::default(), |f| {
             let k = manifest
@@ -960,99 +998,195 @@ async fn segment_over_wire(
         let (measured, noise) = footprint_ramp(&ramp, &corr);
         let response =
             fit_response(&codes, &measured, &noise).map_err(|e| format!("response: {e}"))?;
-        let whole = || roomlight_calib::nodes::whole_frame(&corr, &survey.corners, &survey.target_mask);
-        let nodes: Vec<(Vec<f32>, Option<usize>)> = if large {
-            vec![whole()]
-        } else {
-            match roomlight_calib::nodes::segment(
-                std::slice::from_ref(&corr),
-                &survey.corners,
-                Some(&survey.target_mask),
-                &roomlight_calib::nodes::NodeConfig::default(),
-            ) {
-                Ok(seg) => seg
-                    .nodes
-                    .into_iter()
-                    .map(|n| (n.weights, Some(n.chart)))
-                    .collect(),
-                Err(e) => {
-                    tracing::info!(projector = %name, reason = %e, "lights no chart: one node over its frame");
-                    vec![whole()]
-                }
-            }
-        };
-        Ok::<_, String>((response, nodes, corr.decoded_share()))
+        Ok::<_, String>((corr, response))
     })
     .await;
-    let (response, nodes, decoded) = match worked {
-        Ok(Ok(done)) => done,
+    match worked {
+        Ok(Ok((corr, response))) => Some(Decoded {
+            projector: projector.to_string(),
+            tx,
+            width,
+            height,
+            large,
+            corr,
+            response,
+        }),
         Ok(Err(e)) => {
             tracing::error!(%projector, error = %e, "calibration over the wire refused");
-            return false;
+            None
         }
         Err(e) => {
             tracing::error!(%projector, error = %e, "calibration over the wire failed");
-            return false;
+            None
         }
+    }
+}
+
+/// Segments decoded projectors (off the runtime's threads) and assigns them their nodes: the
+/// standard ones that light a chart together, feathered against each other, beside the
+/// projectors segmented before (which keep their weights: the new ones share what those leave,
+/// [`roomlight_calib::nodes::segment_beside`]); a large aperture, or a projector that lights no
+/// chart, is one node over its frame but the target. Their nodes join the model with empty
+/// columns. Returns the projectors whose assignment was sent.
+async fn assign_decoded(shared: &Shared, batch: Vec<Decoded>) -> Vec<String> {
+    let Some(survey) = shared.survey.clone() else {
+        return Vec::new();
     };
-    let assignment = {
-        let mut live = shared.live.write().unwrap_or_else(PoisonError::into_inner);
-        let first = live.problem.nodes() as u32;
-        let ids: Vec<u32> = (first..).take(nodes.len()).collect();
-        let mut columns = live.problem.columns().to_vec();
-        columns.extend(nodes.iter().map(|_| AttenuationColumn::default()));
-        let problem = match Problem::new(
-            columns,
-            live.problem.black().to_vec(),
-            live.problem.target().to_vec(),
-            live.problem.noise().to_vec(),
-        ) {
-            Ok(p) => p,
+    // What the attached projectors segmented before give each camera pixel (those decoded now
+    // are segmented anew, whatever they had). One that is not attached now does not hold its
+    // share: a projector that replaces a dead one takes its place (should the old one come
+    // back, the model holds both where they overlap).
+    let attached: HashSet<String> = shared.registry().peers.keys().cloned().collect();
+    let claimed: Option<Vec<f32>> = {
+        let live = shared.live();
+        let mut sum: Option<Vec<f32>> = None;
+        for (id, claim) in &live.claims {
+            if !attached.contains(id)
+                || batch.iter().any(|d| &d.projector == id)
+                || claim.len() != survey.target_mask.len()
+            {
+                continue;
+            }
+            let sum = sum.get_or_insert_with(|| vec![0.0; claim.len()]);
+            for (s, c) in sum.iter_mut().zip(claim) {
+                *s = (*s + c).clamp(0.0, 1.0);
+            }
+        }
+        sum
+    };
+    let segmented = tokio::task::spawn_blocking(move || {
+        let config = roomlight_calib::nodes::NodeConfig::default();
+        let charted: Vec<bool> = batch
+            .iter()
+            .map(|d| {
+                !d.large
+                    && roomlight_calib::nodes::charts_lit(&d.corr, &survey.corners, &config)
+                        .is_ok_and(|c| !c.is_empty())
+            })
+            .collect();
+        let together: Vec<roomlight_calib::graycode::Correspondence> = batch
+            .iter()
+            .zip(&charted)
+            .filter(|(_, c)| **c)
+            .map(|(d, _)| d.corr.clone())
+            .collect();
+        let seg = roomlight_calib::nodes::segment_beside(
+            &together,
+            &survey.corners,
+            Some(&survey.target_mask),
+            &config,
+            claimed.as_deref(),
+        );
+        let mut seg = match seg {
+            Ok(seg) => Some(seg),
             Err(e) => {
-                tracing::error!(%projector, error = %e, "calibration over the wire refused");
-                return false;
+                tracing::error!(error = %e, "segmentation over the wire refused");
+                None
             }
         };
-        live.problem = problem;
-        live.start.extend(nodes.iter().map(|_| None));
-        for (&n, (_, chart)) in ids.iter().zip(&nodes) {
-            if let Some(c) = chart {
-                live.charts.insert(n, *c);
-            }
+        let mut out = Vec::with_capacity(batch.len());
+        let mut k = 0;
+        for (d, charted) in batch.into_iter().zip(charted) {
+            let decoded = d.corr.decoded_share();
+            let whole = || {
+                roomlight_calib::nodes::whole_frame(&d.corr, &survey.corners, &survey.target_mask)
+            };
+            let (nodes, claim) = if charted {
+                let Some(seg) = seg.as_mut() else {
+                    continue;
+                };
+                let nodes: Vec<(Vec<f32>, Option<usize>)> = seg
+                    .nodes
+                    .iter_mut()
+                    .filter(|n| n.projector == k)
+                    .map(|n| (std::mem::take(&mut n.weights), Some(n.chart)))
+                    .collect();
+                let claim = std::mem::take(&mut seg.claims[k]);
+                k += 1;
+                (nodes, Some(claim))
+            } else {
+                tracing::info!(projector = %d.projector, large = d.large, "one node over its frame");
+                (vec![whole()], None)
+            };
+            out.push((d, nodes, claim, decoded));
         }
-        let assignment = Assignment {
-            width,
-            height,
-            response,
-            nodes: ids
-                .iter()
-                .zip(&nodes)
-                .map(|(&n, (w, _))| {
-                    let sparse = w
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, w)| **w > 0.0)
-                        .map(|(i, w)| (i as u32, w.min(1.0)))
-                        .collect();
-                    (n, sparse)
-                })
-                .collect(),
-        };
-        live.owners.insert(projector.to_string(), ids.clone());
-        live.assignments
-            .insert(projector.to_string(), assignment.clone());
-        assignment
+        out
+    })
+    .await;
+    let segmented = match segmented {
+        Ok(s) => s,
+        Err(e) => {
+            tracing::error!(error = %e, "segmentation over the wire failed");
+            return Vec::new();
+        }
     };
-    let ids: Vec<u32> = assignment.nodes.iter().map(|(n, _)| *n).collect();
-    if let Some(peer) = shared.registry().peers.get_mut(projector) {
-        peer.nodes = ids.clone();
+    let mut assigned = Vec::with_capacity(segmented.len());
+    for (d, nodes, claim, decoded) in segmented {
+        let projector = d.projector.as_str();
+        let assignment = {
+            let mut live = shared.live.write().unwrap_or_else(PoisonError::into_inner);
+            let first = live.problem.nodes() as u32;
+            let ids: Vec<u32> = (first..).take(nodes.len()).collect();
+            let mut columns = live.problem.columns().to_vec();
+            columns.extend(nodes.iter().map(|_| AttenuationColumn::default()));
+            let problem = match Problem::new(
+                columns,
+                live.problem.black().to_vec(),
+                live.problem.target().to_vec(),
+                live.problem.noise().to_vec(),
+            ) {
+                Ok(p) => p,
+                Err(e) => {
+                    tracing::error!(%projector, error = %e, "calibration over the wire refused");
+                    continue;
+                }
+            };
+            live.problem = problem;
+            live.start.extend(nodes.iter().map(|_| None));
+            for (&n, (_, chart)) in ids.iter().zip(&nodes) {
+                if let Some(c) = chart {
+                    live.charts.insert(n, *c);
+                }
+            }
+            let assignment = Assignment {
+                width: d.width,
+                height: d.height,
+                response: d.response,
+                nodes: ids
+                    .iter()
+                    .zip(&nodes)
+                    .map(|(&n, (w, _))| {
+                        let sparse = w
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, w)| **w > 0.0)
+                            .map(|(i, w)| (i as u32, w.min(1.0)))
+                            .collect();
+                        (n, sparse)
+                    })
+                    .collect(),
+            };
+            live.owners.insert(projector.to_string(), ids.clone());
+            live.assignments
+                .insert(projector.to_string(), assignment.clone());
+            match claim {
+                Some(claim) => live.claims.insert(projector.to_string(), claim),
+                None => live.claims.remove(projector),
+            };
+            assignment
+        };
+        let ids: Vec<u32> = assignment.nodes.iter().map(|(n, _)| *n).collect();
+        if let Some(peer) = shared.registry().peers.get_mut(projector) {
+            peer.nodes = ids.clone();
+        }
+        let assign = v1::room_message::Body::Assign(assign_message(&assignment));
+        if !shared.send(&d.tx, assign).await {
+            continue;
+        }
+        tracing::info!(%projector, nodes = ids.len(), decoded = format!("{:.1}%", 100.0 * decoded), gamma = ?assignment.response.gamma, "segmented over the wire");
+        assigned.push(d.projector);
     }
-    let assign = v1::room_message::Body::Assign(assign_message(&assignment));
-    if !shared.send(&tx, assign).await {
-        return false;
-    }
-    tracing::info!(%projector, nodes = ids.len(), decoded = format!("{:.1}%", 100.0 * decoded), gamma = ?assignment.response.gamma, "segmented over the wire");
-    true
+    assigned
 }
 
 /// Measures a hot projector's attenuation (DESIGN §4): its nodes all at black, then each alone
@@ -1385,6 +1519,7 @@ pub fn serve(
             owners: model.owners,
             start,
             assignments: HashMap::new(),
+            claims: HashMap::new(),
             charts: HashMap::new(),
             excluded,
         }),

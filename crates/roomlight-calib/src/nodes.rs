@@ -53,6 +53,10 @@ pub struct Segmentation {
     pub nodes: Vec<Node>,
     /// Per projector: pixels that light the target or its margin (black in every frame).
     pub excluded: Vec<Vec<bool>>,
+    /// Per projector, per camera pixel: the share of the light at that surface point that the
+    /// projector's nodes give together, in `[0, 1]` (0 outside its footprint). A projector
+    /// segmented later beside these keeps to what they leave ([`segment_beside`]).
+    pub claims: Vec<Vec<f32>>,
 }
 
 /// Projector pixel → the camera pixel that sees it, filled outwards from decoded pixels so that
@@ -147,10 +151,30 @@ pub fn segment(
     target_mask: Option<&[bool]>,
     config: &NodeConfig,
 ) -> Result<Segmentation, CalibError> {
+    segment_beside(luminaires, charts, target_mask, config, None)
+}
+
+/// [`segment`] beside projectors that keep their weights: `claimed[i]` is the share of the
+/// light at camera pixel `i` they already give (the sum of their [`Segmentation::claims`]).
+/// The new projectors share what is left, `1 − claimed`, feathered among themselves as
+/// [`segment`] does, so that the weights of old and new sum to one wherever a new one
+/// reaches. A projector that joins a lit room is segmented this way: the others' weights, and
+/// so their measured attenuation, stay as they are. Where an old projector's footprint ends
+/// inside a new one's, the new one's share steps up as the old one's steps down (the old
+/// weights cannot be feathered without measuring them again). Claims outside `[0, 1]` or not
+/// finite are refused, naming the pixel.
+pub fn segment_beside(
+    luminaires: &[Correspondence],
+    charts: &[ChartCorners],
+    target_mask: Option<&[bool]>,
+    config: &NodeConfig,
+    claimed: Option<&[f32]>,
+) -> Result<Segmentation, CalibError> {
     let Some(first) = luminaires.first() else {
         return Ok(Segmentation {
             nodes: Vec::new(),
             excluded: Vec::new(),
+            claims: Vec::new(),
         });
     };
     let (cw, ch) = (first.width as usize, first.height as usize);
@@ -173,24 +197,26 @@ pub fn segment(
             problem: format!("{} pixels, expected {cw}x{ch}", mask.len()),
         });
     }
-    // Patch centres of every chart in camera pixels.
-    let centres: Vec<Vec<usize>> = charts
-        .iter()
-        .map(|chart| {
-            let hom =
-                Homography::from_corners(&chart.corners).ok_or_else(|| CalibError::Invalid {
-                    field: "chart corners",
-                    problem: format!("chart {}: not a quadrilateral", chart.name),
-                })?;
-            Ok((0..COLUMNS * ROWS)
-                .filter_map(|k| {
-                    let [u, v] = hom.apply((k % COLUMNS) as f64 + 0.5, (k / COLUMNS) as f64 + 0.5);
-                    (u >= 0.0 && v >= 0.0 && (u as usize) < cw && (v as usize) < ch)
-                        .then(|| v as usize * cw + u as usize)
-                })
-                .collect())
-        })
-        .collect::<Result<_, CalibError>>()?;
+    if let Some(claimed) = claimed {
+        if claimed.len() != cw * ch {
+            return Err(CalibError::Invalid {
+                field: "claimed shares",
+                problem: format!("{} pixels, expected {cw}x{ch}", claimed.len()),
+            });
+        }
+        if let Some(i) = claimed.iter().position(|c| !(0.0..=1.0).contains(c)) {
+            return Err(CalibError::Invalid {
+                field: "claimed shares",
+                problem: format!(
+                    "{} at camera pixel ({}, {}); expected a share in [0, 1]",
+                    claimed[i],
+                    i % cw,
+                    i / cw
+                ),
+            });
+        }
+    }
+    let centres = patch_centres(charts, cw, ch)?;
     // Overlap shares in camera space: each projector's share at a surface point ramps from 0 at
     // the boundary of its footprint (frustum edge or shadow) to 1 at `edge_feather_px` camera
     // pixels inside it; the shares of the projectors at a point are normalised to sum to 1.
@@ -206,46 +232,43 @@ pub fn segment(
                 .collect()
         })
         .collect();
-    let total: Vec<f32> = (0..cw * ch)
-        .map(|i| shares.iter().map(|s| s[i]).sum())
+    // The projectors take their blend one after the other, coarsest first: each takes its
+    // share of what the ones before it left (their actual light at each camera pixel, pixel
+    // steps and all), in proportion to its share among itself and those still to come. The
+    // last at a surface point takes exactly what is left there, so its finer pixel grid
+    // absorbs the staircase of the coarser ones' ramps instead of adding its own.
+    let mut order: Vec<usize> = (0..luminaires.len()).collect();
+    let fineness: Vec<f64> = luminaires
+        .iter()
+        .map(projector_pixels_per_camera_pixel)
         .collect();
-    let mut nodes = Vec::new();
-    let mut excluded = Vec::with_capacity(luminaires.len());
-    for (k, c) in luminaires.iter().enumerate() {
+    order.sort_by(|a, b| fineness[*a].total_cmp(&fineness[*b]).then(a.cmp(b)));
+    let mut taken: Vec<f32> = claimed.map_or_else(|| vec![0.0; cw * ch], <[f32]>::to_vec);
+    // Per projector: its blend per projector pixel, its pixels kept black, its claims.
+    let mut per: Vec<Option<Blended>> = vec![None; luminaires.len()];
+    for (rank, &k) in order.iter().enumerate() {
+        let c = &luminaires[k];
         let (pw, ph) = (c.projector_width as usize, c.projector_height as usize);
-        let anchors: Vec<(usize, (f32, f32))> = centres
-            .iter()
-            .enumerate()
-            .filter_map(|(m, pts)| {
-                let hits: Vec<(u32, u32)> = pts.iter().filter_map(|&i| c.map[i]).collect();
-                (hits.len() >= config.min_patches).then(|| {
-                    let n = hits.len() as f32;
-                    (
-                        m,
-                        (
-                            hits.iter().map(|h| h.0 as f32).sum::<f32>() / n,
-                            hits.iter().map(|h| h.1 as f32).sum::<f32>() / n,
-                        ),
-                    )
-                })
-            })
-            .collect();
-        if anchors.is_empty() {
-            return Err(CalibError::Invalid {
-                field: "projectors",
-                problem: format!(
-                    "luminaire projector {k} lights no chart (fewer than {} patch centres decoded on every chart)",
-                    config.min_patches
-                ),
-            });
-        }
+        let rest = &order[rank..];
+        // Its blend at a camera pixel: what is left there times its share over the shares of
+        // itself and the projectors after it; 0 where none of them reaches (shares sum to 0).
+        let blend_at = |i: usize| {
+            let remaining: f32 = rest.iter().map(|&j| shares[j][i]).sum();
+            let free = (1.0 - taken[i]).max(0.0);
+            if remaining > 0.0 {
+                free * shares[k][i] / remaining
+            } else {
+                0.0
+            }
+        };
         let inv = inverse_map(c);
-        // Blend share of each projector pixel: its share at the surface point it lights over the
-        // sum of all shares there; 1 where no projector's footprint has a share (unseen).
+        // Blend of each projector pixel: at the surface point it lights (all that is left
+        // there where no footprint has a share: unseen).
         let blend: Vec<f32> = (0..pw * ph)
             .map(|p| match inv[p] {
-                Some(i) if total[i as usize] > 0.0 => shares[k][i as usize] / total[i as usize],
-                _ => 1.0,
+                Some(i) if shares[k][i as usize] > 0.0 => blend_at(i as usize),
+                Some(i) => (1.0 - taken[i as usize]).max(0.0),
+                None => 1.0,
             })
             .collect();
         // Target exclusion: projector pixels that light target pixels, dilated by the margin.
@@ -262,6 +285,53 @@ pub fn segment(
                 }
             }
             black = dilate(&black, pw, ph, config.target_margin_px);
+        }
+        // The light it gives each camera pixel: the blend of the projector pixel decoded there
+        // (0 where it is kept black); in its footprint's gaps, the camera-space blend.
+        let claim: Vec<f32> = (0..cw * ch)
+            .map(|i| match c.map[i] {
+                Some((x, y)) => {
+                    let p = y as usize * pw + x as usize;
+                    if p < pw * ph && !black[p] {
+                        blend[p]
+                    } else {
+                        0.0
+                    }
+                }
+                None => blend_at(i),
+            })
+            .collect();
+        for (t, c) in taken.iter_mut().zip(&claim) {
+            *t = (*t + c).min(1.0);
+        }
+        per[k] = Some(Blended {
+            blend,
+            black,
+            claim,
+        });
+    }
+    let mut nodes = Vec::new();
+    let mut excluded = Vec::with_capacity(luminaires.len());
+    let mut claims = Vec::with_capacity(luminaires.len());
+    for (k, (c, done)) in luminaires.iter().zip(per).enumerate() {
+        let (pw, ph) = (c.projector_width as usize, c.projector_height as usize);
+        let Some(Blended {
+            blend,
+            black,
+            claim,
+        }) = done
+        else {
+            continue;
+        };
+        let anchors = anchors(c, &centres, config);
+        if anchors.is_empty() {
+            return Err(CalibError::Invalid {
+                field: "projectors",
+                problem: format!(
+                    "luminaire projector {k} lights no chart (fewer than {} patch centres decoded on every chart)",
+                    config.min_patches
+                ),
+            });
         }
         // Node weights: piecewise-linear partition of unity over the distance to each anchor.
         let mut weights = vec![vec![0.0f32; pw * ph]; anchors.len()];
@@ -295,9 +365,110 @@ pub fn segment(
                 weights: w,
             });
         }
+        claims.push(claim);
         excluded.push(black);
     }
-    Ok(Segmentation { nodes, excluded })
+    Ok(Segmentation {
+        nodes,
+        excluded,
+        claims,
+    })
+}
+
+/// One projector's overlap blend (per projector pixel), its pixels kept black for the target,
+/// and the light it gives each camera pixel.
+#[derive(Debug, Clone)]
+struct Blended {
+    blend: Vec<f32>,
+    black: Vec<bool>,
+    claim: Vec<f32>,
+}
+
+/// How many projector pixels a camera pixel sees, over the decoded region: distinct projector
+/// pixels decoded over camera pixels decoded (0 where nothing is decoded).
+fn projector_pixels_per_camera_pixel(c: &Correspondence) -> f64 {
+    let pw = c.projector_width as usize;
+    let mut seen = vec![false; pw * c.projector_height as usize];
+    let mut decoded = 0usize;
+    for (x, y) in c.map.iter().flatten() {
+        decoded += 1;
+        if let Some(s) = seen.get_mut(*y as usize * pw + *x as usize) {
+            *s = true;
+        }
+    }
+    // Nothing decoded: 0 (the projector goes first; it claims nothing anyway).
+    if decoded == 0 {
+        return 0.0;
+    }
+    seen.iter().filter(|s| **s).count() as f64 / decoded as f64
+}
+
+/// Patch centres of every chart, as camera pixel indices (those inside a `cw`×`ch` image).
+fn patch_centres(
+    charts: &[ChartCorners],
+    cw: usize,
+    ch: usize,
+) -> Result<Vec<Vec<usize>>, CalibError> {
+    charts
+        .iter()
+        .map(|chart| {
+            let hom =
+                Homography::from_corners(&chart.corners).ok_or_else(|| CalibError::Invalid {
+                    field: "chart corners",
+                    problem: format!("chart {}: not a quadrilateral", chart.name),
+                })?;
+            Ok((0..COLUMNS * ROWS)
+                .filter_map(|k| {
+                    let [u, v] = hom.apply((k % COLUMNS) as f64 + 0.5, (k / COLUMNS) as f64 + 0.5);
+                    (u >= 0.0 && v >= 0.0 && (u as usize) < cw && (v as usize) < ch)
+                        .then(|| v as usize * cw + u as usize)
+                })
+                .collect())
+        })
+        .collect()
+}
+
+/// The charts a projector lights (at least `min_patches` patch centres decoded) and each one's
+/// position in projector pixels (the mean of its decoded patch centres).
+fn anchors(
+    c: &Correspondence,
+    centres: &[Vec<usize>],
+    config: &NodeConfig,
+) -> Vec<(usize, (f32, f32))> {
+    centres
+        .iter()
+        .enumerate()
+        .filter_map(|(m, pts)| {
+            let hits: Vec<(u32, u32)> = pts
+                .iter()
+                .filter_map(|&i| c.map.get(i).copied().flatten())
+                .collect();
+            (hits.len() >= config.min_patches).then(|| {
+                let n = hits.len() as f32;
+                (
+                    m,
+                    (
+                        hits.iter().map(|h| h.0 as f32).sum::<f32>() / n,
+                        hits.iter().map(|h| h.1 as f32).sum::<f32>() / n,
+                    ),
+                )
+            })
+        })
+        .collect()
+}
+
+/// The charts a projector lights, by index into `charts` (see [`segment`]: a projector that
+/// lights none cannot be split by charts). Corners that are not a quadrilateral are refused.
+pub fn charts_lit(
+    c: &Correspondence,
+    charts: &[ChartCorners],
+    config: &NodeConfig,
+) -> Result<Vec<usize>, CalibError> {
+    let centres = patch_centres(charts, c.width as usize, c.height as usize)?;
+    Ok(anchors(c, &centres, config)
+        .into_iter()
+        .map(|(m, _)| m)
+        .collect())
 }
 
 /// Dilates a mask by `r` pixels (square neighbourhood), separably.
