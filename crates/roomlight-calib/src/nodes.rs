@@ -471,6 +471,108 @@ pub fn charts_lit(
         .collect())
 }
 
+/// How well luminaires' weights sum to one on the surface points the camera sees, measured
+/// through a correspondence the caller trusts (the simulator's truth, in tests and benches).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Partition {
+    /// Camera pixels checked.
+    pub points: usize,
+    /// Of those, the ones two or more projectors reach.
+    pub overlap: usize,
+    /// Share of the points whose weights sum to one within 1e-3, and within 0.05.
+    pub within_1e3: f64,
+    pub within_0_05: f64,
+    /// The largest miss where one projector reaches, and where several do.
+    pub worst_single: f32,
+    pub worst_overlap: f32,
+}
+
+impl std::fmt::Display for Partition {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} surface points ({} in overlaps): {:.2}% within 1e-3, {:.2}% within 0.05; worst {:.3} where one projector reaches, {:.3} in overlaps",
+            self.points,
+            self.overlap,
+            100.0 * self.within_1e3,
+            100.0 * self.within_0_05,
+            self.worst_single,
+            self.worst_overlap
+        )
+    }
+}
+
+/// The sum of projector weights at every camera pixel not `skip`ped: `truth[k][i]` is the
+/// pixel of projector `k` that lights camera pixel `i`'s surface point, `weights[k]` the sum of
+/// its nodes' weights per projector pixel, `dark[k]` its pixels kept black (a point lit through
+/// one is not checked: behind the target's silhouette it stays dark). Pixel indices outside a
+/// projector's weights count as weight 0.
+pub fn partition_of_unity(
+    truth: &[Vec<Option<u32>>],
+    weights: &[Vec<f32>],
+    dark: &[Vec<bool>],
+    skip: &[bool],
+) -> Partition {
+    let mut out = Partition {
+        points: 0,
+        overlap: 0,
+        within_1e3: 0.0,
+        within_0_05: 0.0,
+        worst_single: 0.0,
+        worst_overlap: 0.0,
+    };
+    let (mut tight, mut loose) = (0usize, 0usize);
+    for (i, &skipped) in skip.iter().enumerate() {
+        let reaching: Vec<(usize, usize)> = truth
+            .iter()
+            .enumerate()
+            .filter_map(|(k, t)| t.get(i).copied().flatten().map(|p| (k, p as usize)))
+            .collect();
+        let through_dark = reaching
+            .iter()
+            .any(|&(k, p)| dark.get(k).and_then(|d| d.get(p)).copied().unwrap_or(false));
+        if skipped || reaching.is_empty() || through_dark {
+            continue;
+        }
+        let sum: f32 = reaching
+            .iter()
+            .map(|&(k, p)| {
+                weights
+                    .get(k)
+                    .and_then(|w| w.get(p))
+                    .copied()
+                    .unwrap_or(0.0)
+            })
+            .sum();
+        let miss = (sum - 1.0).abs();
+        tight += usize::from(miss <= 1e-3);
+        loose += usize::from(miss <= 0.05);
+        if reaching.len() == 1 {
+            out.worst_single = out.worst_single.max(miss);
+        } else {
+            out.overlap += 1;
+            out.worst_overlap = out.worst_overlap.max(miss);
+        }
+        out.points += 1;
+    }
+    // No point checked: both shares 0.
+    out.within_1e3 = tight as f64 / out.points.max(1) as f64;
+    out.within_0_05 = loose as f64 / out.points.max(1) as f64;
+    out
+}
+
+/// Every node weight of projector `k` summed per projector pixel (empty if it has no node).
+pub fn projector_weights(nodes: &[Node], k: usize) -> Vec<f32> {
+    let mut sum: Vec<f32> = Vec::new();
+    for n in nodes.iter().filter(|n| n.projector == k) {
+        sum.resize(sum.len().max(n.weights.len()), 0.0);
+        for (s, w) in sum.iter_mut().zip(&n.weights) {
+            *s += w;
+        }
+    }
+    sum
+}
+
 /// Dilates a mask by `r` pixels (square neighbourhood), separably.
 pub fn dilate(mask: &[bool], w: usize, h: usize, r: u32) -> Vec<bool> {
     let r = r as usize;

@@ -4,7 +4,9 @@ mod common;
 
 use common::{chart_corners, decode_projector, small_scene};
 use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig};
-use roomlight_calib::nodes::{Node, NodeConfig, segment, segment_beside};
+use roomlight_calib::nodes::{
+    Node, NodeConfig, Partition, partition_of_unity, projector_weights, segment, segment_beside,
+};
 use roomlight_sim::{Frame, ProjectorImage, Room};
 
 /// The projector images that show every node at full light.
@@ -31,47 +33,8 @@ fn full_frames(room: &Room, nodes: &[Node]) -> Vec<Frame> {
         .collect()
 }
 
-/// Every node weight of projector `k` summed per projector pixel.
-fn projector_weights(nodes: &[Node], k: usize) -> Vec<f32> {
-    let mut sum: Vec<f32> = Vec::new();
-    for n in nodes.iter().filter(|n| n.projector == k) {
-        sum.resize(n.weights.len(), 0.0);
-        for (s, w) in sum.iter_mut().zip(&n.weights) {
-            *s += w;
-        }
-    }
-    sum
-}
-
-/// How well the luminaires' weights sum to one on the surface points they reach.
-struct Partition {
-    checked: usize,
-    /// Points two projectors reach.
-    overlap: usize,
-    tight: f64,
-    loose: f64,
-    worst_single: f32,
-    worst_overlap: f32,
-}
-
-impl std::fmt::Display for Partition {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{} surface points ({} in overlaps): {:.2}% within 1e-3, {:.2}% within 0.05; worst {:.3} where one projector reaches, {:.3} in overlaps",
-            self.checked,
-            self.overlap,
-            100.0 * self.tight,
-            100.0 * self.loose,
-            self.worst_single,
-            self.worst_overlap
-        )
-    }
-}
-
-/// The sum of the luminaires' weights (`weights(k)`: projector k's weight per pixel and its
-/// pixels kept black) at every camera pixel's surface point, through the true correspondence,
-/// outside the target's margin and the points lit only through an excluded pixel.
+/// The partition of unity of per-projector weights and dark pixels, through the true
+/// correspondence, away from the target (its margin is black).
 fn partition(
     room: &Room,
     mask: &[bool],
@@ -84,41 +47,8 @@ fn partition(
         room.camera().height as usize,
         8,
     );
-    let per: Vec<(Vec<f32>, Vec<bool>)> = (0..truth.len()).map(weights).collect();
-    let mut out = Partition {
-        checked: 0,
-        overlap: 0,
-        tight: 0.0,
-        loose: 0.0,
-        worst_single: 0.0,
-        worst_overlap: 0.0,
-    };
-    let (mut within_tight, mut within_loose) = (0usize, 0usize);
-    for i in 0..mask.len() {
-        if near_target[i] {
-            continue;
-        }
-        let reaching: Vec<(usize, u32)> = (0..truth.len())
-            .filter_map(|k| truth[k][i].map(|p| (k, p)))
-            .collect();
-        // Points behind the target's silhouette, lit through the excluded margin, stay dark.
-        if reaching.is_empty() || reaching.iter().any(|&(k, p)| per[k].1[p as usize]) {
-            continue;
-        }
-        let sum: f32 = reaching.iter().map(|&(k, p)| per[k].0[p as usize]).sum();
-        within_tight += usize::from((sum - 1.0).abs() <= 1e-3);
-        within_loose += usize::from((sum - 1.0).abs() <= 0.05);
-        if reaching.len() == 1 {
-            out.worst_single = out.worst_single.max((sum - 1.0).abs());
-        } else {
-            out.overlap += 1;
-            out.worst_overlap = out.worst_overlap.max((sum - 1.0).abs());
-        }
-        out.checked += 1;
-    }
-    out.tight = within_tight as f64 / out.checked.max(1) as f64;
-    out.loose = within_loose as f64 / out.checked.max(1) as f64;
-    out
+    let (w, dark): (Vec<Vec<f32>>, Vec<Vec<bool>>) = (0..truth.len()).map(weights).unzip();
+    partition_of_unity(truth, &w, &dark, &near_target)
 }
 
 #[test]
@@ -152,11 +82,11 @@ fn nodes_partition_the_light_feather_smoothly_and_keep_the_target_dark() {
         (projector_weights(&seg.nodes, k), seg.excluded[k].clone())
     });
     println!("segmented together: {joint}");
-    assert!(joint.checked > 1000 && joint.overlap > 200, "{joint}");
+    assert!(joint.points > 1000 && joint.overlap > 200, "{joint}");
     // Exact inside one projector; across overlaps the shares come from decoded maps, whose gaps
     // (unknown pixels) leave a few points off.
     assert!(
-        joint.tight > 0.95 && joint.loose > 0.99,
+        joint.within_1e3 > 0.95 && joint.within_0_05 > 0.99,
         "segmented together: {joint}"
     );
     // A claim is the light the projector's nodes give the camera pixel.
@@ -188,7 +118,7 @@ fn nodes_partition_the_light_feather_smoothly_and_keep_the_target_dark() {
     });
     println!("segmented one after the other: {one_by_one}");
     assert!(
-        one_by_one.tight > 0.95 && one_by_one.loose > 0.99,
+        one_by_one.within_1e3 > 0.95 && one_by_one.within_0_05 > 0.99,
         "segmented one after the other: {one_by_one}"
     );
     // Each alone (what calibration over the wire did before): overlaps get the light twice.
@@ -198,7 +128,7 @@ fn nodes_partition_the_light_feather_smoothly_and_keep_the_target_dark() {
         (projector_weights(&s.nodes, 0), s.excluded[0].clone())
     });
     println!("each segmented alone: {twice}");
-    assert!(twice.tight < 0.95, "each alone: {twice}");
+    assert!(twice.within_1e3 < 0.95, "each alone: {twice}");
     // Claims outside [0, 1] or of another size are refused by name.
     let mut bad = first.claims[0].clone();
     bad[7] = f32::NAN;

@@ -8,7 +8,9 @@ use roomlight_calib::graycode::{
     group_disjoint, second_pass,
 };
 use roomlight_calib::image_io::LinearImage;
-use roomlight_calib::nodes::{NodeConfig, segment};
+use roomlight_calib::nodes::{
+    NodeConfig, partition_of_unity, projector_weights, segment, segment_beside,
+};
 use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room, scenes};
 use std::time::Instant;
@@ -456,6 +458,49 @@ pub fn run(quick: bool) -> Result<()> {
         corr.len(),
         seg.nodes.len(),
         t.elapsed().as_secs_f64()
+    );
+    // Partition of unity on the surface points, through the simulator's true correspondence,
+    // away from the target (its margin is black): segmented together, and one after the other
+    // as projectors joining a lit room over the wire are.
+    let truth: Vec<Vec<Option<u32>>> = luminaires
+        .iter()
+        .filter(|&&k| decoded_all[k].is_some())
+        .map(|&k| room.true_correspondence(k))
+        .collect();
+    let (cw, ch) = (room.camera().width as usize, room.camera().height as usize);
+    let away = roomlight_calib::nodes::dilate(&mask, cw, ch, 8);
+    let weights: Vec<Vec<f32>> = (0..corr.len())
+        .map(|k| projector_weights(&seg.nodes, k))
+        .collect();
+    println!(
+        "  partition of unity, segmented together: {}",
+        partition_of_unity(&truth, &weights, &seg.excluded, &away)
+    );
+    let mut claimed = vec![0.0f32; cw * ch];
+    let (mut weights, mut dark) = (Vec::new(), Vec::new());
+    for c in &corr {
+        let one = segment_beside(
+            std::slice::from_ref(c),
+            &charts,
+            Some(&mask),
+            &NodeConfig::default(),
+            Some(&claimed),
+        );
+        // A projector that lights no chart alone: no nodes, no light.
+        let Ok(one) = one else {
+            weights.push(Vec::new());
+            dark.push(Vec::new());
+            continue;
+        };
+        for (t, c) in claimed.iter_mut().zip(&one.claims[0]) {
+            *t = (*t + c).min(1.0);
+        }
+        weights.push(projector_weights(&one.nodes, 0));
+        dark.extend(one.excluded);
+    }
+    println!(
+        "  partition of unity, one after the other: {}",
+        partition_of_unity(&truth, &weights, &dark, &away)
     );
     // Luminaire light on the target against a patch on the desk beside it.
     let desk = room.scene().charts.iter().position(|c| c.name == "desk");

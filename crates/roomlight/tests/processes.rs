@@ -184,9 +184,8 @@ fn write_node(dir: &Path, projector: &str, camera: &str, sim: &str) {
 
 /// How well the weights that standard luminaires `names` keep in their state files (in `d`)
 /// sum to one on the surface points of the small room as a 640×480 camera sees it, through the
-/// simulator's true correspondence, away from the target (whose margin is black):
-/// `(points, points two projectors reach, share within 1e-3, share within 0.05)`.
-fn partition_from_states(d: &Path, names: &[&str]) -> (usize, usize, f64, f64) {
+/// simulator's true correspondence, away from the target (whose margin is black).
+fn partition_from_states(d: &Path, names: &[&str]) -> roomlight_calib::nodes::Partition {
     let mut scene = roomlight_sim::scenes::small().expect("small scene");
     scene.camera.resolution = [640, 480];
     let room = roomlight_sim::Room::build(scene).expect("room");
@@ -217,23 +216,8 @@ fn partition_from_states(d: &Path, names: &[&str]) -> (usize, usize, f64, f64) {
             (room.true_correspondence(k), sum)
         })
         .collect();
-    let (mut points, mut overlap, mut tight, mut loose) = (0usize, 0usize, 0usize, 0usize);
-    for i in 0..cw * ch {
-        let reaching: Vec<f32> = per
-            .iter()
-            .filter_map(|(truth, w)| truth[i].map(|p| w[p as usize]))
-            .collect();
-        if away[i] || reaching.is_empty() {
-            continue;
-        }
-        let sum: f32 = reaching.iter().sum();
-        points += 1;
-        overlap += usize::from(reaching.len() > 1);
-        tight += usize::from((sum - 1.0).abs() <= 1e-3);
-        loose += usize::from((sum - 1.0).abs() <= 0.05);
-    }
-    let share = |n: usize| n as f64 / points.max(1) as f64;
-    (points, overlap, share(tight), share(loose))
+    let (truth, weights): (Vec<Vec<Option<u32>>>, Vec<Vec<f32>>) = per.into_iter().unzip();
+    roomlight_calib::nodes::partition_of_unity(&truth, &weights, &[], &away)
 }
 
 #[test]
@@ -759,19 +743,15 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
         .filter(|(_, large, _)| !large)
         .map(|(name, _, _)| name.as_str())
         .collect();
-    let (points, overlap, tight, loose) = partition_from_states(d, &standard);
-    eprintln!(
-        "partition of unity over the wire: {points} surface points ({overlap} in overlaps), {:.2}% within 1e-3, {:.2}% within 0.05",
-        100.0 * tight,
-        100.0 * loose
+    let partition = partition_from_states(d, &standard);
+    eprintln!("partition of unity over the wire: {partition}");
+    assert!(
+        partition.points > 1000 && partition.overlap > 200,
+        "{partition}"
     );
     assert!(
-        points > 1000 && overlap > 200,
-        "{points} points, {overlap} in overlaps"
-    );
-    assert!(
-        tight > 0.95 && loose > 0.99,
-        "partition of unity: {tight} within 1e-3, {loose} within 0.05"
+        partition.within_1e3 > 0.95 && partition.within_0_05 > 0.99,
+        "{partition}"
     );
     drop(procs);
 }
