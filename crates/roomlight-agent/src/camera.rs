@@ -978,6 +978,18 @@ async fn decode_over_wire(
         let pattern = Pattern::Uniform([code as f32; 3]);
         ramp.push(show_and_capture_image(shared, camera, projector, &tx, pattern, captures).await?);
     }
+    // Dark again until its attenuation is measured: at bring-up others are decoded and measured
+    // after it, and its last ramp level would light their captures.
+    if !show_pattern(
+        shared,
+        projector,
+        &tx,
+        wire_pattern(Pattern::Uniform([0.0; 3])),
+    )
+    .await
+    {
+        return None;
+    }
     let worked = tokio::task::spawn_blocking(move || {
         let corr = roomlight_calib::graycode::decode(&manifest, &DecodeConfig::default(), |f| {
             let k = manifest
