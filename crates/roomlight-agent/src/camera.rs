@@ -150,6 +150,13 @@ struct Registry {
     next_connection: u64,
 }
 
+impl Registry {
+    /// The room is still dark: no projector has shown a round's frame yet (bring-up).
+    fn dark(&self) -> bool {
+        self.peers.values().all(|p| p.shown.is_none())
+    }
+}
+
 #[derive(Debug)]
 struct Contribution {
     round: u64,
@@ -914,7 +921,7 @@ async fn segment_over_wire(
     let mut batch = vec![first];
     let others: Vec<String> = {
         let reg = shared.registry();
-        if reg.peers.values().all(|p| p.shown.is_none()) {
+        if reg.dark() {
             reg.peers
                 .iter()
                 .filter(|(id, p)| *id != projector && !p.calibrated && p.nodes.is_empty())
@@ -1059,10 +1066,10 @@ async fn assign_decoded(shared: &Shared, batch: Vec<Decoded>) -> Vec<String> {
             {
                 continue;
             }
-            let sum = sum.get_or_insert_with(|| vec![0.0; claim.len()]);
-            for (s, c) in sum.iter_mut().zip(claim) {
-                *s = (*s + c).clamp(0.0, 1.0);
-            }
+            roomlight_calib::nodes::add_claim(
+                sum.get_or_insert_with(|| vec![0.0; claim.len()]),
+                claim,
+            );
         }
         sum
     };
@@ -1344,7 +1351,7 @@ async fn calibrate_hot(
     // pixels); all are lit once the last is measured.
     let dark = {
         let reg = shared.registry();
-        reg.peers.values().all(|p| p.shown.is_none())
+        reg.dark()
             && reg
                 .peers
                 .iter()

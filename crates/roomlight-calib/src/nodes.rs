@@ -217,6 +217,24 @@ pub fn segment_beside(
         }
     }
     let centres = patch_centres(charts, cw, ch)?;
+    // The charts each projector lights, checked before any blending work.
+    let lit: Vec<Vec<(usize, (f32, f32))>> = luminaires
+        .iter()
+        .enumerate()
+        .map(|(k, c)| {
+            let a = anchors(c, &centres, config);
+            if a.is_empty() {
+                return Err(CalibError::Invalid {
+                    field: "projectors",
+                    problem: format!(
+                        "luminaire projector {k} lights no chart (fewer than {} patch centres decoded on every chart)",
+                        config.min_patches
+                    ),
+                });
+            }
+            Ok(a)
+        })
+        .collect::<Result<_, _>>()?;
     // Overlap shares in camera space: each projector's share at a surface point ramps from 0 at
     // the boundary of its footprint (frustum edge or shadow) to 1 at `edge_feather_px` camera
     // pixels inside it; the shares of the projectors at a point are normalised to sum to 1.
@@ -301,9 +319,7 @@ pub fn segment_beside(
                 None => blend_at(i),
             })
             .collect();
-        for (t, c) in taken.iter_mut().zip(&claim) {
-            *t = (*t + c).min(1.0);
-        }
+        add_claim(&mut taken, &claim);
         per[k] = Some(Blended {
             blend,
             black,
@@ -313,7 +329,7 @@ pub fn segment_beside(
     let mut nodes = Vec::new();
     let mut excluded = Vec::with_capacity(luminaires.len());
     let mut claims = Vec::with_capacity(luminaires.len());
-    for (k, (c, done)) in luminaires.iter().zip(per).enumerate() {
+    for (k, ((c, done), anchors)) in luminaires.iter().zip(per).zip(lit).enumerate() {
         let (pw, ph) = (c.projector_width as usize, c.projector_height as usize);
         let Some(Blended {
             blend,
@@ -323,16 +339,6 @@ pub fn segment_beside(
         else {
             continue;
         };
-        let anchors = anchors(c, &centres, config);
-        if anchors.is_empty() {
-            return Err(CalibError::Invalid {
-                field: "projectors",
-                problem: format!(
-                    "luminaire projector {k} lights no chart (fewer than {} patch centres decoded on every chart)",
-                    config.min_patches
-                ),
-            });
-        }
         // Node weights: piecewise-linear partition of unity over the distance to each anchor.
         let mut weights = vec![vec![0.0f32; pw * ph]; anchors.len()];
         let band = config.node_feather_px.max(1e-3);
@@ -373,6 +379,14 @@ pub fn segment_beside(
         excluded,
         claims,
     })
+}
+
+/// Adds a projector's claims (see [`Segmentation::claims`]) to the shares already claimed at
+/// each camera pixel, capped at 1 (what [`segment_beside`] takes as `claimed`).
+pub fn add_claim(claimed: &mut [f32], claim: &[f32]) {
+    for (t, c) in claimed.iter_mut().zip(claim) {
+        *t = (*t + c).min(1.0);
+    }
 }
 
 /// One projector's overlap blend (per projector pixel), its pixels kept black for the target,

@@ -83,10 +83,12 @@ fn nodes_partition_the_light_feather_smoothly_and_keep_the_target_dark() {
     });
     println!("segmented together: {joint}");
     assert!(joint.points > 1000 && joint.overlap > 200, "{joint}");
-    // Exact inside one projector; across overlaps the shares come from decoded maps, whose gaps
-    // (unknown pixels) leave a few points off.
+    // Exact inside one projector; across overlaps the pixel grids of two projectors never line
+    // up, so a ramp misses where they disagree. Measured 98.76% within 1e-3 with the projectors
+    // compensating each other's pixel steps, 97.80% without (each blend from the camera-space
+    // ramps alone).
     assert!(
-        joint.within_1e3 > 0.95 && joint.within_0_05 > 0.99,
+        joint.within_1e3 > 0.98 && joint.within_0_05 > 0.99,
         "segmented together: {joint}"
     );
     // A claim is the light the projector's nodes give the camera pixel.

@@ -9,7 +9,7 @@ use roomlight_calib::graycode::{
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{
-    NodeConfig, partition_of_unity, projector_weights, segment, segment_beside,
+    NodeConfig, add_claim, partition_of_unity, projector_weights, segment, segment_beside,
 };
 use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room, scenes};
@@ -492,9 +492,7 @@ pub fn run(quick: bool) -> Result<()> {
             dark.push(Vec::new());
             continue;
         };
-        for (t, c) in claimed.iter_mut().zip(&one.claims[0]) {
-            *t = (*t + c).min(1.0);
-        }
+        add_claim(&mut claimed, &one.claims[0]);
         weights.push(projector_weights(&one.nodes, 0));
         dark.extend(one.excluded);
     }
