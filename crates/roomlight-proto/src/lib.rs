@@ -1,5 +1,6 @@
-//! roomlight-proto: the generated wire types of `proto/roomlight/v1` and the conversions between
-//! them and the domain types of roomlight-core, validated on the way in.
+//! roomlight-proto: the generated wire types of `proto/roomlight/v1`, the conversions between
+//! them and the domain types of roomlight-core (validated on the way in), and the one table of
+//! refusals and their gRPC statuses. It knows the contract, not the agents that speak it.
 
 /// Generated code of `roomlight.v1`.
 #[allow(
@@ -13,6 +14,7 @@ pub mod v1 {
 }
 
 pub mod convert;
+pub mod refusal;
 
 /// The protocol version this build speaks.
 pub const PROTOCOL_VERSION: u32 = 1;
