@@ -6,6 +6,7 @@ use crate::AgentError;
 use crate::hardware::{Assignment, Display, Pattern};
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState, StepRule};
 use roomlight_proto::convert::{from_rgb, from_sparse, to_sparse};
+use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -122,17 +123,15 @@ enum SessionEnd {
     Closed,
 }
 
-/// True for refusals that retrying cannot fix (wrong token, room or version, unknown projector,
-/// a malformed message).
-fn fatal(status: &tonic::Status) -> bool {
-    matches!(
-        status.code(),
-        tonic::Code::Unauthenticated
-            | tonic::Code::FailedPrecondition
-            | tonic::Code::NotFound
-            | tonic::Code::InvalidArgument
-            | tonic::Code::PermissionDenied
-    )
+/// Logs a status from the camera agent by its refusal when it carries one, so the node's log
+/// reads as the camera agent's does.
+fn log_refusal(projector: &str, status: &tonic::Status, what: &str) {
+    match Refusal::from_status(status) {
+        Some(refusal) if refusal.is_fatal() => tracing::error!(%projector, %refusal, "{what}"),
+        Some(refusal) => tracing::warn!(%projector, %refusal, "{what}"),
+        None if Refusal::is_fatal_status(status) => tracing::error!(%projector, %status, "{what}"),
+        None => tracing::warn!(%projector, %status, "{what}"),
+    }
 }
 
 /// Runs one node agent until `cancel`. When the camera agent goes away the display keeps its last
@@ -201,9 +200,12 @@ pub async fn run(
         match outcome {
             Ok(SessionEnd::Cancelled) => return Ok(()),
             Ok(SessionEnd::Closed) => backoff = MIN_BACKOFF,
-            Err(AgentError::Status(status)) if fatal(&status) => {
-                tracing::error!(projector = %config.projector_id, %status, "refused by the camera agent");
-                return Err(AgentError::Status(status));
+            Err(AgentError::Status(status)) => {
+                if Refusal::is_fatal_status(&status) {
+                    log_refusal(&config.projector_id, &status, "refused by the camera agent");
+                    return Err(AgentError::Status(status));
+                }
+                log_refusal(&config.projector_id, &status, "session lost");
             }
             Err(e) => tracing::warn!(projector = %config.projector_id, error = %e, "session lost"),
         }
