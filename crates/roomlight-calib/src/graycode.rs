@@ -921,58 +921,122 @@ pub fn second_pass<E: From<CalibError>>(
     longest: f32,
     mut shoot: impl FnMut(&LinearImage, f32) -> Result<LinearImage, E>,
 ) -> Result<Option<SecondPass>, E> {
-    let todo = first.reached_unknown(config);
-    let unknown = todo.iter().filter(|t| **t).count();
-    let decoded = first.map.iter().filter(|m| m.is_some()).count();
-    if (unknown as f64) <= SECOND_PASS_WORTH * decoded as f64 {
+    let Some(plan) = SecondPassPlan::new(config, first) else {
         return Ok(None);
-    }
-    let (shown, share) = first.second_pass_mask(&todo, SECOND_PASS_MARGIN);
-    // The unknown pixels within a few pixels of those regions too: a dim surface's weakest
-    // pixels (and those on the image border) fail the test by themselves.
-    let todo: Vec<bool> = dilate(
-        &todo,
-        first.width as usize,
-        first.height as usize,
-        SECOND_PASS_GROW,
-    )
-    .into_iter()
-    .zip(&first.map)
-    .map(|(t, m)| t && m.is_none())
-    .collect();
-    let white = shoot(&manifest.pattern_image_where(Pattern::White, &shown)?, 1.0)?;
-    white.expect_size(first.width, first.height, "second pass white")?;
-    let exposure = second_pass_exposure(&white, &todo, saturation, longest);
+    };
+    let white = shoot(&plan.white(manifest)?, 1.0)?;
+    let exposure = plan.exposure(first, &white, saturation, longest)?;
     let mut captures = Vec::with_capacity(manifest.patterns.len());
     for p in &manifest.patterns {
-        captures.push(shoot(
-            &manifest.pattern_image_where(p.pattern, &shown)?,
-            exposure,
-        )?);
+        captures.push(shoot(&plan.pattern(manifest, p.pattern)?, exposure)?);
     }
-    let second = decode_where(
-        manifest,
-        &config.exposed_longer(exposure),
-        Some(&todo),
-        |f| {
-            let j = manifest
-                .patterns
-                .iter()
-                .position(|p| p.file == f.file)
-                .ok_or_else(|| CalibError::File {
-                    file: f.file.clone(),
-                    problem: "not in the manifest".into(),
-                })?;
-            Ok(&captures[j])
-        },
-    )?;
-    let taken = first.merge_second_pass(&second, &shown)?;
-    Ok(Some(SecondPass {
-        shown: share,
-        exposure,
-        captures: captures.len() + 1,
-        taken,
-    }))
+    Ok(Some(
+        plan.finish(manifest, config, first, exposure, &captures)?,
+    ))
+}
+
+/// A [`second_pass`] decided on, taken apart for callers that show and capture on their own
+/// terms (asynchronously, [`crate::procedure`]): the masked white at the normal exposure,
+/// then every pattern of the manifest masked the same way at [`SecondPassPlan::exposure`],
+/// then [`SecondPassPlan::finish`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SecondPassPlan {
+    /// Projector pixels shown ([`Correspondence::second_pass_mask`]).
+    shown: Vec<bool>,
+    /// Their share of the frame.
+    share: f64,
+    /// Camera pixels it decodes.
+    todo: Vec<bool>,
+}
+
+impl SecondPassPlan {
+    /// The plan when the first pass left enough reached pixels unknown
+    /// ([`SECOND_PASS_WORTH`]); `None` otherwise.
+    pub fn new(config: &DecodeConfig, first: &Correspondence) -> Option<Self> {
+        let todo = first.reached_unknown(config);
+        let unknown = todo.iter().filter(|t| **t).count();
+        let decoded = first.map.iter().filter(|m| m.is_some()).count();
+        if (unknown as f64) <= SECOND_PASS_WORTH * decoded as f64 {
+            return None;
+        }
+        let (shown, share) = first.second_pass_mask(&todo, SECOND_PASS_MARGIN);
+        // The unknown pixels within a few pixels of those regions too: a dim surface's weakest
+        // pixels (and those on the image border) fail the test by themselves.
+        let todo: Vec<bool> = dilate(
+            &todo,
+            first.width as usize,
+            first.height as usize,
+            SECOND_PASS_GROW,
+        )
+        .into_iter()
+        .zip(&first.map)
+        .map(|(t, m)| t && m.is_none())
+        .collect();
+        Some(Self { shown, share, todo })
+    }
+
+    /// The masked white, shown first at the normal exposure.
+    pub fn white(&self, manifest: &Manifest) -> Result<LinearImage, CalibError> {
+        self.pattern(manifest, Pattern::White)
+    }
+
+    /// `pattern` masked to the projector pixels this pass shows.
+    pub fn pattern(
+        &self,
+        manifest: &Manifest,
+        pattern: Pattern,
+    ) -> Result<LinearImage, CalibError> {
+        manifest.pattern_image_where(pattern, &self.shown)
+    }
+
+    /// The exposure of the pattern captures from the masked white's capture
+    /// ([`second_pass_exposure`]); a white of another size than the camera is refused.
+    pub fn exposure(
+        &self,
+        first: &Correspondence,
+        white: &LinearImage,
+        saturation: f32,
+        longest: f32,
+    ) -> Result<f32, CalibError> {
+        white.expect_size(first.width, first.height, "second pass white")?;
+        Ok(second_pass_exposure(white, &self.todo, saturation, longest))
+    }
+
+    /// Decodes the pattern captures (in manifest order, taken at `exposure`) over the pixels
+    /// the first pass left unknown and merges them into `first`
+    /// ([`Correspondence::merge_second_pass`]).
+    pub fn finish(
+        &self,
+        manifest: &Manifest,
+        config: &DecodeConfig,
+        first: &mut Correspondence,
+        exposure: f32,
+        captures: &[LinearImage],
+    ) -> Result<SecondPass, CalibError> {
+        let second = decode_where(
+            manifest,
+            &config.exposed_longer(exposure),
+            Some(&self.todo),
+            |f| {
+                manifest
+                    .patterns
+                    .iter()
+                    .position(|p| p.file == f.file)
+                    .and_then(|j| captures.get(j))
+                    .ok_or_else(|| CalibError::File {
+                        file: f.file.clone(),
+                        problem: "not captured in the second pass".into(),
+                    })
+            },
+        )?;
+        let taken = first.merge_second_pass(&second, &self.shown)?;
+        Ok(SecondPass {
+            shown: self.share,
+            exposure,
+            captures: captures.len() + 1,
+            taken,
+        })
+    }
 }
 
 /// The exposure factor (1 to `longest`) of a second pass from its white frame captured at the

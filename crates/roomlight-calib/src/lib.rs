@@ -8,6 +8,13 @@
 //! - [`attenuation`]: black offset, attenuation (one at a time, Hadamard), `s`, hot calibration.
 //! - [`nodes`]: nodes per chart region, feathering, target exclusion.
 //! - [`cone`]: the large aperture's cone mask and the ring handed to the texture projector.
+//! - [`rig`]: the [`rig::Rig`] trait, what differs between the callers of calibration (which
+//!   projectors are live, show frames on them, capture).
+//! - [`procedure`]: the one calibration procedure, written against a rig: bring-up of a dark
+//!   room, a projector joining a lit one.
+//!
+//! It must not know processes, networks, async runtimes or the simulator (a dev-dependency
+//! for the tests only).
 
 pub mod attenuation;
 pub mod charts;
@@ -15,7 +22,9 @@ pub mod cone;
 pub mod graycode;
 pub mod image_io;
 pub mod nodes;
+pub mod procedure;
 pub mod response;
+pub mod rig;
 
 /// What went wrong, naming the file or field and what was expected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -1,0 +1,208 @@
+//! The Rig: what differs between the places calibration runs (the in-process simulator, the
+//! camera agent over the wire, a bench). It owns which projectors are live, showing frames on
+//! them, and capturing whole linear images; the calibration procedure
+//! ([`crate::procedure`]) is written once against it. This module knows patterns, node
+//! drawings and images; it must not know processes, networks, runtimes or the simulator.
+
+use crate::graycode::{Coding, Manifest, Pattern};
+use crate::image_io::LinearImage;
+use crate::response::Response;
+use roomlight_core::LinearRgb;
+use std::future::Future;
+use std::sync::Arc;
+use std::task::{Context, Poll, Wake, Waker};
+
+/// How a projector's optics render a pattern: a large aperture's defocus blurs fine stripes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProjectorKind {
+    Standard,
+    LargeAperture,
+}
+
+/// What a projector is for: luminaires are calibrated and lit by node values; texture
+/// projectors are only kept dark while the luminaires are measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProjectorRole {
+    Luminaire,
+    Texture,
+}
+
+/// A live projector, as the rig knows it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Projector {
+    /// Its name (over the wire: the node agent's projector id).
+    pub id: String,
+    pub width: u32,
+    pub height: u32,
+    pub kind: ProjectorKind,
+    pub role: ProjectorRole,
+}
+
+/// What one projector shows until told otherwise.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Frame {
+    /// Every pixel at this code per channel, in [0, 1] (0: black).
+    Uniform([f32; 3]),
+    /// A structured-light pattern of the projector's own resolution.
+    Structured { pattern: Pattern, coding: Coding },
+    /// A whole image of codes (a second pass's masked patterns); only for rigs that
+    /// [`Rig::shows_images`].
+    Image(Arc<LinearImage>),
+    /// Node values (linear light) drawn through the projector's [`Assignment`]; nodes not
+    /// listed are black.
+    Nodes(Vec<(u32, LinearRgb)>),
+}
+
+impl Frame {
+    /// Black: code 0 everywhere.
+    pub const BLACK: Self = Self::Uniform([0.0; 3]);
+
+    /// The frame as codes for a `width`×`height` projector drawing nodes with `assignment`
+    /// (for rigs that render frames themselves). Node values without an assignment draw
+    /// black; an image of another size is refused.
+    pub fn codes(
+        &self,
+        width: u32,
+        height: u32,
+        assignment: Option<&Assignment>,
+    ) -> Result<Vec<[f32; 3]>, crate::CalibError> {
+        let n = (width * height) as usize;
+        match self {
+            Self::Uniform(code) => Ok(vec![*code; n]),
+            Self::Structured { pattern, coding } => {
+                let manifest = Manifest::with_coding(width, height, *coding)?;
+                Ok(manifest.pattern_image(*pattern).pixels)
+            }
+            Self::Image(img) => {
+                img.expect_size(width, height, "frame image")?;
+                Ok(img.pixels.clone())
+            }
+            Self::Nodes(values) => Ok(match assignment {
+                Some(a) if a.width == width && a.height == height => a.draw(values),
+                _ => vec![[0.0; 3]; n],
+            }),
+        }
+    }
+}
+
+/// How a projector draws its nodes: each node's feathered weights (row-major pixels,
+/// increasing, weights in (0, 1]) and the projector's measured response.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Assignment {
+    pub width: u32,
+    pub height: u32,
+    pub response: Response,
+    /// `(node id, [(pixel, weight)])`.
+    pub nodes: Vec<(u32, Vec<(u32, f32)>)>,
+}
+
+impl Assignment {
+    /// The codes that show `values` (linear light per node; unlisted nodes black): each
+    /// pixel's light is the sum of its nodes' weights times their values, turned into a code
+    /// through the response.
+    pub fn draw(&self, values: &[(u32, LinearRgb)]) -> Vec<[f32; 3]> {
+        let mut light = vec![LinearRgb::ZERO; (self.width * self.height) as usize];
+        for (node, weights) in &self.nodes {
+            let Some(&(_, v)) = values.iter().find(|(n, _)| n == node) else {
+                continue;
+            };
+            for &(i, w) in weights {
+                if let Some(l) = light.get_mut(i as usize) {
+                    *l += v * f64::from(w);
+                }
+            }
+        }
+        light
+            .into_iter()
+            .map(|l| self.response.to_code(l))
+            .collect()
+    }
+}
+
+/// Why the rig could not do what it was asked.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RigError {
+    /// The projector is not live (it left, or never was).
+    #[error("projector {0} is not live")]
+    Gone(String),
+    /// A frame was not on the projector within the rig's deadline.
+    #[error("projector {0} did not show its frame in time")]
+    NotShown(String),
+    /// The rig cannot show this kind of frame on it.
+    #[error("projector {0} cannot show {1}")]
+    Unsupported(String, &'static str),
+    /// The camera failed.
+    #[error("camera: {0}")]
+    Camera(String),
+}
+
+/// The camera's limits that calibration plans with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraLimits {
+    /// The level (per channel, capture units) at which a pixel saturates.
+    pub saturation: f32,
+    /// The longest exposure [`Rig::capture`] takes, as a multiple of the normal one (1: the
+    /// camera has one exposure).
+    pub longest_exposure: f32,
+}
+
+/// What differs between the callers of the calibration procedure. Async because the camera
+/// agent waits on node agents and its camera; a rig that works synchronously returns ready
+/// futures and its caller drives them with [`block_on`].
+pub trait Rig: Send {
+    /// The live projectors.
+    fn projectors(&self) -> Vec<Projector>;
+
+    /// Shows each frame on its projector (by id) and resolves once all are on; projectors not
+    /// named keep what they show.
+    fn show(
+        &mut self,
+        frames: &[(&str, Frame)],
+    ) -> impl Future<Output = Result<(), RigError>> + Send;
+
+    /// Hands a projector the drawing of its nodes (later [`Frame::Nodes`] use it).
+    fn assign(
+        &mut self,
+        projector: &str,
+        assignment: &Assignment,
+    ) -> impl Future<Output = Result<(), RigError>> + Send;
+
+    /// One whole linear image exposed `exposure` times as long as normal (at most
+    /// [`CameraLimits::longest_exposure`]), in the units of a normal one.
+    fn capture(
+        &mut self,
+        exposure: f32,
+    ) -> impl Future<Output = Result<LinearImage, RigError>> + Send;
+
+    /// The camera's limits.
+    fn camera(&self) -> CameraLimits;
+
+    /// Whether [`Frame::Image`] can be shown (a second structured-light pass needs it).
+    fn shows_images(&self) -> bool {
+        false
+    }
+}
+
+/// Wakes the thread that blocks on a future.
+struct Unpark(std::thread::Thread);
+
+impl Wake for Unpark {
+    fn wake(self: Arc<Self>) {
+        self.0.unpark();
+    }
+}
+
+/// Runs a future to completion on this thread: for callers without a runtime driving a rig
+/// whose futures complete without one (the simulator, a bench). Never call it on an async
+/// runtime's worker thread.
+pub fn block_on<F: Future>(future: F) -> F::Output {
+    let waker = Waker::from(Arc::new(Unpark(std::thread::current())));
+    let mut cx = Context::from_waker(&waker);
+    let mut future = std::pin::pin!(future);
+    loop {
+        match future.as_mut().poll(&mut cx) {
+            Poll::Ready(out) => return out,
+            Poll::Pending => std::thread::park(),
+        }
+    }
+}
