@@ -1,8 +1,10 @@
 //! roomlight-agent: the camera agent and the node agents of DESIGN §6.
 //!
 //! - [`hardware`]: the `Display` and `Camera` traits and an in-process virtual room for tests.
-//! - [`camera`]: the camera agent: the `Room.Attach` service, the registry of live nodes, and
-//!   the round loop (wait for acknowledgements, capture, send each node its errors).
+//! - [`camera`]: the camera agent: `service` (the `Room.Attach` handshake and each peer's
+//!   reader), `registry` (live peers, admission, removal on drop), `rounds` (wait for
+//!   acknowledgements, capture, send each node its errors, collect), `calibration` (over the
+//!   wire and hot) and `model` (the live model and its file).
 //! - [`node`]: a node agent: owns its nodes' values, updates them from the errors it receives,
 //!   drives its display, acknowledges frames and reports contributions.
 //!

@@ -1,0 +1,288 @@
+//! The camera agent (DESIGN §6): serves `Room.Attach`, admits node agents that present the right
+//! room, token and protocol version, sends each its attenuation and `s` on its support, and runs
+//! rounds: wait until every live projector has shown the last frame (or a deadline passes: late
+//! ones are logged and left out of the round), capture, send each node the errors on its support,
+//! collect contributions, and run model rounds between captures.
+//!
+//! This module owns the public face ([`serve`] and the types it takes and reports) and the state
+//! the parts share; it knows nothing of the wire messages' contents. The parts:
+//! - `service`: the gRPC `Room.Attach` handshake, admission, and each peer's reader task;
+//! - `registry`: the live peers (admission, readiness, removal by a guard's `Drop`);
+//! - `rounds`: the round loop;
+//! - `capture`: captures the nodes can act on (stale frames discarded, charts sampled);
+//! - `calibration`: a projector decoded, segmented and measured over the wire;
+//! - `model`: the live model (attenuation, `s`, starts, patches left out) and its file.
+
+mod calibration;
+mod capture;
+mod model;
+mod registry;
+mod rounds;
+mod service;
+
+use crate::hardware::Camera;
+use model::Live;
+use prost::Message;
+use registry::{Outbox, Registry};
+use roomlight_calib::charts::{COLUMNS, ChartCorners, ROWS, SampleConfig};
+use roomlight_core::{LinearRgb, Problem};
+use roomlight_proto::v1;
+use std::collections::{HashMap, HashSet};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+use tokio_util::sync::CancellationToken;
+
+/// How the camera agent runs.
+#[derive(Debug, Clone)]
+pub struct CameraConfig {
+    /// The room's name; node agents must name it.
+    pub room: String,
+    /// The pre-shared room token.
+    pub token: String,
+    /// How often nodes send heartbeats; three missed ones and the node has left.
+    pub heartbeat: Duration,
+    /// How long a round waits for acknowledgements and contributions.
+    pub deadline: Duration,
+    /// Model rounds after each measured round.
+    pub model_rounds: usize,
+    /// Calibration epoch (a node's persisted state is accepted only for the same epoch).
+    pub calibration_epoch: u64,
+    /// Frames the camera hands over late (its latency, measured once at installation): before
+    /// each measured round the camera agent discards this many captures, so that the nodes
+    /// never act on errors of values they no longer show. Every capture is counted.
+    pub stale_frames: usize,
+    /// Where to write the model (`problem`, `owners`, `start`, as JSON, atomically) after each
+    /// projector calibrated over the wire or hot, and after patches left the model; `None`:
+    /// nowhere.
+    pub model_out: Option<std::path::PathBuf>,
+}
+
+/// The calibrated room the camera agent holds: every node's attenuation, and which projector
+/// owns which nodes.
+#[derive(Debug, Clone)]
+pub struct RoomModel {
+    /// Columns, targets, black offsets, noise.
+    pub problem: Problem,
+    /// Projector id → its node ids (indices of `problem`'s columns).
+    pub owners: HashMap<String, Vec<u32>>,
+    /// Each node's start when it brings no value of its own (the conventional start); `None`:
+    /// the node agents' own default. Clamped to [0, 1]; a non-finite entry is not sent.
+    pub start: Option<Vec<LinearRgb>>,
+    /// Projectors whose attenuation is measured when they join (DESIGN §4, hot calibration):
+    /// each of their nodes at white against all at black, by differential captures while the
+    /// other projectors keep their values. Their columns in `problem` are ignored (emptied).
+    pub hot: HashSet<String>,
+    /// Calibration over the wire: a projector the model does not know is admitted, and the
+    /// camera agent shows it structured light and a response ramp through its node agent,
+    /// decodes and segments it (roomlight-calib), sends it its nodes' weights and then measures
+    /// their attenuation, all while the other projectors keep their values. `None`: only the
+    /// projectors of `owners` are admitted.
+    pub survey: Option<Survey>,
+}
+
+/// What a room's installer configures once for calibration over the wire (DESIGN §4): where the
+/// charts are in the camera image, how to sample them, and which camera pixels are the target.
+#[derive(Debug, Clone)]
+pub struct Survey {
+    pub corners: Vec<ChartCorners>,
+    pub sample: SampleConfig,
+    /// The target's camera pixels (row-major, the camera's resolution): luminaires keep them
+    /// dark.
+    pub target_mask: Vec<bool>,
+    /// Room patch index (chart · patches per chart + patch) of each of the model's patches.
+    pub patches: Vec<usize>,
+}
+
+impl Survey {
+    /// The model's patches on chart `chart` (for a node's conventional start).
+    fn chart_patches(&self, chart: usize) -> Vec<u32> {
+        let per = COLUMNS * ROWS;
+        self.patches
+            .iter()
+            .enumerate()
+            .filter(|(_, i)| **i / per == chart)
+            .map(|(k, _)| k as u32)
+            .collect()
+    }
+}
+
+/// What the round loop has done so far (for tests, logs and the demo).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RoomStatus {
+    /// Rounds run (measured and model).
+    pub round: u64,
+    /// Captures taken.
+    pub captures: u64,
+    /// `G` of the last measured round.
+    pub measured_objective: f64,
+    /// Projectors attached now.
+    pub live_projectors: usize,
+    /// Protobuf bytes sent to node agents since the previous status (errors and setup).
+    pub bytes_out: u64,
+    /// Protobuf bytes received from node agents since the previous status.
+    pub bytes_in: u64,
+    /// The measured `G` moved less than its noise (3√2 σ_G) over each of the last two captures
+    /// (DESIGN §3.6): further rounds only chase camera noise.
+    pub settled: bool,
+    /// Projectors calibrated hot so far.
+    pub calibrated_hot: u64,
+}
+
+/// A node's contribution for a round, as its reader passed it on (ownership checked).
+#[derive(Debug)]
+struct Contribution {
+    round: u64,
+    node: u32,
+    delta: Vec<(u32, LinearRgb)>,
+}
+
+/// What the service, the readers and the round loop share.
+struct Shared {
+    config: CameraConfig,
+    survey: Option<Survey>,
+    /// What hot calibration and calibration over the wire change.
+    live: RwLock<Live>,
+    /// Sequence numbers of Show patterns.
+    pattern_seq: AtomicU64,
+    registry: Arc<Registry>,
+    contributions: mpsc::Sender<Contribution>,
+    bytes_out: AtomicU64,
+    bytes_in: AtomicU64,
+    /// Cancelled once the camera agent has stopped its rounds: ends every node's reader and
+    /// the server (the caller's token only asks the rounds to stop after the current one).
+    cancel: CancellationToken,
+}
+
+impl Shared {
+    fn live(&self) -> RwLockReadGuard<'_, Live> {
+        self.live.read().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn live_mut(&self) -> RwLockWriteGuard<'_, Live> {
+        self.live.write().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Sends `body` to a node agent, counting its bytes; false when the node has left.
+    async fn send(&self, tx: &Outbox, body: v1::room_message::Body) -> bool {
+        let message = v1::RoomMessage { body: Some(body) };
+        self.bytes_out
+            .fetch_add(message.encoded_len() as u64, Ordering::Relaxed);
+        tx.send(Ok(message)).await.is_ok()
+    }
+
+    /// Writes the model to `model_out`, if configured (a failure is logged: the rounds go on).
+    fn save_model(&self) {
+        if let Some(path) = &self.config.model_out
+            && let Err(e) = self.live().write(self.survey.as_ref(), path)
+        {
+            tracing::warn!(path = %path.display(), error = %e, "could not write the model");
+        }
+    }
+}
+
+/// Serves the Room service on `listener` and runs rounds until `cancel`. Returns the status
+/// watch and the task's handle.
+pub fn serve(
+    config: CameraConfig,
+    model: RoomModel,
+    camera: impl Camera,
+    listener: tokio::net::TcpListener,
+    cancel: CancellationToken,
+) -> (
+    watch::Receiver<RoomStatus>,
+    tokio::task::JoinHandle<Result<(), crate::AgentError>>,
+) {
+    let (contributions, contrib_rx) = mpsc::channel(4096);
+    let live = Live::new(&model);
+    let shared = Arc::new(Shared {
+        config,
+        survey: model.survey,
+        live: RwLock::new(live),
+        pattern_seq: AtomicU64::new(0),
+        registry: Arc::new(Registry::default()),
+        contributions,
+        bytes_out: AtomicU64::new(0),
+        bytes_in: AtomicU64::new(0),
+        cancel: CancellationToken::new(),
+    });
+    let (status_tx, status_rx) = watch::channel(RoomStatus::default());
+    let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx, status_tx);
+    let handle = tokio::spawn(run(shared, rounds, listener, cancel));
+    (status_rx, handle)
+}
+
+/// The server and the rounds together; on a stop request the current round finishes (bounded:
+/// a round waits at most a deadline for the acknowledgements and one per model round for the
+/// contributions), then every node is told goodbye and the server drains.
+async fn run<C: Camera>(
+    shared: Arc<Shared>,
+    rounds: rounds::Rounds<C>,
+    listener: tokio::net::TcpListener,
+    cancel: CancellationToken,
+) -> Result<(), crate::AgentError> {
+    let server = tonic::transport::Server::builder()
+        .http2_keepalive_interval(Some(Duration::from_secs(5)))
+        .add_service(v1::room_server::RoomServer::new(service::Service::new(
+            shared.clone(),
+        )))
+        .serve_with_incoming_shutdown(
+            // Small messages both ways every round: Nagle's algorithm would add ~40 ms.
+            tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true)),
+            shared.cancel.clone().cancelled_owned(),
+        );
+    let grace = shared.config.deadline * (shared.config.model_rounds as u32 + 3);
+    let stop_waiting = async {
+        cancel.cancelled().await;
+        tokio::time::sleep(grace).await;
+    };
+    tokio::pin!(server);
+    tokio::select! {
+        result = &mut server => return result.map_err(crate::AgentError::from),
+        () = rounds.run(cancel.clone()) => {}
+        () = stop_waiting => tracing::warn!(?grace, "the round did not finish in time: stopped"),
+    }
+    shared.cancel.cancel();
+    // Stopping: say goodbye and end every node's stream, so the node agents reconnect to
+    // whichever camera agent comes next instead of waiting on a stream nobody writes to.
+    for tx in shared.registry.drain() {
+        let _ = tx.try_send(Ok(v1::RoomMessage {
+            body: Some(v1::room_message::Body::Goodbye(v1::Goodbye {
+                reason: "the camera agent is stopping".into(),
+            })),
+        }));
+    }
+    // The server's graceful shutdown now only waits for the streams to drain.
+    match tokio::time::timeout(Duration::from_secs(2), server).await {
+        Ok(result) => result.map_err(crate::AgentError::from),
+        Err(_) => {
+            tracing::warn!("connections still open 2 s after stopping: dropped");
+            Ok(())
+        }
+    }
+}
+
+impl Shared {
+    /// Sends every attached, calibrated projector its nodes' attenuation, `s` and start: a
+    /// projector measured but not yet lit starts showing its start, a running one keeps its
+    /// values with the new `s`.
+    async fn light_all(&self) {
+        let outbox: Vec<(Outbox, Vec<u32>)> = self
+            .registry
+            .lock()
+            .peers
+            .values()
+            .filter(|p| p.calibrated)
+            .map(|p| (p.tx.clone(), p.nodes.clone()))
+            .collect();
+        for (tx, nodes) in outbox {
+            let bodies = self.live().attenuation_bodies(&nodes);
+            for body in bodies {
+                if !self.send(&tx, body).await {
+                    break;
+                }
+            }
+        }
+    }
+}

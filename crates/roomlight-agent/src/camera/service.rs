@@ -1,0 +1,253 @@
+//! The gRPC `Room.Attach` service: the handshake (Hello → checks → Welcome, Assign and each
+//! node's attenuation), admission into the registry, and the per-peer reader task that turns a
+//! node agent's messages into registry updates and contributions. It knows nothing of rounds or
+//! the camera: the round loop reads what the readers leave in the registry and the channel.
+
+use super::registry::{Peer, PeerGuard};
+use super::{Contribution, Shared};
+use prost::Message;
+use roomlight_proto::convert::from_sparse;
+use roomlight_proto::{PROTOCOL_VERSION, v1};
+use std::pin::Pin;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+use subtle::ConstantTimeEq;
+use tokio::sync::mpsc;
+use tokio_stream::wrappers::ReceiverStream;
+use tokio_stream::{Stream, StreamExt};
+use tonic::{Request, Response, Status, Streaming};
+
+/// Messages a peer's queue holds beyond its handshake.
+const QUEUE: usize = 256;
+
+/// The gRPC service.
+#[derive(Clone)]
+pub(super) struct Service(Arc<Shared>);
+
+impl Service {
+    pub(super) fn new(shared: Arc<Shared>) -> Self {
+        Self(shared)
+    }
+}
+
+type AttachStream = Pin<Box<dyn Stream<Item = Result<v1::RoomMessage, Status>> + Send>>;
+
+fn room_message(body: v1::room_message::Body) -> Result<v1::RoomMessage, Status> {
+    Ok(v1::RoomMessage { body: Some(body) })
+}
+
+#[tonic::async_trait]
+impl v1::room_server::Room for Service {
+    type AttachStream = AttachStream;
+
+    async fn attach(
+        &self,
+        request: Request<Streaming<v1::NodeMessage>>,
+    ) -> Result<Response<AttachStream>, Status> {
+        let shared = self.0.clone();
+        let mut inbound = request.into_inner();
+        let first = tokio::time::timeout(
+            shared.config.deadline.max(Duration::from_secs(1)),
+            inbound.next(),
+        )
+        .await
+        .map_err(|_| Status::deadline_exceeded("no Hello within the deadline"))?
+        .ok_or_else(|| Status::invalid_argument("the stream ended before Hello"))??;
+        let Some(v1::node_message::Body::Hello(hello)) = first.body else {
+            return Err(Status::invalid_argument("the first message must be Hello"));
+        };
+        let nodes = check_hello(&shared, &hello)?;
+        let calibrated = !shared.live().uncalibrated.contains(&hello.projector_id);
+        let greeting = greeting(&shared, &hello, &nodes, calibrated);
+        // The greeting is queued before admission, so that it precedes anything the rounds send.
+        let (tx, rx) = mpsc::channel(QUEUE + greeting.len());
+        for m in greeting {
+            tx.try_send(m)
+                .map_err(|_| Status::internal("the greeting did not fit its queue"))?;
+        }
+        let projector = hello.projector_id.clone();
+        let peer = Peer::new(tx, nodes.clone(), calibrated, &hello);
+        let guard = match shared.registry.admit(&projector, peer) {
+            Ok(guard) => guard,
+            Err(_) => {
+                tracing::warn!(%projector, "refused: already attached");
+                return Err(Status::already_exists(format!(
+                    "projector {projector:?} is already attached to room {:?}",
+                    shared.config.room
+                )));
+            }
+        };
+        tracing::info!(%projector, nodes = nodes.len(), "joined");
+        tokio::spawn(read_node(shared, guard, inbound));
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+}
+
+/// Checks a Hello: protocol version, room, token, and that the projector is known (or can be
+/// calibrated over the wire, then marked uncalibrated). Its nodes (none yet for a projector to
+/// calibrate).
+fn check_hello(shared: &Shared, hello: &v1::Hello) -> Result<Vec<u32>, Status> {
+    let config = &shared.config;
+    if hello.protocol_version != PROTOCOL_VERSION {
+        tracing::warn!(projector = %hello.projector_id, version = hello.protocol_version, "refused: protocol version");
+        return Err(Status::failed_precondition(format!(
+            "protocol version {}, this camera agent speaks {PROTOCOL_VERSION}",
+            hello.protocol_version
+        )));
+    }
+    if hello.room != config.room {
+        tracing::warn!(projector = %hello.projector_id, room = %hello.room, "refused: another room");
+        return Err(Status::failed_precondition(format!(
+            "room {:?}, this is room {:?}",
+            hello.room, config.room
+        )));
+    }
+    if !bool::from(hello.token.as_bytes().ct_eq(config.token.as_bytes())) {
+        tracing::warn!(projector = %hello.projector_id, "refused: wrong room token");
+        return Err(Status::unauthenticated("wrong room token"));
+    }
+    let known = shared.live().owners.get(&hello.projector_id).cloned();
+    match known {
+        Some(nodes) => Ok(nodes),
+        // Calibrated over the wire once it is here: it must say how large it is.
+        None if shared.survey.is_some() => {
+            if hello.width == 0 || hello.height == 0 {
+                tracing::warn!(projector = %hello.projector_id, "refused: no resolution to calibrate");
+                return Err(Status::failed_precondition(format!(
+                    "projector {:?} is not calibrated in room {:?}, and its Hello gives no resolution to calibrate it with (a display that draws pixels does)",
+                    hello.projector_id, config.room
+                )));
+            }
+            shared
+                .live_mut()
+                .uncalibrated
+                .insert(hello.projector_id.clone());
+            Ok(Vec::new())
+        }
+        None => Err(Status::not_found(format!(
+            "projector {:?} is not calibrated in room {:?}",
+            hello.projector_id, config.room
+        ))),
+    }
+}
+
+/// Welcome, the node list, then each node's column and s on its support (for a hot projector not
+/// yet measured: after its calibration).
+fn greeting(
+    shared: &Shared,
+    hello: &v1::Hello,
+    nodes: &[u32],
+    calibrated: bool,
+) -> Vec<Result<v1::RoomMessage, Status>> {
+    let config = &shared.config;
+    let live = shared.live();
+    let assign = match live.assignments.get(&hello.projector_id) {
+        Some(a) => super::calibration::assign_message(a),
+        None => v1::Assign {
+            nodes: nodes
+                .iter()
+                .map(|&n| v1::NodeAssignment {
+                    node: n,
+                    chart: n,
+                    ..Default::default()
+                })
+                .collect(),
+            ..Default::default()
+        },
+    };
+    let mut messages = vec![
+        room_message(v1::room_message::Body::Welcome(v1::Welcome {
+            protocol_version: PROTOCOL_VERSION,
+            room: config.room.clone(),
+            calibration_epoch: config.calibration_epoch,
+            heartbeat_ms: u32::try_from(config.heartbeat.as_millis()).unwrap_or(u32::MAX),
+            // A node's values are worth keeping only under the same calibration.
+            state_accepted: hello
+                .state
+                .as_ref()
+                .is_some_and(|st| st.calibration_epoch == config.calibration_epoch),
+        })),
+        room_message(v1::room_message::Body::Assign(assign)),
+    ];
+    if calibrated {
+        messages.extend(live.attenuation_bodies(nodes).into_iter().map(room_message));
+    }
+    messages
+}
+
+/// Reads one node agent's stream until it ends, errs, or misses three heartbeats; the guard
+/// removes the peer whichever way it ends.
+async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming<v1::NodeMessage>) {
+    let projector = guard.projector().to_string();
+    let silence = 3 * shared.config.heartbeat;
+    loop {
+        let next = tokio::select! {
+            () = shared.cancel.cancelled() => break,
+            next = tokio::time::timeout(silence, inbound.next()) => next,
+        };
+        let next = match next {
+            Err(_) => {
+                tracing::warn!(%projector, "no heartbeat: leaves");
+                break;
+            }
+            Ok(None) => break,
+            Ok(Some(Err(status))) => {
+                tracing::info!(%projector, %status, "stream ended");
+                break;
+            }
+            Ok(Some(Ok(m))) => {
+                shared
+                    .bytes_in
+                    .fetch_add(m.encoded_len() as u64, Ordering::Relaxed);
+                m
+            }
+        };
+        match next.body {
+            Some(v1::node_message::Body::Shown(s)) => {
+                guard.with(|peer| {
+                    let seen = if s.pattern {
+                        &mut peer.pattern_shown
+                    } else {
+                        &mut peer.shown
+                    };
+                    *seen = Some(seen.map_or(s.seq, |old| old.max(s.seq)));
+                });
+                shared.registry.notify();
+            }
+            Some(v1::node_message::Body::Contribution(c)) => {
+                let owns = guard.with(|p| p.nodes.contains(&c.node)).unwrap_or(false);
+                if !owns {
+                    tracing::warn!(%projector, node = c.node, "contribution for a node it does not own: ignored");
+                    continue;
+                }
+                let Some(delta) = c.delta.as_ref() else {
+                    continue;
+                };
+                match from_sparse("contribution", delta) {
+                    Ok((patches, values)) => {
+                        let delta = patches.into_iter().zip(values).collect();
+                        let contribution = Contribution {
+                            round: c.round,
+                            node: c.node,
+                            delta,
+                        };
+                        if shared.contributions.send(contribution).await.is_err() {
+                            break;
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(%projector, error = %e, "malformed contribution: ignored")
+                    }
+                }
+            }
+            Some(v1::node_message::Body::Goodbye(g)) => {
+                tracing::info!(%projector, reason = %g.reason, "goodbye");
+                break;
+            }
+            Some(v1::node_message::Body::Heartbeat(_))
+            | Some(v1::node_message::Body::Hello(_))
+            | None => {}
+        }
+    }
+}
