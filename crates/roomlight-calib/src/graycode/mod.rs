@@ -1,0 +1,680 @@
+//! Gray-code structured light (DESIGN §4.2): column and row bit patterns with their inverses,
+//! plus full white and black, and a decoder that is robust to inter-reflection and defocus.
+//!
+//! Hand-written: no crate decodes Gray codes with direct/global separation. The decoder follows
+//! the ideas of Nayar et al. (2006) and Xu & Aliaga (2007): the finest patterns split each
+//! pixel's light into a direct part `Ld` (which flips with the pattern) and a global part `Lg`
+//! (which does not); a bit is trusted only where the direct light decides it, and a pixel with
+//! more than one untrusted bit is reported unknown rather than wrong.
+
+use crate::CalibError;
+use crate::image_io::LinearImage;
+use crate::nodes::dilate;
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+mod fill;
+mod second_pass;
+
+use fill::fill_from_neighbours;
+pub use second_pass::{
+    COVER_SPAN, SECOND_PASS_BRIGHTER, SECOND_PASS_CROWD, SECOND_PASS_GROW, SECOND_PASS_LONGEST,
+    SECOND_PASS_MARGIN, SECOND_PASS_SNR, SECOND_PASS_WORTH, SOLID_NEIGHBOURS, SecondPass,
+    SecondPassPlan, second_pass, second_pass_exposure,
+};
+
+/// Which coordinate a pattern encodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Axis {
+    /// Projector column (x).
+    Column,
+    /// Projector row (y).
+    Row,
+}
+
+/// What one pattern shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Pattern {
+    /// Every pixel white.
+    White,
+    /// Every pixel black.
+    Black,
+    /// Bit `bit` (0 is the most significant) of the Gray code of the column or row.
+    Bit {
+        /// Column or row.
+        axis: Axis,
+        /// Bit index from the most significant.
+        bit: u32,
+        /// True for the complemented pattern.
+        inverse: bool,
+    },
+}
+
+/// One file of the pattern set.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PatternFile {
+    /// File name inside the pattern folder (captures carry the same name).
+    pub file: String,
+    /// What it encodes.
+    #[serde(flatten)]
+    pub pattern: Pattern,
+}
+
+/// How the bits are turned into patterns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Coding {
+    /// Plain Gray code: the coarse bits are wide stripes, which inter-reflection can flip.
+    Gray,
+    /// Gray code XOR-ed with its 4-pixel-stripe bit (Gupta et al. 2012, "XOR-04"): every
+    /// pattern is high-frequency, so global light is the same under a pattern and its inverse
+    /// and cancels in their difference. Decoding XORs the base bit back out.
+    #[default]
+    Xor04,
+}
+
+/// The pattern set of one projector resolution: what `patterns.json` holds.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Projector width.
+    pub width: u32,
+    /// Projector height.
+    pub height: u32,
+    /// How bits become patterns (files without it are plain Gray code).
+    #[serde(default = "gray_coding")]
+    pub coding: Coding,
+    /// Bits for the columns.
+    pub column_bits: u32,
+    /// Bits for the rows.
+    pub row_bits: u32,
+    /// Every pattern, in display order.
+    pub patterns: Vec<PatternFile>,
+}
+
+fn gray_coding() -> Coding {
+    Coding::Gray
+}
+
+/// Bits needed to code `n` positions (at least 1).
+pub fn bits_for(n: u32) -> u32 {
+    (32 - n.saturating_sub(1).leading_zeros()).max(1)
+}
+
+/// The reflected binary (Gray) code of `v`.
+pub fn gray(v: u32) -> u32 {
+    v ^ (v >> 1)
+}
+
+/// The value whose Gray code is `g`.
+pub fn gray_inverse(g: u32) -> u32 {
+    let mut v = g;
+    let mut shift = g >> 1;
+    while shift != 0 {
+        v ^= shift;
+        shift >>= 1;
+    }
+    v
+}
+
+impl Manifest {
+    /// The pattern set for a `width × height` projector: white, black, then each column bit and
+    /// its inverse from the most significant, then the rows.
+    pub fn new(width: u32, height: u32) -> Result<Self, CalibError> {
+        Self::with_coding(width, height, Coding::default())
+    }
+
+    /// The pattern set with a chosen coding.
+    pub fn with_coding(width: u32, height: u32, coding: Coding) -> Result<Self, CalibError> {
+        if width == 0 || height == 0 || width > 65_535 || height > 65_535 {
+            return Err(CalibError::Invalid {
+                field: "projector resolution",
+                problem: format!("{width}x{height}, expected 1 to 65535 per side"),
+            });
+        }
+        let (column_bits, row_bits) = (bits_for(width), bits_for(height));
+        let mut patterns = vec![
+            PatternFile {
+                file: "white.png".into(),
+                pattern: Pattern::White,
+            },
+            PatternFile {
+                file: "black.png".into(),
+                pattern: Pattern::Black,
+            },
+        ];
+        for (axis, bits, name) in [
+            (Axis::Column, column_bits, "col"),
+            (Axis::Row, row_bits, "row"),
+        ] {
+            for bit in 0..bits {
+                for inverse in [false, true] {
+                    let suffix = if inverse { "-inv" } else { "" };
+                    patterns.push(PatternFile {
+                        file: format!("{name}-{bit:02}{suffix}.png"),
+                        pattern: Pattern::Bit { axis, bit, inverse },
+                    });
+                }
+            }
+        }
+        Ok(Self {
+            width,
+            height,
+            coding,
+            column_bits,
+            row_bits,
+            patterns,
+        })
+    }
+
+    /// Checks a manifest read from a file: sizes, bit counts and a complete, unique pattern set.
+    pub fn validate(&self, file: &str) -> Result<(), CalibError> {
+        let expected = Self::with_coding(self.width, self.height, self.coding).map_err(|e| {
+            CalibError::File {
+                file: file.into(),
+                problem: e.to_string(),
+            }
+        })?;
+        if self.column_bits != expected.column_bits || self.row_bits != expected.row_bits {
+            return Err(CalibError::File {
+                file: file.into(),
+                problem: format!(
+                    "column_bits/row_bits are {}/{}, a {}x{} projector needs {}/{}",
+                    self.column_bits,
+                    self.row_bits,
+                    self.width,
+                    self.height,
+                    expected.column_bits,
+                    expected.row_bits
+                ),
+            });
+        }
+        for p in &expected.patterns {
+            let n = self
+                .patterns
+                .iter()
+                .filter(|q| q.pattern == p.pattern)
+                .count();
+            if n != 1 {
+                return Err(CalibError::File {
+                    file: file.into(),
+                    problem: format!("lists {:?} {n} times, expected once", p.pattern),
+                });
+            }
+        }
+        if self.patterns.len() != expected.patterns.len() {
+            return Err(CalibError::File {
+                file: file.into(),
+                problem: format!(
+                    "lists {} patterns, expected {}",
+                    self.patterns.len(),
+                    expected.patterns.len()
+                ),
+            });
+        }
+        let mut names: Vec<&str> = self.patterns.iter().map(|p| p.file.as_str()).collect();
+        names.sort_unstable();
+        if names.windows(2).any(|w| w[0] == w[1])
+            || names
+                .iter()
+                .any(|n| n.contains('/') || n.contains('\\') || n.is_empty())
+        {
+            return Err(CalibError::File {
+                file: file.into(),
+                problem: "file names must be unique plain names".into(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The code value (0 or 1) of every projector pixel for a pattern.
+    pub fn pattern_values(&self, pattern: Pattern) -> Vec<f32> {
+        let (w, h) = (self.width, self.height);
+        (0..w * h)
+            .map(|i| {
+                let on = match pattern {
+                    Pattern::White => true,
+                    Pattern::Black => false,
+                    Pattern::Bit { axis, bit, inverse } => {
+                        let v = match axis {
+                            Axis::Column => i % w,
+                            Axis::Row => i / w,
+                        };
+                        self.encoded_bit(axis, bit, v) != inverse
+                    }
+                };
+                f32::from(u8::from(on))
+            })
+            .collect()
+    }
+
+    /// The value `bit` of `axis` shows at projector coordinate `v` (before the inverse): the
+    /// Gray code's bit, XOR-ed with the base bit under XOR coding.
+    pub fn encoded_bit(&self, axis: Axis, bit: u32, v: u32) -> bool {
+        let bits = match axis {
+            Axis::Column => self.column_bits,
+            Axis::Row => self.row_bits,
+        };
+        let g = |b: u32| (gray(v) >> (bits - 1 - b)) & 1 == 1;
+        match self.base_bit(bits) {
+            Some(base) if base != bit => g(bit) != g(base),
+            _ => g(bit),
+        }
+    }
+
+    /// The bit every other bit is XOR-ed with, for an axis of `bits` bits.
+    pub fn base_bit(&self, bits: u32) -> Option<u32> {
+        match self.coding {
+            Coding::Xor04 if bits >= 3 => Some(bits - 2),
+            _ => None,
+        }
+    }
+
+    /// The pattern with only the projector pixels `shown` marks lit (the others black): the
+    /// second pass of [`Correspondence::second_pass_mask`]. A mask of another size than the
+    /// projector is refused.
+    pub fn pattern_image_where(
+        &self,
+        pattern: Pattern,
+        shown: &[bool],
+    ) -> Result<LinearImage, CalibError> {
+        if shown.len() != (self.width * self.height) as usize {
+            return Err(CalibError::Invalid {
+                field: "pattern mask",
+                problem: format!(
+                    "{} pixels, the projector has {}x{}",
+                    shown.len(),
+                    self.width,
+                    self.height
+                ),
+            });
+        }
+        let mut image = self.pattern_image(pattern);
+        for (px, &on) in image.pixels.iter_mut().zip(shown) {
+            if !on {
+                *px = [0.0; 3];
+            }
+        }
+        Ok(image)
+    }
+
+    /// The pattern as an image (white where on).
+    pub fn pattern_image(&self, pattern: Pattern) -> LinearImage {
+        LinearImage {
+            width: self.width,
+            height: self.height,
+            pixels: self
+                .pattern_values(pattern)
+                .into_iter()
+                .map(|v| [v; 3])
+                .collect(),
+        }
+    }
+}
+
+/// Noise and thresholds of the decoder, in capture units (the sum of the three channels).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DecodeConfig {
+    /// Noise standard deviation of a pixel at black.
+    pub noise_floor: f32,
+    /// Noise standard deviation at value 1 from shot noise (it grows with √value).
+    pub shot_noise: f32,
+    /// A pixel is reached when its direct light is at least this share of the image's 99th
+    /// percentile of direct light.
+    pub min_direct_share: f32,
+    /// A bit is trusted when pattern and inverse differ by at least this share of `Ld`.
+    pub min_margin_share: f32,
+    /// How many untrusted bits a pixel may have and still be decoded (0 or 1).
+    pub max_uncertain_bits: usize,
+    /// Decode pixels with more untrusted bits from their decoded neighbours (XOR coding only;
+    /// see [`decode`]).
+    pub fill_from_neighbours: bool,
+}
+
+impl DecodeConfig {
+    /// For defocused projectors (the large aperture): every bit must be clearly decided, so
+    /// that a blurred stripe edge gives "unknown" rather than a position off by the blur.
+    pub fn strict() -> Self {
+        Self {
+            min_margin_share: 0.5,
+            max_uncertain_bits: 0,
+            fill_from_neighbours: false,
+            ..Self::default()
+        }
+    }
+
+    /// The same decoder for captures exposed `factor` times as long and scaled back to the
+    /// units of a normal one: read noise shrinks by `factor`, shot noise by its square root.
+    /// A factor that is not a finite number ≥ 1 is taken as 1.
+    pub fn exposed_longer(self, factor: f32) -> Self {
+        let f = if factor.is_finite() && factor >= 1.0 {
+            factor
+        } else {
+            1.0
+        };
+        Self {
+            noise_floor: self.noise_floor / f,
+            shot_noise: self.shot_noise / f.sqrt(),
+            ..self
+        }
+    }
+}
+
+impl Default for DecodeConfig {
+    fn default() -> Self {
+        Self {
+            noise_floor: 0.002,
+            shot_noise: 0.007,
+            min_direct_share: 0.005,
+            min_margin_share: 0.4,
+            max_uncertain_bits: 1,
+            fill_from_neighbours: true,
+        }
+    }
+}
+
+/// The decoded correspondence of one projector.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Correspondence {
+    /// Camera width.
+    pub width: u32,
+    /// Camera height.
+    pub height: u32,
+    /// Projector width.
+    pub projector_width: u32,
+    /// Projector height.
+    pub projector_height: u32,
+    /// `(column, row)` for each camera pixel, or `None` where unknown.
+    pub map: Vec<Option<(u32, u32)>>,
+    /// Confidence in `[0, 1]`: the smallest trusted margin over `Ld`, halved where one bit was
+    /// resolved by its sign alone.
+    pub confidence: Vec<f32>,
+    /// Direct light `Ld` per pixel.
+    pub direct: Vec<f32>,
+    /// Global light `Lg` per pixel.
+    pub global: Vec<f32>,
+    /// The direct light from which a pixel counts as reached (capture units).
+    pub reach: f32,
+}
+
+impl Correspondence {
+    /// Share of camera pixels with a decoded projector pixel.
+    pub fn decoded_share(&self) -> f64 {
+        self.map.iter().filter(|m| m.is_some()).count() as f64 / self.map.len().max(1) as f64
+    }
+
+    /// The 16-bit map of the `graycode decode` command: R = column + 1, G = row + 1 (0 where
+    /// unknown), B = confidence × 65535.
+    pub fn to_png16(&self) -> Vec<u16> {
+        self.map
+            .iter()
+            .zip(&self.confidence)
+            .flat_map(|(m, c)| match m {
+                Some((x, y)) => [
+                    (*x + 1).min(65_535) as u16,
+                    (*y + 1).min(65_535) as u16,
+                    (c.clamp(0.0, 1.0) * 65_535.0).round() as u16,
+                ],
+                None => [0, 0, 0],
+            })
+            .collect()
+    }
+}
+
+/// Decodes one projector from its captures, looked up by pattern. Every capture must have the
+/// camera's size.
+///
+/// Two passes: each pixel on its own (at most one untrusted bit), then, with XOR coding and
+/// [`DecodeConfig::fill_from_neighbours`], pixels with more untrusted bits from their decoded
+/// neighbours ([`fill_from_neighbours`]).
+pub fn decode<'a>(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
+) -> Result<Correspondence, CalibError> {
+    decode_where(manifest, config, None, capture)
+}
+
+/// [`decode`] over the camera pixels `ours` marks (all when `None`): projectors coded at the
+/// same time ([`group_disjoint`]) each decode the pixels they light most, and the second pass
+/// does not grow into another's. A mask of another size than the captures is refused.
+pub fn decode_where<'a>(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    ours: Option<&[bool]>,
+    mut capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
+) -> Result<Correspondence, CalibError> {
+    let find = |pattern: Pattern| {
+        manifest
+            .patterns
+            .iter()
+            .find(|p| p.pattern == pattern)
+            .ok_or(CalibError::Invalid {
+                field: "manifest",
+                problem: format!("has no {pattern:?} pattern"),
+            })
+    };
+    let white_file = find(Pattern::White)?;
+    let white = capture(white_file)?;
+    let (w, h) = (white.width, white.height);
+    let mut intensity = |p: &PatternFile| -> Result<Vec<f32>, CalibError> {
+        let img = capture(p)?;
+        img.expect_size(w, h, &p.file)?;
+        Ok(img.intensity())
+    };
+    let white = intensity(white_file)?;
+    let black = intensity(find(Pattern::Black)?)?;
+    let n = (w * h) as usize;
+    if let Some(mask) = ours
+        && mask.len() != n
+    {
+        return Err(CalibError::Invalid {
+            field: "decode mask",
+            problem: format!("{} pixels, the captures have {w}x{h}", mask.len()),
+        });
+    }
+    // Pairs (pattern − black, inverse − black) per axis and bit.
+    let mut pairs: Vec<(Axis, u32, Vec<f32>, Vec<f32>)> = Vec::new();
+    for (axis, bits) in [
+        (Axis::Column, manifest.column_bits),
+        (Axis::Row, manifest.row_bits),
+    ] {
+        for bit in 0..bits {
+            let p = intensity(find(Pattern::Bit {
+                axis,
+                bit,
+                inverse: false,
+            })?)?;
+            let q = intensity(find(Pattern::Bit {
+                axis,
+                bit,
+                inverse: true,
+            })?)?;
+            let p: Vec<f32> = p.iter().zip(&black).map(|(a, b)| a - b).collect();
+            let q: Vec<f32> = q.iter().zip(&black).map(|(a, b)| a - b).collect();
+            pairs.push((axis, bit, p, q));
+        }
+    }
+    // Direct and global light from the two finest patterns of each axis (Nayar et al.): with
+    // half the pixels on, max = Ld + Lg/2 and min = Lg/2.
+    // With XOR coding every pattern is high-frequency, so every pair can be used.
+    let xor = manifest.coding == Coding::Xor04;
+    let fine: Vec<&(Axis, u32, Vec<f32>, Vec<f32>)> = pairs
+        .iter()
+        .filter(|(axis, bit, _, _)| {
+            let bits = if *axis == Axis::Column {
+                manifest.column_bits
+            } else {
+                manifest.row_bits
+            };
+            xor || bit + 2 >= bits
+        })
+        .collect();
+    let mut direct = vec![0.0f32; n];
+    let mut global = vec![0.0f32; n];
+    for i in 0..n {
+        let (mut ld, mut lg) = (0.0f32, 0.0f32);
+        for (_, _, p, q) in &fine {
+            let (hi, lo) = (p[i].max(q[i]), p[i].min(q[i]).max(0.0));
+            ld = ld.max(hi - lo);
+            lg += 2.0 * lo;
+        }
+        direct[i] = ld;
+        global[i] = lg / fine.len().max(1) as f32;
+    }
+    let mut sorted: Vec<f32> = direct.iter().copied().filter(|v| v.is_finite()).collect();
+    sorted.sort_by(f32::total_cmp);
+    let p99 = sorted.get(sorted.len() * 99 / 100).copied().unwrap_or(0.0);
+    let reach = (config.min_direct_share * p99).max(6.0 * config.noise_floor);
+    // One reading per pattern pair: the difference `d` and, where the direct light decides it,
+    // the encoded value it shows (`None`: untrusted), with the noise of the difference.
+    let reading = |i: usize, out: &mut Vec<Reading>| {
+        let (ld, lg) = (direct[i], global[i]);
+        out.clear();
+        out.extend(pairs.iter().map(|(axis, bit, p, q)| {
+            let (a, b) = (p[i], q[i]);
+            let d = a - b;
+            // Noise of a difference of two pixels around their level.
+            let level = a.max(b).max(0.0);
+            let sigma = (2.0
+                * (config.noise_floor * config.noise_floor
+                    + config.shot_noise * config.shot_noise * level))
+                .sqrt();
+            let margin = (config.min_margin_share * ld).max(3.0 * sigma);
+            let trusted = if d.abs() < margin {
+                None
+            } else if xor || ld > lg {
+                // High-frequency pairs see the same global light: the sign is the direct
+                // part's.
+                Some(d > 0.0)
+            } else if a < ld && b > lg {
+                // Global light dominates a coarse stripe: trust only what direct light
+                // explains.
+                Some(false)
+            } else if a > lg && b < ld {
+                Some(true)
+            } else {
+                None
+            };
+            Reading {
+                axis: *axis,
+                bit: *bit,
+                d,
+                sigma,
+                trusted,
+            }
+        }));
+    };
+    let reached = |i: usize| {
+        // NaN (a corrupt capture) counts as not reached.
+        ours.is_none_or(|m| m[i])
+            && !(direct[i].is_nan() || direct[i] < reach || white[i] - black[i] < reach)
+    };
+    let mut map = vec![None; n];
+    let mut confidence = vec![0.0f32; n];
+    let mut readings = Vec::with_capacity(pairs.len());
+    for i in 0..n {
+        if !reached(i) {
+            continue;
+        }
+        let ld = direct[i];
+        // (value, trusted) of every encoded bit, per axis, most significant first.
+        let mut read: [Vec<(bool, bool)>; 2] = [Vec::new(), Vec::new()];
+        let mut worst = f32::INFINITY;
+        reading(i, &mut readings);
+        for r in &readings {
+            if r.trusted.is_some() {
+                worst = worst.min(r.d.abs() / ld);
+            }
+            read[usize::from(r.axis == Axis::Row)]
+                .push((r.trusted.unwrap_or(r.d > 0.0), r.trusted.is_some()));
+        }
+        // Undo the XOR with the base bit; a bit is trusted only if its base is too.
+        let mut codes = [0u32; 2];
+        let mut uncertain = 0;
+        for (k, bits) in read.iter().enumerate() {
+            let base = manifest
+                .base_bit(bits.len() as u32)
+                .map(|b| bits[b as usize]);
+            for (b, &(value, trusted)) in bits.iter().enumerate() {
+                let (value, trusted) = match base {
+                    Some((bv, bt)) if Some(b as u32) != manifest.base_bit(bits.len() as u32) => {
+                        (value != bv, trusted && bt)
+                    }
+                    _ => (value, trusted),
+                };
+                uncertain += usize::from(!trusted);
+                codes[k] = (codes[k] << 1) | u32::from(value);
+            }
+        }
+        // One untrusted bit lies on that bit's stripe edge, where both readings are neighbours:
+        // at most one pixel off. More than one: unknown rather than wrong.
+        if uncertain > config.max_uncertain_bits.min(1) {
+            continue;
+        }
+        let (x, y) = (gray_inverse(codes[0]), gray_inverse(codes[1]));
+        if x >= manifest.width || y >= manifest.height {
+            continue;
+        }
+        map[i] = Some((x, y));
+        let c = worst.min(1.0);
+        confidence[i] = if uncertain == 1 { 0.5 * c } else { c };
+    }
+    // The fill correlates the differences with candidate codes: that needs every pair's sign to
+    // be the direct light's, true of XOR coding's high-frequency patterns only.
+    if config.fill_from_neighbours && xor {
+        fill_from_neighbours(
+            manifest,
+            w as usize,
+            h as usize,
+            &reached,
+            &reading,
+            &direct,
+            &mut map,
+            &mut confidence,
+        );
+    }
+    Ok(Correspondence {
+        width: w,
+        height: h,
+        projector_width: manifest.width,
+        projector_height: manifest.height,
+        map,
+        confidence,
+        direct,
+        global,
+        reach,
+    })
+}
+
+/// One pattern pair at one camera pixel: `d` = pattern − inverse, its noise, and the encoded
+/// value it shows where the direct light decides it.
+struct Reading {
+    axis: Axis,
+    bit: u32,
+    d: f32,
+    sigma: f32,
+    trusted: Option<bool>,
+}
+
+/// Groups projectors whose footprints (camera pixels each lights directly) do not overlap, so
+/// that each group shows its patterns at the same time. Greedy, in the given order.
+pub fn group_disjoint(footprints: &[Vec<bool>]) -> Vec<Vec<usize>> {
+    let mut groups: Vec<(Vec<usize>, Vec<bool>)> = Vec::new();
+    for (k, fp) in footprints.iter().enumerate() {
+        match groups
+            .iter_mut()
+            .find(|(_, used)| used.iter().zip(fp).all(|(a, b)| !(*a && *b)))
+        {
+            Some((members, used)) => {
+                members.push(k);
+                for (u, f) in used.iter_mut().zip(fp) {
+                    *u |= *f;
+                }
+            }
+            None => groups.push((vec![k], fp.clone())),
+        }
+    }
+    groups.into_iter().map(|(m, _)| m).collect()
+}

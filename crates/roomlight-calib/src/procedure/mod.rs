@@ -1,0 +1,389 @@
+//! The calibration procedure (DESIGN §4), written once against a [`Rig`]: black offset,
+//! footprints, structured light with projectors whose footprints do not overlap coded at the
+//! same time, the second pass where the first leaves reached pixels unknown, response ramps,
+//! nodes (feathered across overlaps, the target kept dark, beside projectors already lit),
+//! attenuation (one at a time or Hadamard) and hot calibration of a projector joining a lit
+//! room. Every step is a method a caller may run on its own; [`Procedure::bring_up`] and
+//! [`Procedure::join`] chain them for the two situations the system meets. It owns the order
+//! of captures and what is shown for each; it must not know where frames are shown or photos
+//! come from (processes, networks, the simulator), nor what the caller does with the results.
+
+use crate::CalibError;
+use crate::attenuation::{Attenuation, Scheme, differential, plan, solve};
+use crate::charts::{ChartCorners, PatchSample, PatchStatus, SampleConfig, sample_charts};
+use crate::graycode::{
+    Coding, Correspondence, DecodeConfig, Manifest, SecondPass, SecondPassPlan, decode_where,
+    group_disjoint,
+};
+use crate::image_io::LinearImage;
+use crate::nodes::{NodeConfig, charts_lit, segment_beside, whole_frame};
+use crate::response::{Response, fit_response, footprint_ramp, ramp_codes};
+use crate::rig::{Assignment, Frame, Projector, ProjectorKind, ProjectorRole, Rig, RigError};
+use roomlight_core::LinearRgb;
+
+mod steps;
+
+pub use steps::Procedure;
+
+/// How the procedure measures; [`Settings::default`] is what the benches measured best.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// Decoder for standard projectors (XOR-04 coded).
+    pub decode: DecodeConfig,
+    /// Decoder for large apertures (plain Gray code, blurred by their defocus).
+    pub decode_large: DecodeConfig,
+    /// A camera pixel is in a standard projector's footprint when its white raises it by this
+    /// share of its brightest pixel: inter-reflected light stays below it in the lab.
+    pub footprint_share: f32,
+    /// The same for a large aperture: its blur's tail carries plain Gray code's coarse stripes
+    /// (which inter-reflection does not average away) well below a tenth of its peak. At 0.1 the
+    /// lab grouped floor-right with the large aperture, and 0.32% of floor-right's decoded
+    /// pixels came out off by more than 2 (none coded alone).
+    pub footprint_share_large: f32,
+    /// Levels of the response ramp (DESIGN §4.3: at least 9).
+    pub ramp_levels: usize,
+    /// How the attenuation of a room brought up is multiplexed.
+    pub scheme: Scheme,
+    /// How projectors are split into nodes and feathered.
+    pub nodes: NodeConfig,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            decode: DecodeConfig::default(),
+            decode_large: DecodeConfig::strict(),
+            footprint_share: 0.1,
+            footprint_share_large: 0.01,
+            ramp_levels: 9,
+            scheme: Scheme::Hadamard,
+            nodes: NodeConfig::default(),
+        }
+    }
+}
+
+/// The room as configured by hand: where the charts are in the camera image, how they are
+/// sampled, and which camera pixels the projection-mapping target covers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Setup {
+    pub corners: Vec<ChartCorners>,
+    pub sample: SampleConfig,
+    pub target_mask: Vec<bool>,
+}
+
+/// The steps, for progress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    Dark,
+    Footprints,
+    StructuredLight,
+    SecondPass,
+    Responses,
+    Attenuation,
+    Hot,
+}
+
+/// What the procedure reports while it runs (nothing is printed).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A step begins and plans about this many captures.
+    Stage { stage: Stage, captures: usize },
+    /// One capture taken.
+    Captured { stage: Stage },
+    /// The projectors coded at the same time, group by group.
+    Grouped { groups: Vec<Vec<String>> },
+    /// A projector's structured light decoded (share of camera pixels).
+    Decoded { projector: String, share: f64 },
+    /// A second pass over what the first left unknown.
+    SecondPass { projector: String, pass: SecondPass },
+    /// A projector's response fitted.
+    Response { projector: String, gamma: [f64; 3] },
+    /// A projector made one node over its frame (a large aperture, or one that lights no
+    /// chart), with the chart it lights most.
+    WholeFrame {
+        projector: String,
+        chart: Option<usize>,
+    },
+}
+
+/// Why a step failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ProcedureError {
+    #[error(transparent)]
+    Rig(#[from] RigError),
+    /// A measurement of one projector was refused.
+    #[error("{projector}: {source}")]
+    Projector {
+        projector: String,
+        #[source]
+        source: CalibError,
+    },
+    #[error(transparent)]
+    Calib(#[from] CalibError),
+}
+
+/// A projector's structured light decoded, and the second pass if one was taken.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decoded {
+    pub projector: Projector,
+    pub corr: Correspondence,
+    pub second: Option<SecondPass>,
+}
+
+/// A projector decoded and its response fitted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measured {
+    pub projector: Projector,
+    pub corr: Correspondence,
+    pub response: Response,
+    pub second: Option<SecondPass>,
+}
+
+/// How a projector was split into nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layout {
+    /// One node per chart it lights, feathered against the others.
+    Charted,
+    /// One node over its whole frame but the target (a large aperture, or a standard
+    /// projector that lights no chart).
+    WholeFrame,
+}
+
+/// One node: its id, the chart whose region it is (for the conventional start), and the
+/// weight of every projector pixel (row-major, in `[0, 1]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlacedNode {
+    pub id: u32,
+    pub chart: Option<usize>,
+    pub weights: Vec<f32>,
+}
+
+/// A projector's nodes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Placed {
+    pub projector: Projector,
+    pub layout: Layout,
+    pub nodes: Vec<PlacedNode>,
+    /// Per camera pixel, the share of the light there its nodes give
+    /// ([`crate::nodes::Segmentation::claims`]); `None` for a whole-frame node, which does not
+    /// blend with others.
+    pub claim: Option<Vec<f32>>,
+    /// Projector pixels kept black for the target (charted projectors; empty otherwise).
+    pub excluded: Vec<bool>,
+    pub response: Response,
+}
+
+impl Placed {
+    /// How the projector draws its nodes: sparse weights, capped at 1.
+    pub fn assignment(&self) -> Assignment {
+        Assignment {
+            width: self.projector.width,
+            height: self.projector.height,
+            response: self.response.clone(),
+            nodes: self
+                .nodes
+                .iter()
+                .map(|n| {
+                    let sparse = n
+                        .weights
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, w)| **w > 0.0)
+                        .map(|(i, w)| (i as u32, w.min(1.0)))
+                        .collect();
+                    (n.id, sparse)
+                })
+                .collect(),
+        }
+    }
+
+    /// The node ids, in order.
+    pub fn ids(&self) -> Vec<u32> {
+        self.nodes.iter().map(|n| n.id).collect()
+    }
+}
+
+/// Attenuation of every node, column `j` being node `ids[j]`'s.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Columns {
+    pub ids: Vec<u32>,
+    pub attenuation: Attenuation,
+}
+
+/// A hot projector's nodes measured differentially while the rest of the room keeps its light
+/// (DESIGN §4.7): each node's `p` per room patch (white − black, not clipped) and its standard
+/// deviation, and which patches every capture could measure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Hot {
+    pub columns: Vec<(u32, Vec<LinearRgb>)>,
+    pub sigma: Vec<Vec<LinearRgb>>,
+    pub measurable: Vec<bool>,
+    /// The room with this projector's nodes black.
+    pub black: Vec<PatchSample>,
+}
+
+/// A room brought up from dark.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BringUp {
+    pub measured: Vec<Measured>,
+    pub placed: Vec<Placed>,
+    pub columns: Columns,
+    /// Captures taken in all.
+    pub captures: usize,
+}
+
+/// A projector calibrated while the others stay lit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Joined {
+    pub measured: Measured,
+    pub placed: Placed,
+    pub hot: Hot,
+    /// Captures taken in all.
+    pub captures: usize,
+}
+
+/// The luminaires among `projectors` (texture projectors are kept dark, not calibrated).
+pub fn luminaires(projectors: &[Projector]) -> Vec<Projector> {
+    projectors
+        .iter()
+        .filter(|p| p.role == ProjectorRole::Luminaire)
+        .cloned()
+        .collect()
+}
+
+/// The coding a projector's optics allow: a large aperture's defocus blurs XOR-04's fine
+/// stripes away, so it gets plain Gray code.
+pub fn coding(p: &Projector) -> Coding {
+    match p.kind {
+        ProjectorKind::LargeAperture => Coding::Gray,
+        ProjectorKind::Standard => Coding::Xor04,
+    }
+}
+
+/// Groups of projectors (indices into `whites`) whose footprints do not overlap
+/// ([`group_disjoint`]), from each one's white capture minus `dark`.
+pub fn coding_groups(
+    projectors: &[Projector],
+    dark: &LinearImage,
+    whites: &[LinearImage],
+    settings: &Settings,
+) -> Vec<Vec<usize>> {
+    let dark = dark.intensity();
+    let footprints: Vec<Vec<bool>> = projectors
+        .iter()
+        .zip(whites)
+        .map(|(p, white)| {
+            let gain = gain(white, &dark);
+            let peak = gain.iter().copied().fold(0.0f32, f32::max);
+            let share = match p.kind {
+                ProjectorKind::LargeAperture => settings.footprint_share_large,
+                ProjectorKind::Standard => settings.footprint_share,
+            };
+            gain.iter().map(|g| *g > share * peak).collect()
+        })
+        .collect();
+    group_disjoint(&footprints)
+}
+
+/// How much a white raises each camera pixel above `dark` (intensities).
+pub(super) fn gain(white: &LinearImage, dark: &[f32]) -> Vec<f32> {
+    white
+        .intensity()
+        .iter()
+        .zip(dark)
+        .map(|(w, b)| w - b)
+        .collect()
+}
+
+/// For each member of a group coded together, the camera pixels it decodes: those its white
+/// raises most (`None` for a projector coded alone).
+pub(super) fn owned_pixels(group: &[usize], gains: &[Vec<f32>]) -> Vec<Option<Vec<bool>>> {
+    group
+        .iter()
+        .map(|&k| {
+            (group.len() > 1).then(|| {
+                (0..gains[k].len())
+                    .map(|i| !group.iter().any(|&o| o != k && gains[o][i] > gains[k][i]))
+                    .collect()
+            })
+        })
+        .collect()
+}
+
+/// Splits measured projectors into nodes, ids from `first_node` on in the order given:
+/// standard ones that light a chart together, feathered against each other and beside
+/// projectors already lit (`claimed`: the sum of their claims,
+/// [`crate::nodes::add_claim`]); a large aperture, or a projector that lights no chart, one
+/// node over its frame but the target ([`whole_frame`]).
+pub fn place(
+    setup: &Setup,
+    measured: &[Measured],
+    claimed: Option<&[f32]>,
+    first_node: u32,
+    config: &NodeConfig,
+    progress: &mut dyn FnMut(Event),
+) -> Result<Vec<Placed>, CalibError> {
+    let charted: Vec<bool> = measured
+        .iter()
+        .map(|m| {
+            m.projector.kind == ProjectorKind::Standard
+                && charts_lit(&m.corr, &setup.corners, config).is_ok_and(|c| !c.is_empty())
+        })
+        .collect();
+    let together: Vec<Correspondence> = measured
+        .iter()
+        .zip(&charted)
+        .filter(|(_, c)| **c)
+        .map(|(m, _)| m.corr.clone())
+        .collect();
+    let mut seg = segment_beside(
+        &together,
+        &setup.corners,
+        Some(&setup.target_mask),
+        config,
+        claimed,
+    )?;
+    let (mut next, mut slot) = (first_node, 0usize);
+    let mut placed = Vec::with_capacity(measured.len());
+    for (m, charted) in measured.iter().zip(charted) {
+        let (layout, nodes, claim, excluded) = if charted {
+            let nodes: Vec<(Option<usize>, Vec<f32>)> = seg
+                .nodes
+                .iter_mut()
+                .filter(|n| n.projector == slot)
+                .map(|n| (Some(n.chart), std::mem::take(&mut n.weights)))
+                .collect();
+            let claim = std::mem::take(&mut seg.claims[slot]);
+            let excluded = std::mem::take(&mut seg.excluded[slot]);
+            slot += 1;
+            (Layout::Charted, nodes, Some(claim), excluded)
+        } else {
+            let (weights, chart) = whole_frame(&m.corr, &setup.corners, &setup.target_mask);
+            progress(Event::WholeFrame {
+                projector: m.projector.id.clone(),
+                chart,
+            });
+            (Layout::WholeFrame, vec![(chart, weights)], None, Vec::new())
+        };
+        let nodes = nodes
+            .into_iter()
+            .map(|(chart, weights)| {
+                next += 1;
+                PlacedNode {
+                    id: next - 1,
+                    chart,
+                    weights,
+                }
+            })
+            .collect();
+        placed.push(Placed {
+            projector: m.projector.clone(),
+            layout,
+            nodes,
+            claim,
+            excluded,
+            response: m.response.clone(),
+        });
+    }
+    Ok(placed)
+}
