@@ -1,0 +1,161 @@
+//! Decoding pixels with several untrusted bits from their decoded neighbours (the fill step
+//! of [`super::decode`]). It owns the prediction from neighbours and the choice among nearby
+//! codes; it must not know where the captures came from.
+
+use super::*;
+
+/// How far (projector pixels) a candidate may lie from the neighbours' prediction.
+const FILL_RADIUS: i64 = 8;
+/// The share of the measured differences (by magnitude) a filled pixel's code must agree with:
+/// a pixel in shadow next to a lit surface sees that surface's code in its inter-reflected
+/// light, which agrees with no single position that well.
+const FILL_AGREEMENT: f32 = 0.9;
+/// How many times a pixel is tried as its neighbours fill in.
+const FILL_TRIES: u8 = 3;
+
+/// The second pass of [`decode`]: a reached pixel with more than one untrusted bit (a weak
+/// direct signal next to strong global light, or a surface at grazing incidence where
+/// pattern-dependent inter-reflection flips weak bits) is decoded from its decoded neighbours,
+/// growing inwards from them. Per axis, the neighbours predict its coordinate (a linear
+/// extrapolation of two neighbours in a row where there are such, else the neighbours
+/// themselves); of the coordinates within [`FILL_RADIUS`] of the prediction that agree with
+/// every trusted bit, the one whose code correlates best with the measured differences is taken
+/// when it agrees with [`FILL_AGREEMENT`] of them and beats every candidate more than one pixel
+/// away by six noise standard deviations and half the direct light. Otherwise the pixel stays
+/// unknown: across a depth edge the prediction is wrong and no candidate agrees clearly.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn fill_from_neighbours(
+    manifest: &Manifest,
+    w: usize,
+    h: usize,
+    reached: &impl Fn(usize) -> bool,
+    reading: &impl Fn(usize, &mut Vec<Reading>),
+    direct: &[f32],
+    map: &mut [Option<(u32, u32)>],
+    confidence: &mut [f32],
+) {
+    const AROUND: [(isize, isize); 8] = [
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+        (-1, 0),
+        (1, 0),
+        (-1, 1),
+        (0, 1),
+        (1, 1),
+    ];
+    let at = |i: usize, (dx, dy): (isize, isize), k: isize| -> Option<usize> {
+        let (x, y) = ((i % w) as isize + dx * k, (i / w) as isize + dy * k);
+        (x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h)
+            .then(|| y as usize * w + x as usize)
+    };
+    let mut tries = vec![0u8; w * h];
+    let mut readings = Vec::new();
+    let mut queue: VecDeque<usize> = VecDeque::new();
+    let push_around =
+        |i: usize, map: &[Option<(u32, u32)>], tries: &mut [u8], queue: &mut VecDeque<usize>| {
+            for dir in AROUND {
+                if let Some(j) = at(i, dir, 1)
+                    && map[j].is_none()
+                    && tries[j] < FILL_TRIES
+                    && reached(j)
+                {
+                    tries[j] += 1;
+                    queue.push_back(j);
+                }
+            }
+        };
+    for i in 0..w * h {
+        if map[i].is_some() {
+            push_around(i, map, &mut tries, &mut queue);
+        }
+    }
+    while let Some(i) = queue.pop_front() {
+        if map[i].is_some() {
+            continue;
+        }
+        // Predictions per axis from the neighbours: extrapolations where there are any.
+        let (mut extrapolated, mut adjacent): ([Vec<i64>; 2], [Vec<i64>; 2]) = Default::default();
+        for dir in AROUND {
+            let Some(a) = at(i, dir, 1).and_then(|j| map[j]) else {
+                continue;
+            };
+            let b = at(i, dir, 2).and_then(|j| map[j]);
+            for (k, (va, vb)) in [(a.0, b.map(|b| b.0)), (a.1, b.map(|b| b.1))]
+                .into_iter()
+                .enumerate()
+            {
+                adjacent[k].push(i64::from(va));
+                if let Some(vb) = vb {
+                    extrapolated[k].push(2 * i64::from(va) - i64::from(vb));
+                }
+            }
+        }
+        let mut predictions = [0, 1].map(|k| {
+            if extrapolated[k].is_empty() {
+                std::mem::take(&mut adjacent[k])
+            } else {
+                std::mem::take(&mut extrapolated[k])
+            }
+        });
+        reading(i, &mut readings);
+        let ld = direct[i];
+        let (Some((x, x_gap)), Some((y, y_gap))) = (
+            best_on_axis(manifest, Axis::Column, &readings, &mut predictions[0], ld),
+            best_on_axis(manifest, Axis::Row, &readings, &mut predictions[1], ld),
+        ) else {
+            continue;
+        };
+        map[i] = Some((x, y));
+        // At most a quarter: where a measured pixel lands on the same projector pixel the
+        // inverse map mostly prefers it.
+        confidence[i] = 0.25 * (x_gap.min(y_gap) / (2.0 * ld).max(f32::MIN_POSITIVE)).min(1.0);
+        push_around(i, map, &mut tries, &mut queue);
+    }
+}
+
+/// One axis of [`fill_from_neighbours`]: the coordinate near the median of `predictions` whose
+/// code agrees with every trusted reading and best with all of them, with its lead over every
+/// candidate more than one pixel away; `None` when no candidate is clear.
+fn best_on_axis(
+    manifest: &Manifest,
+    axis: Axis,
+    readings: &[Reading],
+    predictions: &mut [i64],
+    ld: f32,
+) -> Option<(u32, f32)> {
+    predictions.sort_unstable();
+    let centre = *predictions.get(predictions.len() / 2)?;
+    let size = i64::from(match axis {
+        Axis::Column => manifest.width,
+        Axis::Row => manifest.height,
+    });
+    let ours: Vec<&Reading> = readings.iter().filter(|r| r.axis == axis).collect();
+    let noise = ours.iter().map(|r| r.sigma).sum::<f32>() / ours.len().max(1) as f32;
+    let candidates: Vec<(i64, f32)> = ((centre - FILL_RADIUS).max(0)
+        ..=(centre + FILL_RADIUS).min(size - 1))
+        .filter_map(|v| {
+            let mut score = 0.0f32;
+            for r in &ours {
+                let e = manifest.encoded_bit(axis, r.bit, v as u32);
+                if r.trusted.is_some_and(|t| t != e) {
+                    return None;
+                }
+                score += if e { r.d } else { -r.d };
+            }
+            Some((v, score))
+        })
+        .collect();
+    let &(best, score) = candidates.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    // No rival at all (every other candidate disagrees with a trusted bit): an infinite lead.
+    let rival = candidates
+        .iter()
+        .filter(|(v, _)| (v - best).abs() > 1)
+        .map(|c| c.1)
+        .fold(f32::NEG_INFINITY, f32::max);
+    let gap = score - rival;
+    let total: f32 = ours.iter().map(|r| r.d.abs()).sum();
+    // NaN differences (a corrupt capture) fail both comparisons.
+    (score >= FILL_AGREEMENT * total && gap >= (6.0 * noise).max(0.5 * ld))
+        .then_some((best as u32, gap))
+}

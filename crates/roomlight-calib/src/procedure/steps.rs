@@ -1,0 +1,526 @@
+//! The steps of the procedure as run on a rig ([`Procedure`]): what is shown for each
+//! capture, in which order, and what is kept between steps. It must not know where frames are
+//! shown or photos come from.
+
+use super::*;
+
+/// Runs the steps of calibration on a rig, counting captures and reporting progress.
+pub struct Procedure<'a, R: Rig> {
+    rig: &'a mut R,
+    settings: Settings,
+    captures: usize,
+    progress: Box<dyn FnMut(Event) + Send + 'a>,
+}
+
+impl<R: Rig> std::fmt::Debug for Procedure<'_, R> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Procedure")
+            .field("settings", &self.settings)
+            .field("captures", &self.captures)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'a, R: Rig> Procedure<'a, R> {
+    /// A procedure on `rig` that reports to `progress`.
+    pub fn new(
+        rig: &'a mut R,
+        settings: Settings,
+        progress: impl FnMut(Event) + Send + 'a,
+    ) -> Self {
+        Self {
+            rig,
+            settings,
+            captures: 0,
+            progress: Box::new(progress),
+        }
+    }
+
+    /// Captures taken so far.
+    pub fn captures(&self) -> usize {
+        self.captures
+    }
+
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The rig, for what the caller shows between steps.
+    pub fn rig(&mut self) -> &mut R {
+        self.rig
+    }
+
+    fn report(&mut self, event: Event) {
+        (self.progress)(event);
+    }
+
+    async fn capture(&mut self, stage: Stage, exposure: f32) -> Result<LinearImage, RigError> {
+        let image = self.rig.capture(exposure).await?;
+        self.captures += 1;
+        self.report(Event::Captured { stage });
+        Ok(image)
+    }
+
+    async fn show_and_capture(
+        &mut self,
+        stage: Stage,
+        frames: &[(&str, Frame)],
+    ) -> Result<LinearImage, RigError> {
+        self.rig.show(frames).await?;
+        self.capture(stage, 1.0).await
+    }
+
+    async fn black(&mut self, projectors: &[Projector]) -> Result<(), RigError> {
+        let frames: Vec<(&str, Frame)> = projectors
+            .iter()
+            .map(|p| (p.id.as_str(), Frame::BLACK))
+            .collect();
+        self.rig.show(&frames).await
+    }
+
+    /// The black offset: `projectors` black (the others keep their light), one capture.
+    pub async fn dark(&mut self, projectors: &[Projector]) -> Result<LinearImage, RigError> {
+        self.report(Event::Stage {
+            stage: Stage::Dark,
+            captures: 1,
+        });
+        self.black(projectors).await?;
+        self.capture(Stage::Dark, 1.0).await
+    }
+
+    /// Each projector alone at white (one capture each), then black again: its footprint
+    /// for grouping, and the top of its response ramp.
+    pub async fn whites(&mut self, projectors: &[Projector]) -> Result<Vec<LinearImage>, RigError> {
+        self.report(Event::Stage {
+            stage: Stage::Footprints,
+            captures: projectors.len(),
+        });
+        let mut whites = Vec::with_capacity(projectors.len());
+        for p in projectors {
+            let white = Frame::Uniform([1.0; 3]);
+            whites.push(
+                self.show_and_capture(Stage::Footprints, &[(&p.id, white)])
+                    .await?,
+            );
+            self.rig.show(&[(&p.id, Frame::BLACK)]).await?;
+        }
+        Ok(whites)
+    }
+
+    /// Structured light on `projectors` (black, with `dark` and `whites` from [`Self::dark`]
+    /// and [`Self::whites`]): those whose footprints do not overlap coded at the same time,
+    /// each decoding the camera pixels it lights most, then a second pass for each standard
+    /// projector where the first left enough reached pixels unknown (on rigs that show
+    /// images). In the order of `projectors`.
+    pub async fn structured_light(
+        &mut self,
+        projectors: &[Projector],
+        dark: &LinearImage,
+        whites: &[LinearImage],
+    ) -> Result<Vec<Decoded>, ProcedureError> {
+        let manifests: Vec<Manifest> = projectors
+            .iter()
+            .map(|p| Manifest::with_coding(p.width, p.height, coding(p)))
+            .collect::<Result<_, _>>()?;
+        let groups = coding_groups(projectors, dark, whites, &self.settings);
+        let planned = groups
+            .iter()
+            .map(|g| {
+                g.iter()
+                    .map(|&k| manifests[k].patterns.len())
+                    .max()
+                    .unwrap_or(0)
+            })
+            .sum();
+        self.report(Event::Stage {
+            stage: Stage::StructuredLight,
+            captures: planned,
+        });
+        self.report(Event::Grouped {
+            groups: groups
+                .iter()
+                .map(|g| g.iter().map(|&k| projectors[k].id.clone()).collect())
+                .collect(),
+        });
+        let dark_intensity = dark.intensity();
+        let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
+        let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
+        for group in &groups {
+            let decoded = self
+                .code_group(projectors, &manifests, group, &gains)
+                .await?;
+            for (&k, c) in group.iter().zip(decoded) {
+                corrs[k] = Some(c);
+            }
+        }
+        let mut out = Vec::with_capacity(projectors.len());
+        for ((p, m), corr) in projectors.iter().zip(&manifests).zip(corrs) {
+            let Some(mut corr) = corr else {
+                continue;
+            };
+            let second = self.second_pass(p, m, &mut corr).await?;
+            out.push(Decoded {
+                projector: p.clone(),
+                corr,
+                second,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Shows one group's patterns slot by slot (member `k` its own pattern `j`, black once it
+    /// has no more), captures each, leaves the members black and decodes each.
+    async fn code_group(
+        &mut self,
+        projectors: &[Projector],
+        manifests: &[Manifest],
+        group: &[usize],
+        gains: &[Vec<f32>],
+    ) -> Result<Vec<Correspondence>, ProcedureError> {
+        let longest = group
+            .iter()
+            .map(|&k| manifests[k].patterns.len())
+            .max()
+            .unwrap_or(0);
+        let mut captures = Vec::with_capacity(longest);
+        for j in 0..longest {
+            let frames: Vec<(&str, Frame)> = group
+                .iter()
+                .map(|&k| {
+                    let frame = match manifests[k].patterns.get(j) {
+                        Some(f) => Frame::Structured {
+                            pattern: f.pattern,
+                            coding: coding(&projectors[k]),
+                        },
+                        None => Frame::BLACK,
+                    };
+                    (projectors[k].id.as_str(), frame)
+                })
+                .collect();
+            captures.push(
+                self.show_and_capture(Stage::StructuredLight, &frames)
+                    .await?,
+            );
+        }
+        let members: Vec<Projector> = group.iter().map(|&k| projectors[k].clone()).collect();
+        self.black(&members).await?;
+        let mut out = Vec::with_capacity(group.len());
+        for (&k, ours) in group.iter().zip(owned_pixels(group, gains)) {
+            let (p, m) = (&projectors[k], &manifests[k]);
+            let config = match p.kind {
+                ProjectorKind::LargeAperture => self.settings.decode_large,
+                ProjectorKind::Standard => self.settings.decode,
+            };
+            let corr = decode_where(m, &config, ours.as_deref(), |f| {
+                let j = m
+                    .patterns
+                    .iter()
+                    .position(|q| q.file == f.file)
+                    .unwrap_or(0);
+                Ok(&captures[j])
+            })
+            .map_err(|source| ProcedureError::Projector {
+                projector: p.id.clone(),
+                source,
+            })?;
+            self.report(Event::Decoded {
+                projector: p.id.clone(),
+                share: corr.decoded_share(),
+            });
+            out.push(corr);
+        }
+        Ok(out)
+    }
+
+    /// A second structured-light pass on standard projector `p` (shown alone; the others
+    /// keep their light) where [`SecondPassPlan::new`] finds it worth its captures and the rig
+    /// can show masked patterns. Leaves `p` black.
+    pub async fn second_pass(
+        &mut self,
+        p: &Projector,
+        manifest: &Manifest,
+        corr: &mut Correspondence,
+    ) -> Result<Option<SecondPass>, ProcedureError> {
+        let config = self.settings.decode;
+        let plan = match SecondPassPlan::new(&config, corr) {
+            Some(plan) if p.kind == ProjectorKind::Standard && self.rig.shows_images() => plan,
+            _ => return Ok(None),
+        };
+        self.report(Event::Stage {
+            stage: Stage::SecondPass,
+            captures: manifest.patterns.len() + 1,
+        });
+        let refused = |source| ProcedureError::Projector {
+            projector: p.id.clone(),
+            source,
+        };
+        let white = Frame::Image(plan.white(manifest).map_err(refused)?.into());
+        self.rig.show(&[(&p.id, white)]).await?;
+        let white = self.capture(Stage::SecondPass, 1.0).await?;
+        let limits = self.rig.camera();
+        let exposure = plan
+            .exposure(corr, &white, limits.saturation, limits.longest_exposure)
+            .map_err(refused)?;
+        let mut captures = Vec::with_capacity(manifest.patterns.len());
+        for f in &manifest.patterns {
+            let frame = Frame::Image(plan.pattern(manifest, f.pattern).map_err(refused)?.into());
+            self.rig.show(&[(&p.id, frame)]).await?;
+            captures.push(self.capture(Stage::SecondPass, exposure).await?);
+        }
+        self.rig.show(&[(&p.id, Frame::BLACK)]).await?;
+        let pass = plan
+            .finish(manifest, &config, corr, exposure, &captures)
+            .map_err(refused)?;
+        self.report(Event::SecondPass {
+            projector: p.id.clone(),
+            pass,
+        });
+        Ok(Some(pass))
+    }
+
+    /// Projector `d`'s response (DESIGN §4.3): a ramp of uniform codes read over the camera
+    /// pixels it was decoded on; its first level is `dark` and its last `white` (taken
+    /// before), the levels between are captured now. Leaves the projector black.
+    pub async fn response(
+        &mut self,
+        d: Decoded,
+        dark: &LinearImage,
+        white: &LinearImage,
+    ) -> Result<Measured, ProcedureError> {
+        let codes = ramp_codes(self.settings.ramp_levels)?;
+        let mut ramp = Vec::with_capacity(codes.len());
+        for (j, &code) in codes.iter().enumerate() {
+            ramp.push(if j == 0 {
+                dark.clone()
+            } else if j + 1 == codes.len() {
+                white.clone()
+            } else {
+                let frame = Frame::Uniform([code as f32; 3]);
+                self.show_and_capture(Stage::Responses, &[(&d.projector.id, frame)])
+                    .await?
+            });
+        }
+        self.rig.show(&[(&d.projector.id, Frame::BLACK)]).await?;
+        let (measured, noise) = footprint_ramp(&ramp, &d.corr);
+        let response = fit_response(&codes, &measured, &noise).map_err(|source| {
+            ProcedureError::Projector {
+                projector: d.projector.id.clone(),
+                source,
+            }
+        })?;
+        self.report(Event::Response {
+            projector: d.projector.id.clone(),
+            gamma: response.gamma,
+        });
+        Ok(Measured {
+            projector: d.projector,
+            corr: d.corr,
+            response,
+            second: d.second,
+        })
+    }
+
+    /// Hands every placed projector its nodes.
+    pub async fn assign(&mut self, placed: &[Placed]) -> Result<(), RigError> {
+        for p in placed {
+            self.rig.assign(&p.projector.id, &p.assignment()).await?;
+        }
+        Ok(())
+    }
+
+    /// Attenuation of every node of `placed` through the charts (DESIGN §4.5), multiplexed by
+    /// the settings' scheme: the black level (from `black`, a capture of the room with every
+    /// node black, when the caller has one), then one capture per row of the plan.
+    pub async fn attenuation(
+        &mut self,
+        setup: &Setup,
+        placed: &[Placed],
+        black: Option<&LinearImage>,
+    ) -> Result<Columns, ProcedureError> {
+        let ids: Vec<u32> = placed.iter().flat_map(Placed::ids).collect();
+        let scheme = self.settings.scheme;
+        let rows = plan(ids.len(), scheme);
+        self.report(Event::Stage {
+            stage: Stage::Attenuation,
+            captures: rows.len() + usize::from(black.is_none()),
+        });
+        let black = match black {
+            Some(image) => image.clone(),
+            None => {
+                let all_off = self.node_frames(placed, |_| false);
+                self.show_and_capture(Stage::Attenuation, &borrow(&all_off))
+                    .await?
+            }
+        };
+        let black = sample_charts(&black, &setup.corners, &setup.sample)?;
+        let mut measured = Vec::with_capacity(rows.len());
+        for on in &rows {
+            let frames = self.node_frames(placed, |j| on[j]);
+            let image = self
+                .show_and_capture(Stage::Attenuation, &borrow(&frames))
+                .await?;
+            measured.push(sample_charts(&image, &setup.corners, &setup.sample)?);
+        }
+        let off = self.node_frames(placed, |_| false);
+        self.rig.show(&borrow(&off)).await?;
+        let attenuation = solve(scheme, ids.len(), &black, &measured)?;
+        Ok(Columns { ids, attenuation })
+    }
+
+    /// Node-value frames for every placed projector: node `j` (counted over all of them, in
+    /// order) at white where `on(j)`, else black.
+    fn node_frames(&self, placed: &[Placed], on: impl Fn(usize) -> bool) -> Vec<(String, Frame)> {
+        let mut j = 0;
+        placed
+            .iter()
+            .map(|p| {
+                let values = p
+                    .nodes
+                    .iter()
+                    .map(|n| {
+                        j += 1;
+                        let lit = on(j - 1);
+                        (n.id, if lit { LinearRgb::ONE } else { LinearRgb::ZERO })
+                    })
+                    .collect();
+                (p.projector.id.clone(), Frame::Nodes(values))
+            })
+            .collect()
+    }
+
+    /// Hot calibration of `placed` (DESIGN §4.7): its nodes all black, then each alone at
+    /// white, one capture each, while every other projector keeps its light. Leaves its
+    /// nodes black.
+    pub async fn hot(&mut self, setup: &Setup, placed: &Placed) -> Result<Hot, ProcedureError> {
+        self.report(Event::Stage {
+            stage: Stage::Hot,
+            captures: placed.nodes.len() + 1,
+        });
+        let one = std::slice::from_ref(placed);
+        let off = self.node_frames(one, |_| false);
+        let image = self.show_and_capture(Stage::Hot, &borrow(&off)).await?;
+        let black = sample_charts(&image, &setup.corners, &setup.sample)?;
+        let mut measurable: Vec<bool> = black.iter().map(|s| s.status == PatchStatus::Ok).collect();
+        let (mut columns, mut sigma) = (Vec::new(), Vec::new());
+        for (j, node) in placed.nodes.iter().enumerate() {
+            let frames = self.node_frames(one, |i| i == j);
+            let image = self.show_and_capture(Stage::Hot, &borrow(&frames)).await?;
+            let white = sample_charts(&image, &setup.corners, &setup.sample)?;
+            for (m, w) in measurable.iter_mut().zip(&white) {
+                *m &= w.status == PatchStatus::Ok;
+            }
+            let (p, s) = differential(&white, &black)?;
+            columns.push((node.id, p));
+            sigma.push(s);
+        }
+        self.rig.show(&borrow(&off)).await?;
+        Ok(Hot {
+            columns,
+            sigma,
+            measurable,
+            black,
+        })
+    }
+
+    /// Brings up a dark room: every live projector black, then the luminaires' footprints,
+    /// structured light (disjoint ones together, second passes), responses, nodes feathered
+    /// together with the target kept dark, and their attenuation. Leaves every node black.
+    pub async fn bring_up(&mut self, setup: &Setup) -> Result<BringUp, ProcedureError> {
+        let live = self.rig.projectors();
+        let luminaires = luminaires(&live);
+        let dark = self.dark(&live).await?;
+        let whites = self.whites(&luminaires).await?;
+        let decoded = self.structured_light(&luminaires, &dark, &whites).await?;
+        let measured = self.responses(decoded, &luminaires, &dark, &whites).await?;
+        drop(whites);
+        let nodes = self.settings.nodes;
+        let placed = place(setup, &measured, None, 0, &nodes, &mut *self.progress)?;
+        self.assign(&placed).await?;
+        // Every node black is the room as `dark` saw it: its black level.
+        let columns = self.attenuation(setup, &placed, Some(&dark)).await?;
+        Ok(BringUp {
+            measured,
+            placed,
+            columns,
+            captures: self.captures,
+        })
+    }
+
+    /// The responses of decoded projectors, `whites[k]` being `projectors[k]`'s.
+    async fn responses(
+        &mut self,
+        decoded: Vec<Decoded>,
+        projectors: &[Projector],
+        dark: &LinearImage,
+        whites: &[LinearImage],
+    ) -> Result<Vec<Measured>, ProcedureError> {
+        let levels = self.settings.ramp_levels.saturating_sub(2);
+        self.report(Event::Stage {
+            stage: Stage::Responses,
+            captures: decoded.len() * levels,
+        });
+        let mut measured = Vec::with_capacity(decoded.len());
+        for d in decoded {
+            let Some(k) = projectors.iter().position(|p| p.id == d.projector.id) else {
+                continue;
+            };
+            measured.push(self.response(d, dark, &whites[k]).await?);
+        }
+        Ok(measured)
+    }
+
+    /// Calibrates live projector `id` while the others keep their light: its black offset
+    /// and white, structured light (pattern against inverse, so the others' light cancels),
+    /// a second pass where needed, its response, its nodes beside the projectors already lit
+    /// (`claimed`, the sum of their claims) with ids from `first_node`, and its attenuation
+    /// measured hot. Leaves its nodes black.
+    pub async fn join(
+        &mut self,
+        setup: &Setup,
+        id: &str,
+        claimed: Option<&[f32]>,
+        first_node: u32,
+    ) -> Result<Joined, ProcedureError> {
+        let projector = self
+            .rig
+            .projectors()
+            .into_iter()
+            .find(|p| p.id == id)
+            .ok_or_else(|| RigError::Gone(id.to_string()))?;
+        let one = std::slice::from_ref(&projector);
+        let dark = self.dark(one).await?;
+        let whites = self.whites(one).await?;
+        let decoded = self.structured_light(one, &dark, &whites).await?;
+        let measured = self.responses(decoded, one, &dark, &whites).await?;
+        let nodes = self.settings.nodes;
+        let placed = place(
+            setup,
+            &measured,
+            claimed,
+            first_node,
+            &nodes,
+            &mut *self.progress,
+        )?;
+        let (Some(measured), Some(placed)) =
+            (measured.into_iter().next(), placed.into_iter().next())
+        else {
+            return Err(RigError::Gone(id.to_string()).into());
+        };
+        self.assign(std::slice::from_ref(&placed)).await?;
+        let hot = self.hot(setup, &placed).await?;
+        Ok(Joined {
+            measured,
+            placed,
+            hot,
+            captures: self.captures,
+        })
+    }
+}
+
+/// Frames addressed by owned ids, as the rig takes them.
+fn borrow(frames: &[(String, Frame)]) -> Vec<(&str, Frame)> {
+    frames
+        .iter()
+        .map(|(id, f)| (id.as_str(), f.clone()))
+        .collect()
+}
