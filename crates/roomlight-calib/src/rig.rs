@@ -134,6 +134,9 @@ pub enum RigError {
     /// The camera failed.
     #[error("camera: {0}")]
     Camera(String),
+    /// The worker that ran [`Rig::offload`]ed work failed.
+    #[error("worker: {0}")]
+    Worker(String),
 }
 
 /// The camera's limits that calibration plans with.
@@ -180,6 +183,15 @@ pub trait Rig: Send {
     /// Whether [`Frame::Image`] can be shown (a second structured-light pass needs it).
     fn shows_images(&self) -> bool {
         false
+    }
+
+    /// Runs CPU-heavy work (decoding, segmentation) where it does not stall the rig's other
+    /// duties: an async rig hands it to a blocking thread; by default it runs in place.
+    fn offload<T: Send + 'static>(
+        &mut self,
+        work: impl FnOnce() -> T + Send + 'static,
+    ) -> impl Future<Output = Result<T, RigError>> + Send {
+        std::future::ready(Ok(work()))
     }
 }
 

@@ -204,32 +204,46 @@ impl<'a, R: Rig> Procedure<'a, R> {
         }
         let members: Vec<Projector> = group.iter().map(|&k| projectors[k].clone()).collect();
         self.black(&members).await?;
-        let mut out = Vec::with_capacity(group.len());
-        for (&k, ours) in group.iter().zip(owned_pixels(group, gains)) {
-            let (p, m) = (&projectors[k], &manifests[k]);
-            let config = match p.kind {
-                ProjectorKind::LargeAperture => self.settings.decode_large,
-                ProjectorKind::Standard => self.settings.decode,
-            };
-            let corr = decode_where(m, &config, ours.as_deref(), |f| {
-                let j = m
-                    .patterns
-                    .iter()
-                    .position(|q| q.file == f.file)
-                    .unwrap_or(0);
-                Ok(&captures[j])
+        let jobs: Vec<(Projector, Manifest, DecodeConfig, Option<Vec<bool>>)> = group
+            .iter()
+            .zip(owned_pixels(group, gains))
+            .map(|(&k, ours)| {
+                let p = &projectors[k];
+                let config = match p.kind {
+                    ProjectorKind::LargeAperture => self.settings.decode_large,
+                    ProjectorKind::Standard => self.settings.decode,
+                };
+                (p.clone(), manifests[k].clone(), config, ours)
             })
-            .map_err(|source| ProcedureError::Projector {
-                projector: p.id.clone(),
-                source,
-            })?;
+            .collect();
+        let corrs = self
+            .rig
+            .offload(move || {
+                jobs.iter()
+                    .map(|(p, m, config, ours)| {
+                        decode_where(m, config, ours.as_deref(), |f| {
+                            let j = m
+                                .patterns
+                                .iter()
+                                .position(|q| q.file == f.file)
+                                .unwrap_or(0);
+                            Ok(&captures[j])
+                        })
+                        .map_err(|source| ProcedureError::Projector {
+                            projector: p.id.clone(),
+                            source,
+                        })
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .await??;
+        for (p, corr) in members.iter().zip(&corrs) {
             self.report(Event::Decoded {
                 projector: p.id.clone(),
                 share: corr.decoded_share(),
             });
-            out.push(corr);
         }
-        Ok(out)
+        Ok(corrs)
     }
 
     /// A second structured-light pass on standard projector `p` (shown alone; the others
@@ -347,7 +361,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
         let black = match black {
             Some(image) => image.clone(),
             None => {
-                let all_off = self.node_frames(placed, |_| false);
+                let all_off = node_frames(&owners(placed), |_| false);
                 self.show_and_capture(Stage::Attenuation, &borrow(&all_off))
                     .await?
             }
@@ -355,62 +369,46 @@ impl<'a, R: Rig> Procedure<'a, R> {
         let black = sample_charts(&black, &setup.corners, &setup.sample)?;
         let mut measured = Vec::with_capacity(rows.len());
         for on in &rows {
-            let frames = self.node_frames(placed, |j| on[j]);
+            let frames = node_frames(&owners(placed), |j| on[j]);
             let image = self
                 .show_and_capture(Stage::Attenuation, &borrow(&frames))
                 .await?;
             measured.push(sample_charts(&image, &setup.corners, &setup.sample)?);
         }
-        let off = self.node_frames(placed, |_| false);
+        let off = node_frames(&owners(placed), |_| false);
         self.rig.show(&borrow(&off)).await?;
         let attenuation = solve(scheme, ids.len(), &black, &measured)?;
         Ok(Columns { ids, attenuation })
     }
 
-    /// Node-value frames for every placed projector: node `j` (counted over all of them, in
-    /// order) at white where `on(j)`, else black.
-    fn node_frames(&self, placed: &[Placed], on: impl Fn(usize) -> bool) -> Vec<(String, Frame)> {
-        let mut j = 0;
-        placed
-            .iter()
-            .map(|p| {
-                let values = p
-                    .nodes
-                    .iter()
-                    .map(|n| {
-                        j += 1;
-                        let lit = on(j - 1);
-                        (n.id, if lit { LinearRgb::ONE } else { LinearRgb::ZERO })
-                    })
-                    .collect();
-                (p.projector.id.clone(), Frame::Nodes(values))
-            })
-            .collect()
-    }
-
-    /// Hot calibration of `placed` (DESIGN §4.7): its nodes all black, then each alone at
-    /// white, one capture each, while every other projector keeps its light. Leaves its
-    /// nodes black.
-    pub async fn hot(&mut self, setup: &Setup, placed: &Placed) -> Result<Hot, ProcedureError> {
+    /// Hot calibration of projector `id`'s `nodes` (DESIGN §4.7): its nodes all black, then
+    /// each alone at white, one capture each, while every other projector keeps its light.
+    /// Leaves its nodes black.
+    pub async fn hot(
+        &mut self,
+        setup: &Setup,
+        id: &str,
+        nodes: &[u32],
+    ) -> Result<Hot, ProcedureError> {
         self.report(Event::Stage {
             stage: Stage::Hot,
-            captures: placed.nodes.len() + 1,
+            captures: nodes.len() + 1,
         });
-        let one = std::slice::from_ref(placed);
-        let off = self.node_frames(one, |_| false);
+        let one = [(id.to_string(), nodes.to_vec())];
+        let off = node_frames(&one, |_| false);
         let image = self.show_and_capture(Stage::Hot, &borrow(&off)).await?;
         let black = sample_charts(&image, &setup.corners, &setup.sample)?;
         let mut measurable: Vec<bool> = black.iter().map(|s| s.status == PatchStatus::Ok).collect();
         let (mut columns, mut sigma) = (Vec::new(), Vec::new());
-        for (j, node) in placed.nodes.iter().enumerate() {
-            let frames = self.node_frames(one, |i| i == j);
+        for (j, &node) in nodes.iter().enumerate() {
+            let frames = node_frames(&one, |i| i == j);
             let image = self.show_and_capture(Stage::Hot, &borrow(&frames)).await?;
             let white = sample_charts(&image, &setup.corners, &setup.sample)?;
             for (m, w) in measurable.iter_mut().zip(&white) {
                 *m &= w.status == PatchStatus::Ok;
             }
             let (p, s) = differential(&white, &black)?;
-            columns.push((node.id, p));
+            columns.push((node, p));
             sigma.push(s);
         }
         self.rig.show(&borrow(&off)).await?;
@@ -447,7 +445,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
     }
 
     /// The responses of decoded projectors, `whites[k]` being `projectors[k]`'s.
-    async fn responses(
+    pub async fn responses(
         &mut self,
         decoded: Vec<Decoded>,
         projectors: &[Projector],
@@ -507,7 +505,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
             return Err(RigError::Gone(id.to_string()).into());
         };
         self.assign(std::slice::from_ref(&placed)).await?;
-        let hot = self.hot(setup, &placed).await?;
+        let hot = self.hot(setup, &placed.projector.id, &placed.ids()).await?;
         Ok(Joined {
             measured,
             placed,
@@ -522,5 +520,39 @@ fn borrow(frames: &[(String, Frame)]) -> Vec<(&str, Frame)> {
     frames
         .iter()
         .map(|(id, f)| (id.as_str(), f.clone()))
+        .collect()
+}
+
+/// Each placed projector's id and node ids.
+fn owners(placed: &[Placed]) -> Vec<(String, Vec<u32>)> {
+    placed
+        .iter()
+        .map(|p| (p.projector.id.clone(), p.ids()))
+        .collect()
+}
+
+/// Node-value frames for projectors and their nodes: node `j` (counted over all of them, in
+/// order) at white where `on(j)`, else black.
+fn node_frames(owners: &[(String, Vec<u32>)], on: impl Fn(usize) -> bool) -> Vec<(String, Frame)> {
+    let mut j = 0;
+    owners
+        .iter()
+        .map(|(id, nodes)| {
+            let values = nodes
+                .iter()
+                .map(|&n| {
+                    j += 1;
+                    (
+                        n,
+                        if on(j - 1) {
+                            LinearRgb::ONE
+                        } else {
+                            LinearRgb::ZERO
+                        },
+                    )
+                })
+                .collect();
+            (id.clone(), Frame::Nodes(values))
+        })
         .collect()
 }
