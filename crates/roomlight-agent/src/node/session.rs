@@ -1,0 +1,533 @@
+//! One session of a node agent with the camera agent: the handshake (Hello with the values it
+//! remembers, then Welcome, Assign and each node's attenuation), the message loop (errors in,
+//! steps, contributions and acknowledgements out; calibration patterns shown as sent), and
+//! heartbeats.
+//!
+//! It knows nothing of reconnecting or of the state file's format: it ends with a
+//! [`SessionEnd`] or an error, and keeps what must outlive it in the node agent's [`Memory`].
+
+use super::NodeConfig;
+use super::state::Memory;
+use crate::AgentError;
+use crate::hardware::{Assignment, Display, Pattern};
+use roomlight_core::{AttenuationColumn, LinearRgb, NodeState};
+use roomlight_proto::convert::{from_rgb, from_sparse, to_rgb, to_sparse};
+use roomlight_proto::{PROTOCOL_VERSION, v1};
+use std::collections::HashMap;
+use std::time::Duration;
+use tokio::sync::mpsc;
+use tokio_stream::StreamExt;
+use tokio_stream::wrappers::ReceiverStream;
+use tokio_util::sync::CancellationToken;
+
+/// Largest message a node agent takes from the camera agent (an Assign of a 4K projector's
+/// weights is about 70 MB).
+const MAX_ROOM_MESSAGE: usize = 256 << 20;
+
+/// Heartbeat period until the camera agent's Welcome gives its own.
+const FIRST_HEARTBEAT: Duration = Duration::from_secs(1);
+
+/// How a session with the camera agent ended.
+#[derive(Debug)]
+pub(super) enum SessionEnd {
+    /// `cancel` fired: the node said goodbye.
+    Cancelled,
+    /// The camera agent ended the stream or went away.
+    Closed,
+}
+
+fn message(body: v1::node_message::Body) -> v1::NodeMessage {
+    v1::NodeMessage { body: Some(body) }
+}
+
+/// Queues a message to the camera agent; a closed queue means the stream is gone.
+async fn send(
+    tx: &mpsc::Sender<v1::NodeMessage>,
+    body: v1::node_message::Body,
+) -> Result<(), AgentError> {
+    tx.send(message(body))
+        .await
+        .map_err(|_| AgentError::Protocol("the outgoing stream closed".into()))
+}
+
+/// Runs one session until `cancel`, the camera agent's goodbye or the end of the stream.
+pub(super) async fn run(
+    config: &NodeConfig,
+    endpoint: &tonic::transport::Endpoint,
+    display: &mut impl Display,
+    cancel: &CancellationToken,
+    memory: &mut Memory,
+) -> Result<SessionEnd, AgentError> {
+    // An Assign with a projector's weights can be several megabytes.
+    let mut client = v1::room_client::RoomClient::new(endpoint.connect().await?)
+        .max_decoding_message_size(MAX_ROOM_MESSAGE);
+    let (tx, rx) = mpsc::channel(256);
+    send(&tx, hello(config, display, memory)).await?;
+    let mut inbound = client.attach(ReceiverStream::new(rx)).await?.into_inner();
+    let mut session = Session {
+        config,
+        display,
+        memory,
+        tx,
+        assigned: Vec::new(),
+        nodes: HashMap::new(),
+        applied: HashMap::new(),
+        started: false,
+    };
+    let mut ticker = tokio::time::interval(FIRST_HEARTBEAT);
+    loop {
+        let next = tokio::select! {
+            () = cancel.cancelled() => {
+                let goodbye = v1::Goodbye { reason: "shutting down".into() };
+                // The stream may already be gone; the node stops either way.
+                let _ = send(&session.tx, v1::node_message::Body::Goodbye(goodbye)).await;
+                return Ok(SessionEnd::Cancelled);
+            }
+            _ = ticker.tick() => {
+                send(&session.tx, v1::node_message::Body::Heartbeat(v1::Heartbeat { sent_unix_ms: 0 })).await?;
+                continue;
+            }
+            next = inbound.next() => next,
+        };
+        let Some(msg) = next.transpose()? else {
+            return Ok(SessionEnd::Closed);
+        };
+        use v1::room_message::Body;
+        match msg.body {
+            Some(Body::Welcome(w)) => ticker = tokio::time::interval(session.welcome(&w)),
+            Some(Body::Assign(a)) => session.assign(&a)?,
+            Some(Body::Attenuation(a)) => session.attenuation(&a).await?,
+            Some(Body::Errors(e)) => session.errors(&e).await?,
+            Some(Body::Show(show)) => session.show(show).await?,
+            Some(Body::Goodbye(g)) => {
+                tracing::info!(reason = %g.reason, "the camera agent said goodbye");
+                return Ok(SessionEnd::Closed);
+            }
+            None => {}
+        }
+    }
+}
+
+/// The Hello that opens a session: who this is, its resolution, and the values (with their
+/// calibration epoch and attenuation) it remembers, so a camera agent can resume it.
+fn hello(config: &NodeConfig, display: &impl Display, memory: &Memory) -> v1::node_message::Body {
+    let nodes = memory
+        .values
+        .iter()
+        .map(|(&node, &x)| v1::NodeState {
+            node,
+            x: Some(to_rgb(x)),
+            attenuation: memory
+                .attenuation
+                .get(&node)
+                .map(|c| to_sparse(c.support(), c.values())),
+        })
+        .collect();
+    v1::node_message::Body::Hello(v1::Hello {
+        protocol_version: PROTOCOL_VERSION,
+        room: config.room.clone(),
+        token: config.token.clone(),
+        projector_id: config.projector_id.clone(),
+        width: display.resolution().map_or(0, |r| r.0),
+        height: display.resolution().map_or(0, |r| r.1),
+        kind: config.kind as i32,
+        state: Some(v1::PersistedState {
+            calibration_epoch: memory.epoch,
+            nodes,
+        }),
+        ..Default::default()
+    })
+}
+
+/// What one session knows beyond the node agent's memory.
+struct Session<'a, D: Display> {
+    config: &'a NodeConfig,
+    display: &'a mut D,
+    memory: &'a mut Memory,
+    /// The outgoing stream.
+    tx: mpsc::Sender<v1::NodeMessage>,
+    /// The nodes the camera agent assigned to this projector.
+    assigned: Vec<u32>,
+    /// The running state of each node whose attenuation arrived.
+    nodes: HashMap<u32, NodeState>,
+    /// Round → how many of this projector's nodes have applied its errors.
+    applied: HashMap<u64, usize>,
+    /// Whether the start (frame 0) has been acknowledged.
+    started: bool,
+}
+
+impl<D: Display> Session<'_, D> {
+    /// Takes the room's terms; returns the heartbeat period it asks for.
+    fn welcome(&mut self, w: &v1::Welcome) -> Duration {
+        // Values from another calibration mean nothing now: start afresh.
+        if !w.state_accepted {
+            self.memory.forget_values();
+        }
+        self.memory.epoch = w.calibration_epoch;
+        Duration::from_millis(u64::from(w.heartbeat_ms.max(50)))
+    }
+
+    fn assign(&mut self, a: &v1::Assign) -> Result<(), AgentError> {
+        self.assigned = a.nodes.iter().map(|n| n.node).collect();
+        // Weights drawn by the camera agent (calibration over the wire): a malformed
+        // assignment ends the session (the camera agent logs the stream's end).
+        if a.width > 0 {
+            let assignment = assignment_from_wire(a)?;
+            self.display.assign(&assignment);
+            self.memory.assignment = Some(assignment);
+            self.memory.flush();
+        }
+        Ok(())
+    }
+
+    /// A node's attenuation column and white response: it starts (or, for a node already
+    /// running, takes the new response), and once every assigned node has started the
+    /// projector acknowledges its start.
+    async fn attenuation(&mut self, a: &v1::Attenuation) -> Result<(), AgentError> {
+        let (Some(p), Some(s)) = (a.p.as_ref(), a.s.as_ref()) else {
+            return Err(AgentError::Protocol(format!(
+                "attenuation of node {} lacks p or s",
+                a.node
+            )));
+        };
+        let (support, values) =
+            from_sparse("attenuation p", p).map_err(|e| AgentError::Protocol(e.to_string()))?;
+        let (_, white) =
+            from_sparse("attenuation s", s).map_err(|e| AgentError::Protocol(e.to_string()))?;
+        let column = AttenuationColumn::new(support, values)?;
+        // Its own last value, else the camera agent's start, else the configured one.
+        let offered = match a
+            .start
+            .as_ref()
+            .map(|v| from_rgb("attenuation start", Some(v)))
+            .transpose()
+        {
+            Ok(v) => v.map(LinearRgb::clamp_unit),
+            Err(e) => {
+                tracing::warn!(node = a.node, error = %e, "malformed start: ignored");
+                None
+            }
+        };
+        // A node already running (new `s` after a projector joined) keeps its value.
+        let start = self
+            .nodes
+            .get(&a.node)
+            .map(NodeState::shown)
+            .or_else(|| self.memory.values.get(&a.node).copied())
+            .or(offered)
+            .unwrap_or(self.config.start);
+        self.memory.attenuation.insert(a.node, column.clone());
+        let state = NodeState::new(column, &white, self.config.rule, start)?;
+        self.display.show(a.node, state.shown());
+        self.nodes.insert(a.node, state);
+        if !self.started
+            && !self.assigned.is_empty()
+            && self.assigned.iter().all(|n| self.nodes.contains_key(n))
+        {
+            self.started = true;
+            acknowledge(self.display, &self.tx, 0, false).await?;
+        }
+        Ok(())
+    }
+
+    /// One node's errors of a round: its step, shown and reported as a contribution; once all
+    /// this projector's nodes have stepped, the round's frame is acknowledged.
+    async fn errors(&mut self, e: &v1::Errors) -> Result<(), AgentError> {
+        let Some(state) = self.nodes.get_mut(&e.node) else {
+            tracing::warn!(
+                node = e.node,
+                "errors for a node this projector does not own: ignored"
+            );
+            return Ok(());
+        };
+        let Some(sparse) = e.errors.as_ref() else {
+            return Ok(());
+        };
+        let errors = match from_sparse("errors", sparse) {
+            Ok((_, v)) => v,
+            Err(err) => {
+                tracing::warn!(node = e.node, error = %err, "malformed errors: ignored");
+                return Ok(());
+            }
+        };
+        // Invalid errors leave the node where it is (and it still acknowledges the round).
+        let delta = state.update(&errors, e.restart).unwrap_or(LinearRgb::ZERO);
+        self.display.show(e.node, state.shown());
+        self.memory.values.insert(e.node, state.shown());
+        let (patches, values): (Vec<u32>, Vec<LinearRgb>) = state.contribution(delta).unzip();
+        let contribution = v1::Contribution {
+            round: e.round,
+            node: e.node,
+            delta: Some(to_sparse(&patches, &values)),
+        };
+        send(&self.tx, v1::node_message::Body::Contribution(contribution)).await?;
+        let done = self.applied.entry(e.round).or_insert(0);
+        *done += 1;
+        if *done == self.nodes.len() {
+            // This round is complete; rounds before it will never be.
+            self.applied.retain(|r, _| *r > e.round);
+            self.memory.maybe_flush();
+            acknowledge(self.display, &self.tx, e.round, false).await?;
+        }
+        Ok(())
+    }
+
+    /// A calibration pattern: node values shown as they are, without touching the node states
+    /// (values for nodes it does not own, or not finite, are refused), or a whole-frame
+    /// pattern. One the display cannot show is not acknowledged.
+    async fn show(&mut self, show: v1::Show) -> Result<(), AgentError> {
+        let values = match show.pattern.map(pattern_from_wire) {
+            Some(Ok(Wire::Nodes(values))) => values,
+            Some(Ok(Wire::Frame(pattern))) => {
+                if !self.display.show_pattern(pattern) {
+                    tracing::warn!(
+                        seq = show.seq,
+                        "this display shows node values only: pattern ignored"
+                    );
+                    return Ok(());
+                }
+                return acknowledge(self.display, &self.tx, show.seq, true).await;
+            }
+            Some(Err(e)) => {
+                tracing::warn!(seq = show.seq, error = %e, "malformed Show pattern: ignored");
+                return Ok(());
+            }
+            None => {
+                tracing::warn!(seq = show.seq, "Show without a pattern: ignored");
+                return Ok(());
+            }
+        };
+        for v in &values.values {
+            if !self.assigned.contains(&v.node) {
+                tracing::warn!(
+                    node = v.node,
+                    "Show for a node this projector does not own: ignored"
+                );
+                continue;
+            }
+            match from_rgb("show value", v.x.as_ref()) {
+                Ok(x) => self.display.show(v.node, x.clamp_unit()),
+                Err(e) => {
+                    tracing::warn!(node = v.node, error = %e, "malformed Show value: ignored")
+                }
+            }
+        }
+        acknowledge(self.display, &self.tx, show.seq, true).await
+    }
+}
+
+/// Acknowledges frame `seq` (a round's, or with `pattern` a Show pattern's) once the display
+/// has everything shown so far.
+async fn acknowledge(
+    display: &mut impl Display,
+    tx: &mpsc::Sender<v1::NodeMessage>,
+    seq: u64,
+    pattern: bool,
+) -> Result<(), AgentError> {
+    display.flush().await;
+    send(
+        tx,
+        v1::node_message::Body::Shown(v1::Shown { seq, pattern }),
+    )
+    .await
+}
+
+/// A Show message's pattern: node values, or a whole frame.
+enum Wire {
+    Nodes(v1::NodeValues),
+    Frame(Pattern),
+}
+
+fn pattern_from_wire(p: v1::show::Pattern) -> Result<Wire, String> {
+    use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+    Ok(match p {
+        v1::show::Pattern::Nodes(values) => Wire::Nodes(values),
+        v1::show::Pattern::Uniform(u) => {
+            let code = from_rgb("uniform code", u.code.as_ref()).map_err(|e| e.to_string())?;
+            if code.0.iter().any(|v| !(0.0..=1.0).contains(v)) {
+                return Err(format!("uniform code {code:?}: expected values in [0, 1]"));
+            }
+            Wire::Frame(Pattern::Uniform(code.0.map(|v| v as f32)))
+        }
+        v1::show::Pattern::Gray(g) => {
+            let axis = match v1::Axis::try_from(g.axis) {
+                Ok(v1::Axis::Column) => Axis::Column,
+                Ok(v1::Axis::Row) => Axis::Row,
+                _ => return Err(format!("Gray bit axis {}: expected column or row", g.axis)),
+            };
+            let coding = match v1::Coding::try_from(g.coding) {
+                Ok(v1::Coding::Gray) => Coding::Gray,
+                Ok(v1::Coding::Xor04) => Coding::Xor04,
+                _ => {
+                    return Err(format!(
+                        "Gray bit coding {}: expected gray or xor04",
+                        g.coding
+                    ));
+                }
+            };
+            if g.bit >= 32 {
+                return Err(format!("Gray bit {}: expected below 32", g.bit));
+            }
+            Wire::Frame(Pattern::Structured {
+                pattern: Gray::Bit {
+                    axis,
+                    bit: g.bit,
+                    inverse: g.inverse,
+                },
+                coding,
+            })
+        }
+    })
+}
+
+/// The weights and response of an Assign message, checked.
+fn assignment_from_wire(a: &v1::Assign) -> Result<Assignment, AgentError> {
+    let gamma = match a.gamma.as_slice() {
+        [] => [1.0; 3],
+        [r, g, b] => [*r, *g, *b],
+        other => {
+            return Err(AgentError::Protocol(format!(
+                "assignment: {} response exponents, expected 3",
+                other.len()
+            )));
+        }
+    };
+    let mut nodes = Vec::with_capacity(a.nodes.len());
+    for n in &a.nodes {
+        if n.pixels.len() != n.weights.len() {
+            return Err(AgentError::Protocol(format!(
+                "assignment of node {}: {} pixels, {} weights",
+                n.node,
+                n.pixels.len(),
+                n.weights.len()
+            )));
+        }
+        nodes.push((
+            n.node,
+            n.pixels
+                .iter()
+                .copied()
+                .zip(n.weights.iter().copied())
+                .collect(),
+        ));
+    }
+    let assignment = Assignment {
+        width: a.width,
+        height: a.height,
+        response: roomlight_calib::response::Response {
+            gamma,
+            max_residual: [0.0; 3],
+        },
+        nodes,
+    };
+    assignment.validate("assignment")?;
+    Ok(assignment)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assign(pixels: Vec<u32>, weights: Vec<f32>, gamma: Vec<f64>) -> v1::Assign {
+        v1::Assign {
+            nodes: vec![v1::NodeAssignment {
+                node: 3,
+                chart: 3,
+                pixels,
+                weights,
+            }],
+            width: 4,
+            height: 2,
+            gamma,
+        }
+    }
+
+    /// A well-formed assignment is taken as sent; every malformed one is refused with a message
+    /// that names the node or the field, never drawn.
+    #[test]
+    fn assignments_over_the_wire_are_checked() {
+        let ok = assignment_from_wire(&assign(vec![0, 5, 7], vec![1.0, 0.5, 0.25], vec![]))
+            .expect("well formed");
+        assert_eq!(ok.nodes, vec![(3, vec![(0, 1.0), (5, 0.5), (7, 0.25)])]);
+        assert!(
+            ok.response.gamma.iter().all(|g| (g - 1.0).abs() < 1e-12),
+            "no exponents: linear"
+        );
+        let refused = |a: v1::Assign, says: &str| {
+            let e = assignment_from_wire(&a).expect_err("malformed").to_string();
+            assert!(e.contains(says), "{e:?} should say {says:?}");
+        };
+        refused(
+            assign(vec![0, 1], vec![1.0], vec![]),
+            "node 3: 2 pixels, 1 weights",
+        );
+        refused(
+            assign(vec![0, 8], vec![1.0, 1.0], vec![]),
+            "outside the 4×2 frame",
+        );
+        refused(assign(vec![5, 2], vec![1.0, 1.0], vec![]), "not increasing");
+        refused(assign(vec![0], vec![1.5], vec![]), "outside (0, 1]");
+        refused(assign(vec![0], vec![f32::NAN], vec![]), "outside (0, 1]");
+        refused(
+            assign(vec![0], vec![1.0], vec![2.2, 2.2]),
+            "2 response exponents",
+        );
+        refused(
+            assign(vec![0], vec![1.0], vec![2.2, f64::INFINITY, 2.2]),
+            "finite and positive",
+        );
+        let mut empty = assign(vec![0], vec![1.0], vec![]);
+        empty.height = 0;
+        refused(empty, "a 4×0 projector");
+    }
+
+    /// Whole-frame patterns are read as sent; codes outside [0, 1], unknown axes or codings and
+    /// impossible bits are refused.
+    #[test]
+    fn show_patterns_over_the_wire_are_checked() {
+        use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+        let uniform = |v: f64| {
+            v1::show::Pattern::Uniform(v1::Uniform {
+                code: Some(to_rgb(LinearRgb::splat(v))),
+            })
+        };
+        assert!(matches!(
+            pattern_from_wire(uniform(0.25)),
+            Ok(Wire::Frame(Pattern::Uniform([0.25, 0.25, 0.25])))
+        ));
+        for bad in [-0.1, 1.5, f64::NAN] {
+            assert!(pattern_from_wire(uniform(bad)).is_err(), "code {bad}");
+        }
+        let gray = |axis: i32, bit: u32, coding: i32| {
+            v1::show::Pattern::Gray(v1::GrayBit {
+                axis,
+                bit,
+                inverse: true,
+                coding,
+            })
+        };
+        let row = v1::Axis::Row as i32;
+        let xor = v1::Coding::Xor04 as i32;
+        assert!(matches!(
+            pattern_from_wire(gray(row, 3, xor)),
+            Ok(Wire::Frame(Pattern::Structured {
+                pattern: Gray::Bit {
+                    axis: Axis::Row,
+                    bit: 3,
+                    inverse: true
+                },
+                coding: Coding::Xor04
+            }))
+        ));
+        assert!(
+            pattern_from_wire(gray(0, 3, xor)).is_err(),
+            "unspecified axis"
+        );
+        assert!(pattern_from_wire(gray(9, 3, xor)).is_err(), "unknown axis");
+        assert!(
+            pattern_from_wire(gray(row, 3, 0)).is_err(),
+            "unspecified coding"
+        );
+        assert!(pattern_from_wire(gray(row, 40, xor)).is_err(), "bit 40");
+    }
+}

@@ -1,0 +1,246 @@
+//! What a node agent remembers across sessions and restarts: the value each node last showed,
+//! the calibration epoch they belong to, the assignment and attenuation the camera agent sent,
+//! and the state file that keeps them on disk (written atomically, at most once a second).
+//!
+//! It knows nothing of the wire or of sessions: the session hands it values and columns, and the
+//! node agent asks it to relight a display or to flush.
+
+use crate::AgentError;
+use crate::hardware::{Assignment, Display};
+use roomlight_core::{AttenuationColumn, LinearRgb};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// What a node agent keeps on disk: the values its nodes show, and the calibration they belong to.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SavedState {
+    /// Calibration epoch the values were computed under.
+    pub calibration_epoch: u64,
+    /// Node id → linear light shown.
+    pub values: Vec<(u32, LinearRgb)>,
+    /// The nodes' weights and response when the camera agent segmented this projector over
+    /// the wire (so that a restarted node can draw its values before it reconnects).
+    #[serde(default)]
+    pub assignment: Option<Assignment>,
+    /// Node id → its attenuation column as the camera agent last sent it (sent back in Hello
+    /// with the values).
+    #[serde(default)]
+    pub attenuation: Vec<(u32, AttenuationColumn)>,
+}
+
+impl SavedState {
+    /// Reads a state file; a missing file is `Ok(None)`, an unreadable one an error naming it.
+    pub fn load(path: &Path) -> Result<Option<Self>, AgentError> {
+        let named = |e: &dyn std::fmt::Display| {
+            AgentError::Protocol(format!("state file {}: {e}", path.display()))
+        };
+        let text = match std::fs::read_to_string(path) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(named(&e)),
+        };
+        let mut state: Self = serde_json::from_str(&text).map_err(|e| named(&e))?;
+        if state.values.iter().any(|(_, v)| !v.is_finite()) {
+            return Err(named(&"a value is not finite"));
+        }
+        if let Some(a) = &state.assignment {
+            a.validate(&format!("state file {}", path.display()))?;
+        }
+        // Deserialised columns are not checked: build them anew.
+        for (node, column) in &mut state.attenuation {
+            *column = AttenuationColumn::new(column.support().to_vec(), column.values().to_vec())
+                .map_err(|e| named(&format!("attenuation of node {node}: {e}")))?;
+        }
+        Ok(Some(state))
+    }
+
+    /// Writes the state atomically: a temporary file beside it, synced, then renamed over it.
+    pub fn save(&self, path: &Path) -> Result<(), AgentError> {
+        let io =
+            |e: std::io::Error| AgentError::Protocol(format!("state file {}: {e}", path.display()));
+        let tmp = path.with_extension("tmp");
+        let text = serde_json::to_string(self).map_err(|e| AgentError::Protocol(e.to_string()))?;
+        {
+            let mut f = std::fs::File::create(&tmp).map_err(io)?;
+            f.write_all(text.as_bytes()).map_err(io)?;
+            f.sync_all().map_err(io)?;
+        }
+        std::fs::rename(&tmp, path).map_err(io)
+    }
+}
+
+/// A node agent's memory: what the next session starts from, and its state file.
+#[derive(Debug)]
+pub(super) struct Memory {
+    /// The last value each node showed: the start of the next session.
+    pub(super) values: HashMap<u32, LinearRgb>,
+    /// The calibration epoch of `values`.
+    pub(super) epoch: u64,
+    /// The assignment received over the wire, kept with the values.
+    pub(super) assignment: Option<Assignment>,
+    /// Each node's last attenuation column.
+    pub(super) attenuation: HashMap<u32, AttenuationColumn>,
+    path: Option<PathBuf>,
+    last_write: Option<Instant>,
+}
+
+impl Memory {
+    /// The memory kept in `path` (empty when there is no file or no path), shown at once on
+    /// `display` so that the lights come back before any camera agent is reachable.
+    pub(super) fn relight(
+        path: Option<PathBuf>,
+        display: &mut impl Display,
+        projector: &str,
+    ) -> Result<Self, AgentError> {
+        let mut memory = Self {
+            values: HashMap::new(),
+            epoch: 0,
+            assignment: None,
+            attenuation: HashMap::new(),
+            path,
+            last_write: None,
+        };
+        let saved = match memory.path.as_deref() {
+            Some(path) => SavedState::load(path)?,
+            None => None,
+        };
+        let Some(saved) = saved else {
+            return Ok(memory);
+        };
+        if let Some(a) = &saved.assignment {
+            display.assign(a);
+        }
+        for &(node, value) in &saved.values {
+            display.show(node, value);
+        }
+        tracing::info!(%projector, nodes = saved.values.len(), "relit from the state file");
+        memory.values = saved.values.into_iter().collect();
+        memory.epoch = saved.calibration_epoch;
+        memory.assignment = saved.assignment;
+        memory.attenuation = saved.attenuation.into_iter().collect();
+        Ok(memory)
+    }
+
+    /// Values from another calibration mean nothing now: forget them.
+    pub(super) fn forget_values(&mut self) {
+        self.values.clear();
+        self.attenuation.clear();
+    }
+
+    /// Writes the state file unless it was written less than a second ago.
+    pub(super) fn maybe_flush(&mut self) {
+        if self
+            .last_write
+            .is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
+        {
+            self.flush();
+        }
+    }
+
+    /// Writes the state file now (when there is one).
+    pub(super) fn flush(&mut self) {
+        let Some(path) = &self.path else { return };
+        let mut values: Vec<(u32, LinearRgb)> = self.values.iter().map(|(&n, &v)| (n, v)).collect();
+        values.sort_by_key(|(n, _)| *n);
+        let mut attenuation: Vec<(u32, AttenuationColumn)> = self
+            .attenuation
+            .iter()
+            .map(|(&n, c)| (n, c.clone()))
+            .collect();
+        attenuation.sort_by_key(|(n, _)| *n);
+        let saved = SavedState {
+            calibration_epoch: self.epoch,
+            values,
+            assignment: self.assignment.clone(),
+            attenuation,
+        };
+        if let Err(e) = saved.save(path) {
+            // The lights matter more than the file: log and carry on.
+            tracing::warn!(error = %e, "could not write the state file");
+        }
+        self.last_write = Some(Instant::now());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A state file whose attenuation is not a valid column (unsorted support) is refused
+    /// with a message that names the file and the node; a valid one reads back as written.
+    #[test]
+    fn state_files_check_their_attenuation() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("p.state.json");
+        let column = AttenuationColumn::new(
+            vec![1, 4],
+            vec![LinearRgb::splat(0.5), LinearRgb::splat(0.25)],
+        )
+        .expect("column");
+        let saved = SavedState {
+            calibration_epoch: 3,
+            values: vec![(7, LinearRgb::splat(0.4))],
+            assignment: None,
+            attenuation: vec![(7, column)],
+        };
+        saved.save(&path).expect("save");
+        assert_eq!(SavedState::load(&path).expect("load"), Some(saved));
+        let text = std::fs::read_to_string(&path).expect("read");
+        std::fs::write(&path, text.replace("[1,4]", "[4,1]")).expect("corrupt");
+        let e = SavedState::load(&path)
+            .expect_err("unsorted support")
+            .to_string();
+        assert!(e.contains("p.state.json") && e.contains("node 7"), "{e}");
+    }
+
+    /// A missing file is no state; a file that is not JSON, or whose value is out of range
+    /// (JSON has no infinity), is refused naming the file.
+    #[test]
+    fn missing_files_are_empty_and_broken_ones_are_named() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("q.state.json");
+        assert_eq!(SavedState::load(&path).expect("missing"), None);
+        std::fs::write(&path, "{ not json").expect("write");
+        let e = SavedState::load(&path).expect_err("not json").to_string();
+        assert!(e.contains("q.state.json"), "{e}");
+        std::fs::write(
+            &path,
+            r#"{"calibration_epoch":1,"values":[[0,[1e999,0,0]]]}"#,
+        )
+        .expect("write");
+        let e = SavedState::load(&path).expect_err("infinite").to_string();
+        assert!(e.contains("q.state.json"), "{e}");
+    }
+
+    /// A display that records what it was told to show.
+    #[derive(Default)]
+    struct Recorder(HashMap<u32, LinearRgb>);
+
+    impl Display for Recorder {
+        fn show(&mut self, node: u32, value: LinearRgb) {
+            self.0.insert(node, value);
+        }
+    }
+
+    /// The memory written by one node agent relights the next one's display and starts its
+    /// session from the same values and epoch.
+    #[test]
+    fn a_flushed_memory_relights_the_next_run() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("r.state.json");
+        let mut first = Memory::relight(Some(path.clone()), &mut Recorder::default(), "r")
+            .expect("no file yet");
+        assert!(first.values.is_empty() && first.epoch == 0);
+        first.values.insert(2, LinearRgb::splat(0.3));
+        first.epoch = 5;
+        first.flush();
+        let mut display = Recorder::default();
+        let second = Memory::relight(Some(path), &mut display, "r").expect("relit");
+        assert_eq!(second.epoch, 5);
+        assert_eq!(second.values, first.values);
+        assert_eq!(display.0, first.values);
+    }
+}
