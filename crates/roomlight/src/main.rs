@@ -1,23 +1,13 @@
 //! The `roomlight` command: a thin clap front over the crates.
 
-mod bench;
-mod bench_calib;
-mod bench_net;
-mod bench_report;
-mod bench_room;
-mod bench_sim;
-mod demo;
 mod graycode_cmd;
-mod pipeline;
-mod pm;
 mod procs;
-mod rendered;
-mod report;
-mod shadow;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use peak_alloc::PeakAlloc;
+use roomlight_lab::bench;
+use roomlight_lab::demo::{self, DemoOptions};
 use std::path::PathBuf;
 
 /// Counts heap use so that benchmarks can report memory.
@@ -39,7 +29,7 @@ struct Cli {
 enum Command {
     /// Runs the best end-to-end pipeline there is so far: a synthetic room lit by distributed
     /// node updates from the conventional start, reported against the exact optimum.
-    Demo(demo::DemoArgs),
+    Demo(DemoArgs),
     /// The simulated hardware as a process: a synthetic room served as `VirtualHardware`, or
     /// (`--scene`) the rendered room served as `RenderedRoom`.
     Sim(procs::SimArgs),
@@ -75,6 +65,23 @@ enum Command {
     /// room's presets, the hard cases, a thousand-node room, sparsity and scaling — as a table,
     /// `--json` and an HTML page (`--out`).
     Bench(BenchArgs),
+}
+
+/// Options of the demo.
+#[derive(Debug, clap::Args)]
+struct DemoArgs {
+    /// A smaller room (for tests).
+    #[arg(long)]
+    quick: bool,
+    /// The synthetic-room comparison of update rules instead of the simulated lab.
+    #[arg(long)]
+    synthetic: bool,
+    /// Seed of the synthetic room and the camera noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Where the report goes.
+    #[arg(long, default_value = "roomlight-report")]
+    out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -171,7 +178,12 @@ enum BenchCommand {
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Demo(args) => demo::run(&args),
+        Command::Demo(args) => demo::run(&DemoOptions {
+            quick: args.quick,
+            synthetic: args.synthetic,
+            seed: args.seed,
+            out: args.out,
+        }),
         Command::Sim(args) => procs::sim(&args),
         Command::Calibrate(args) => procs::calibrate(&args),
         Command::Camera { config } => procs::camera(&config),
@@ -184,8 +196,8 @@ fn main() -> Result<()> {
 
 fn bench(args: BenchArgs) -> Result<()> {
     match args.which {
-        None => bench_room::run(
-            &bench_room::Plan {
+        None => bench::room::run(
+            &bench::room::Plan {
                 quick: args.quick,
                 presets: true,
                 hard: true,
@@ -199,7 +211,7 @@ fn bench(args: BenchArgs) -> Result<()> {
             &ALLOCATOR,
         ),
         Some(BenchCommand::Core { quick, json, seed }) => {
-            bench::core(quick, json.as_deref(), seed, &ALLOCATOR)
+            bench::core::core(quick, json.as_deref(), seed, &ALLOCATOR)
         }
         Some(BenchCommand::Room {
             quick,
@@ -209,8 +221,8 @@ fn bench(args: BenchArgs) -> Result<()> {
             repeats,
             seed,
             case,
-        }) => bench_room::run(
-            &bench_room::Plan {
+        }) => bench::room::run(
+            &bench::room::Plan {
                 quick,
                 presets: !hard,
                 hard,
@@ -223,8 +235,8 @@ fn bench(args: BenchArgs) -> Result<()> {
             },
             &ALLOCATOR,
         ),
-        Some(BenchCommand::Net { quick }) => bench_net::run(quick, &ALLOCATOR).map(|_| ()),
-        Some(BenchCommand::Calib { quick }) => bench_calib::run(quick),
-        Some(BenchCommand::Sim { quick, out }) => bench_sim::run(quick, out.as_deref(), &ALLOCATOR),
+        Some(BenchCommand::Net { quick }) => bench::net::run(quick, &ALLOCATOR).map(|_| ()),
+        Some(BenchCommand::Calib { quick }) => bench::calib::run(quick),
+        Some(BenchCommand::Sim { quick, out }) => bench::sim::run(quick, out.as_deref(), &ALLOCATOR),
     }
 }

@@ -47,7 +47,7 @@ pub struct ChartsFile {
 /// sampled at the charts.
 enum AnyCamera {
     Synthetic(RemoteCamera),
-    Rendered(crate::rendered::RenderedCamera),
+    Rendered(roomlight_lab::rendered::RenderedCamera),
 }
 
 impl roomlight_agent::hardware::Camera for AnyCamera {
@@ -229,8 +229,8 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
             &SurveyFile {
                 camera_width,
                 camera_height,
-                corners: crate::pipeline::chart_corners(&room)?,
-                sample: crate::pipeline::sample_config(&room),
+                corners: roomlight_lab::pipeline::chart_corners(&room)?,
+                sample: roomlight_lab::pipeline::sample_config(&room),
                 target_pixels: room
                     .pixels()
                     .iter()
@@ -249,8 +249,8 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
     };
     let mut noise = roomlight_sim::CameraNoise::with_seed(&room, args.seed);
     let bar = indicatif::ProgressBar::hidden();
-    let cal = crate::pipeline::calibrate(&room, &mut noise, &bar, |line| println!("{line}"))?;
-    let model = crate::pipeline::measure_target(&room, &cal, preset, &mut noise)?;
+    let cal = roomlight_lab::pipeline::calibrate(&room, &mut noise, &bar, |line| println!("{line}"))?;
+    let model = roomlight_lab::pipeline::measure_target(&room, &cal, preset, &mut noise)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     write_json(
@@ -267,7 +267,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
         &ChartsFile {
             corners: cal.corners.clone(),
             patches: model.patches.clone(),
-            sample: crate::pipeline::sample_config(&room),
+            sample: roomlight_lab::pipeline::sample_config(&room),
         },
     )?;
     for (k, p) in room.projectors().iter().enumerate() {
@@ -276,12 +276,12 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
             .iter()
             .enumerate()
             .filter(|(_, r)| r.projector == k)
-            .map(|(n, r)| (n as u32, crate::pipeline::sparse_weights(r)))
+            .map(|(n, r)| (n as u32, roomlight_lab::pipeline::sparse_weights(r)))
             .collect();
         if nodes.is_empty() {
             continue;
         }
-        let spec = crate::rendered::FrameSpec {
+        let spec = roomlight_lab::rendered::FrameSpec {
             projector: p.name.clone(),
             width: p.pinhole.width,
             height: p.pinhole.height,
@@ -467,7 +467,7 @@ pub fn sim(args: &SimArgs) -> Result<()> {
                 .with_context(|| format!("building the room of {which}"))?,
         );
         return serve_until_stopped("sim", &args.listen, |listener, cancel| {
-            crate::rendered::serve(room, args.seed, listener, cancel)
+            roomlight_lab::rendered::serve(room, args.seed, listener, cancel)
         });
     }
     let Some(model_out) = &args.model_out else {
@@ -569,8 +569,8 @@ async fn survey_model(
     survey_path: &Path,
     preset: Option<&str>,
     resume: Option<(&Path, ModelFile)>,
-    client: crate::rendered::Client,
-) -> Result<(RoomModel, crate::rendered::RenderedCamera)> {
+    client: roomlight_lab::rendered::Client,
+) -> Result<(RoomModel, roomlight_lab::rendered::RenderedCamera)> {
     let survey: SurveyFile = read_json(survey_path, "a survey file")?;
     let pixels = u64::from(survey.camera_width) * u64::from(survey.camera_height);
     if let Some(&bad) = survey
@@ -636,7 +636,7 @@ async fn survey_model(
             model.problem.nodes(),
             model.owners.len()
         );
-        let camera = crate::rendered::RenderedCamera::new(
+        let camera = roomlight_lab::rendered::RenderedCamera::new(
             client,
             survey.corners.clone(),
             patches.clone(),
@@ -663,7 +663,7 @@ async fn survey_model(
             .cloned()
             .context("the room has no LED preset to reproduce")?,
     };
-    let camera = crate::rendered::RenderedCamera::new(
+    let camera = roomlight_lab::rendered::RenderedCamera::new(
         client,
         survey.corners.clone(),
         Vec::new(),
@@ -696,7 +696,7 @@ async fn survey_model(
         patches.len(),
         target.len()
     );
-    let camera = crate::rendered::RenderedCamera::new(
+    let camera = roomlight_lab::rendered::RenderedCamera::new(
         camera.client(),
         survey.corners.clone(),
         patches.clone(),
@@ -741,7 +741,7 @@ pub fn camera(path: &Path) -> Result<()> {
     };
     runtime()?.block_on(async {
         let connect_rendered = || async {
-            crate::rendered::connect(file.hardware.clone())
+            roomlight_lab::rendered::connect(file.hardware.clone())
                 .await
                 .with_context(|| format!("connecting to the rendered room at {}", file.hardware))
         };
@@ -775,7 +775,7 @@ pub fn camera(path: &Path) -> Result<()> {
                                 model.problem.patches()
                             );
                         }
-                        AnyCamera::Rendered(crate::rendered::RenderedCamera::new(
+                        AnyCamera::Rendered(roomlight_lab::rendered::RenderedCamera::new(
                             connect_rendered().await?,
                             charts.corners,
                             charts.patches,
@@ -878,7 +878,7 @@ pub fn node(path: &Path) -> Result<()> {
         stop_on_signals(cancel.clone());
         let display = match &file.frame {
             Some(path) => {
-                let spec: crate::rendered::FrameSpec = read_json(path, "a frame file")?;
+                let spec: roomlight_lab::rendered::FrameSpec = read_json(path, "a frame file")?;
                 if spec.projector != file.projector {
                     bail!(
                         "{}: drawn for projector {:?}, this node agent is {:?}",
@@ -887,16 +887,16 @@ pub fn node(path: &Path) -> Result<()> {
                         file.projector
                     );
                 }
-                let client = crate::rendered::connect(file.hardware.clone())
+                let client = roomlight_lab::rendered::connect(file.hardware.clone())
                     .await
                     .with_context(|| {
                         format!("connecting to the rendered room at {}", file.hardware)
                     })?;
                 let (name, size) = (spec.projector.clone(), (spec.width, spec.height));
-                crate::rendered::rendered_display(client, name, size, Some(spec), cancel.clone())
+                roomlight_lab::rendered::rendered_display(client, name, size, Some(spec), cancel.clone())
             }
             None if file.rendered => {
-                let client = crate::rendered::connect(file.hardware.clone())
+                let client = roomlight_lab::rendered::connect(file.hardware.clone())
                     .await
                     .with_context(|| {
                         format!("connecting to the rendered room at {}", file.hardware)
@@ -921,7 +921,7 @@ pub fn node(path: &Path) -> Result<()> {
                     );
                 };
                 let size = (p.width, p.height);
-                crate::rendered::rendered_display(
+                roomlight_lab::rendered::rendered_display(
                     client,
                     p.name.clone(),
                     size,

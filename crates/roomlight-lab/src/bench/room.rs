@@ -138,7 +138,7 @@ pub struct Outcome {
     /// Per case: per rule, the median curve over the repeats.
     pub curves: Vec<(String, Vec<Curve>)>,
     pub sparsity: Vec<Sparsity>,
-    pub scaling: Vec<crate::bench_net::NetPoint>,
+    pub scaling: Vec<crate::bench::net::NetPoint>,
     /// Cases that could not run, and why (reported, not left out).
     pub failed: Vec<(String, String)>,
 }
@@ -150,7 +150,7 @@ type RuleSpec = (&'static str, StepRule, usize, bool);
 /// Every rule, or the quick subset; with stale errors also the safe step the delay allows.
 fn rules(problem: &Problem, quick_subset: bool, latency: usize) -> Vec<RuleSpec> {
     // The same six rules as `bench core` (the budget does not matter here).
-    let mut all: Vec<RuleSpec> = crate::bench::rules(problem, 1)
+    let mut all: Vec<RuleSpec> = crate::bench::core::rules(problem, 1)
         .into_iter()
         .map(|(name, config)| (name, config.rule, config.model_rounds, false))
         .collect();
@@ -358,7 +358,7 @@ pub fn run(plan: &Plan, alloc: &PeakAlloc) -> Result<()> {
         }
     }
     if plan.scaling && wanted("scaling") {
-        outcome.scaling = crate::bench_net::run(plan.quick, alloc)?;
+        outcome.scaling = crate::bench::net::run(plan.quick, alloc)?;
     }
     print_table(&outcome.records);
     for (case, why) in &outcome.failed {
@@ -374,7 +374,7 @@ pub fn run(plan: &Plan, alloc: &PeakAlloc) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(dir) = &plan.out {
-        crate::bench_report::write(dir, &outcome)?;
+        crate::bench::report::write(dir, &outcome)?;
         println!("report: {}", dir.join("index.html").display());
     }
     Ok(())
@@ -463,7 +463,7 @@ impl Bench {
             rules(&model.problem, variant.few_rules, variant.latency)
         {
             let compute_us_per_round =
-                crate::bench::us_per_node_update(&model.problem, rule, &model.conventional)?
+                crate::bench::core::us_per_node_update(&model.problem, rule, &model.conventional)?
                     * model.problem.nodes() as f64;
             let mut runs = Vec::new();
             for k in 0..plan.repeats {
@@ -558,7 +558,7 @@ fn synthetic_case(outcome: &mut Outcome, plan: &Plan, nodes: usize, budget: u64)
     let mut curves = Vec::new();
     for (rule_name, rule, model_rounds, _) in rules(&problem, false, 0) {
         let compute_us_per_round =
-            crate::bench::us_per_node_update(&problem, rule, &start)? * nodes as f64;
+            crate::bench::core::us_per_node_update(&problem, rule, &start)? * nodes as f64;
         let mut runs = Vec::new();
         for k in 0..plan.repeats {
             let seed = plan.seed + k as u64;
@@ -604,7 +604,7 @@ async fn synthetic_run(
         seed,
         ..PlantConfig::default()
     };
-    let mut agents = crate::bench_net::SyntheticAgents::camera(
+    let mut agents = crate::bench::net::SyntheticAgents::camera(
         problem,
         plant,
         Some(start.to_vec()),

@@ -201,7 +201,7 @@ pub async fn connect(endpoint: String) -> Result<Client, roomlight_agent::AgentE
 
 /// The camera agent's camera on a rendered room: each capture is a whole image, sampled at the
 /// charts (corners, inner-half boxes, trimmed means) and reduced to the model's patches.
-#[derive(Clone)]
+#[derive(Clone, Debug)]
 pub struct RenderedCamera {
     client: Client,
     corners: Arc<Vec<roomlight_calib::charts::ChartCorners>>,

@@ -100,6 +100,7 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
 
 /// A synthetic room served by a camera agent over loopback gRPC, with a virtual camera, and
 /// its node agents (ten nodes each).
+#[derive(Debug)]
 pub struct SyntheticAgents {
     pub room: VirtualRoom,
     pub status: tokio::sync::watch::Receiver<camera::RoomStatus>,
@@ -196,10 +197,12 @@ impl SyntheticAgents {
 async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
     let problem = synthetic_room(&SyntheticConfig::new(nodes, 1))?.problem;
     let rule = StepRule::Safe { theta: 1.0 };
-    let compute_ms =
-        crate::bench::us_per_node_update(&problem, rule, &vec![LinearRgb::splat(0.5); nodes])?
-            * nodes as f64
-            / 1e3;
+    let compute_ms = crate::bench::core::us_per_node_update(
+        &problem,
+        rule,
+        &vec![LinearRgb::splat(0.5); nodes],
+    )? * nodes as f64
+        / 1e3;
     let mut room = SyntheticAgents::camera(&problem, PlantConfig::default(), None, 0).await?;
     let agents = room.agents;
     let before = alloc.current_usage();

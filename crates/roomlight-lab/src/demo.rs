@@ -14,24 +14,20 @@ use roomlight_core::{LinearRgb, StepRule};
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Options of the demo.
-#[derive(Debug, clap::Args)]
-pub struct DemoArgs {
+/// Options of the demo (the binary fills them from its command line).
+#[derive(Debug, Clone)]
+pub struct DemoOptions {
     /// A smaller room (for tests).
-    #[arg(long)]
     pub quick: bool,
     /// The synthetic-room comparison of update rules instead of the simulated lab.
-    #[arg(long)]
     pub synthetic: bool,
     /// Seed of the synthetic room and the camera noise.
-    #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Where the report goes.
-    #[arg(long, default_value = "roomlight-report")]
     pub out: std::path::PathBuf,
 }
 
-pub fn run(args: &DemoArgs) -> Result<()> {
+pub fn run(args: &DemoOptions) -> Result<()> {
     if args.synthetic {
         return synthetic(args);
     }
@@ -373,7 +369,7 @@ fn preset_images(
 }
 
 /// The synthetic-room comparison: the in-memory loop against the paper's rule, then the agents.
-fn synthetic(args: &DemoArgs) -> Result<()> {
+fn synthetic(args: &DemoOptions) -> Result<()> {
     let t0 = Instant::now();
     let nodes = if args.quick { 25 } else { 100 };
     let room = synthetic_room(&SyntheticConfig::new(nodes, args.seed))
@@ -463,7 +459,7 @@ fn synthetic(args: &DemoArgs) -> Result<()> {
 fn agents_over_grpc(
     problem: &roomlight_core::Problem,
     best: &roomlight_core::optimum::Optimum,
-    args: &DemoArgs,
+    args: &DemoOptions,
 ) -> Result<()> {
     use roomlight_agent::camera::{self, CameraConfig, RoomModel};
     use roomlight_agent::hardware::VirtualRoom;

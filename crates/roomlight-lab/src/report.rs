@@ -11,6 +11,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 /// One LED preset reproduced by the agents.
+#[derive(Debug)]
 pub struct PresetOutcome {
     /// The preset's name.
     pub name: String,
@@ -26,6 +27,7 @@ pub struct PresetOutcome {
 }
 
 /// One update rule run on the first preset, for the convergence plots.
+#[derive(Debug)]
 pub struct RuleOutcome {
     /// Its label.
     pub label: String,
@@ -34,6 +36,7 @@ pub struct RuleOutcome {
 }
 
 /// Everything the report shows.
+#[derive(Debug)]
 pub struct Report {
     /// The room's name.
     pub room: String,
@@ -62,6 +65,7 @@ pub struct Report {
 
 /// One projector leaves, another joins that the camera agent has never measured: it is
 /// calibrated hot while the others keep their values, then the room converges again.
+#[derive(Debug)]
 pub struct HotJoin {
     pub leaving: String,
     pub joining: String,

@@ -1,8 +1,8 @@
 //! `roomlight bench --out DIR`: the bench's plots (SVG), its records (bench.json) and one HTML
 //! page that shows them, like the demo's report.
 
-use crate::bench_net::growth_exponent;
-use crate::bench_room::{Outcome, captures_cell};
+use crate::bench::net::growth_exponent;
+use crate::bench::room::{Outcome, captures_cell};
 use crate::report::{escape, plot};
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
@@ -31,7 +31,7 @@ pub fn write(dir: &Path, outcome: &Outcome) -> Result<()> {
     let mut figures = String::new();
     for (case, curves) in &outcome.curves {
         let slug = slug(case);
-        let series = |f: &dyn Fn(&crate::bench_room::Point) -> (f64, f64)| {
+        let series = |f: &dyn Fn(&crate::bench::room::Point) -> (f64, f64)| {
             curves
                 .iter()
                 .map(|(rule, points)| (rule.as_str(), points.iter().map(f).collect::<Vec<_>>()))
@@ -138,7 +138,7 @@ fn html(outcome: &Outcome, figures: &str) -> String {
                 p.heap_mb
             );
         }
-        let fit = |f: fn(&crate::bench_net::NetPoint) -> f64| {
+        let fit = |f: fn(&crate::bench::net::NetPoint) -> f64| {
             let points: Vec<(f64, f64)> = outcome
                 .scaling
                 .iter()

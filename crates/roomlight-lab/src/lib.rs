@@ -1,0 +1,15 @@
+//! roomlight's experiments: the whole method on the simulated room (the demo pipeline:
+//! calibration from captures, then the real agents over loopback gRPC), projection-mapping
+//! evaluation, shadows, the demo's report, the rendered-room gRPC service the process commands
+//! serve, and the benches.
+//!
+//! It owns what is measured and how it is reported. It must not know the command line: the
+//! `roomlight` binary parses arguments and configuration and calls in here with plain options.
+
+pub mod bench;
+pub mod demo;
+pub mod pipeline;
+pub mod pm;
+pub mod rendered;
+pub mod report;
+pub mod shadow;

@@ -1,0 +1,123 @@
+//! The measured model for one lighting target and what is derived from it: node weights as
+//! sparse pixel lists, node values as projector frames, the problem without its sparsity cut-off.
+
+use anyhow::Result;
+use roomlight_calib::response::Response;
+use roomlight_core::{AttenuationColumn, LinearRgb, PatchId, Problem};
+use roomlight_sim::{Frame, NodeRegion, ProjectorImage, Room};
+use std::collections::HashMap;
+
+use super::*;
+
+/// The model for one lighting target: the measured problem over the patches usable in every
+/// capture.
+#[derive(Debug)]
+pub struct Model {
+    /// Columns, black, target and noise over the usable patches.
+    pub problem: Problem,
+    /// Room patch index of each model patch.
+    pub patches: Vec<usize>,
+    /// The conventional start (DESIGN §3.1), one value per node.
+    pub conventional: Vec<LinearRgb>,
+}
+
+/// A node's non-zero weights: `(node, [(pixel, weight)])`.
+type SparseNode = (usize, Vec<(u32, f32)>);
+
+/// A node region's non-zero weights as `(pixel, weight)`, row-major pixels.
+pub fn sparse_weights(region: &NodeRegion) -> Vec<(u32, f32)> {
+    region
+        .weights
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| **w > 0.0)
+        .map(|(i, w)| (i as u32, *w))
+        .collect()
+}
+
+/// Node values as projector frames: each pixel's linear light is the sum of its nodes' weights
+/// times their values, turned into a code through the projector's measured response (as a node
+/// agent does before it shows a frame). Each node's weights are kept sparse.
+#[derive(Debug)]
+pub struct FrameBuilder {
+    /// Per projector: width, height, and its nodes.
+    projectors: Vec<(u32, u32, Vec<SparseNode>)>,
+    responses: Vec<Response>,
+}
+
+impl FrameBuilder {
+    /// For `regions` of `room`'s projectors with their measured `responses`.
+    pub fn new(room: &Room, regions: &[NodeRegion], responses: Vec<Response>) -> Self {
+        let projectors = room
+            .projectors()
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let nodes = regions
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, r)| r.projector == k)
+                    .map(|(n, r)| (n, sparse_weights(r)))
+                    .collect();
+                (p.pinhole.width, p.pinhole.height, nodes)
+            })
+            .collect();
+        Self {
+            projectors,
+            responses,
+        }
+    }
+
+    /// The frames for node values `x` (a missing value counts as black).
+    pub fn frames(&self, x: &[LinearRgb]) -> Vec<Frame> {
+        let linear = Response::linear();
+        self.projectors
+            .iter()
+            .enumerate()
+            .map(|(k, (width, height, nodes))| {
+                let mut light = vec![LinearRgb::ZERO; (width * height) as usize];
+                for (n, weights) in nodes {
+                    let v = x.get(*n).copied().unwrap_or(LinearRgb::ZERO);
+                    for &(i, w) in weights {
+                        light[i as usize] += v * f64::from(w);
+                    }
+                }
+                let response = self.responses.get(k).unwrap_or(&linear);
+                Frame::Image(ProjectorImage {
+                    width: *width,
+                    height: *height,
+                    pixels: light.into_iter().map(|l| response.to_code(l)).collect(),
+                })
+            })
+            .collect()
+    }
+}
+
+/// `model` with every attenuation entry kept (no 3σ cut-off), over the same patches: what the
+/// sparse supports are compared against.
+pub fn uncut_problem(cal: &Calibrated, model: &Model) -> Result<Problem> {
+    let index: HashMap<usize, PatchId> = model
+        .patches
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (i, k as PatchId))
+        .collect();
+    let columns = cal
+        .attenuation
+        .columns(0.0)?
+        .iter()
+        .map(|c| {
+            let (s, v): (Vec<PatchId>, Vec<LinearRgb>) = c
+                .iter()
+                .filter_map(|(i, p)| index.get(&(i as usize)).map(|&k| (k, p)))
+                .unzip();
+            AttenuationColumn::new(s, v)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Problem::new(
+        columns,
+        model.problem.black().to_vec(),
+        model.problem.target().to_vec(),
+        model.problem.noise().to_vec(),
+    )?)
+}

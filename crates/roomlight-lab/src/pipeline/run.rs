@@ -1,0 +1,452 @@
+//! One run of the real agents over loopback gRPC on a measured model: options, churn (a
+//! projector leaving, another joining), the trace against the truth, bytes per round.
+
+use anyhow::{Context, Result, bail};
+use roomlight_agent::camera::{self, CameraConfig, RoomModel};
+use roomlight_agent::node::{self, NodeConfig};
+use roomlight_core::metrics::patch_delta_e;
+use roomlight_core::optimum::optimum;
+use roomlight_core::{LinearRgb, StepRule};
+use roomlight_sim::scene::ProjectorKind;
+use roomlight_sim::{CameraNoise, Room};
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+use tokio_util::sync::CancellationToken;
+
+use super::*;
+
+/// How the agents run for one target.
+#[derive(Debug, Clone, Copy)]
+pub struct RunOptions {
+    /// The node agents' update rule.
+    pub rule: StepRule,
+    /// Model rounds per capture (DESIGN §3.4).
+    pub model_rounds: usize,
+    /// Stop here if the camera agent has not reported settled before.
+    pub max_captures: u64,
+    /// Stop when the camera agent reports settled (DESIGN §3.6); otherwise run to
+    /// `max_captures` (to compare rules over the same budget).
+    pub stop_when_settled: bool,
+    /// Seed of the capture noise.
+    pub seed: u64,
+    /// Captures of camera latency: the errors the nodes act on are this many captures stale.
+    pub latency: usize,
+    /// The camera agent knows the latency and discards that many captures before each measured
+    /// round (fresh errors, more captures).
+    pub discard_stale: bool,
+    /// A projector leaving and another joining mid-run.
+    pub churn: Option<Churn>,
+}
+
+/// A projector leaving the room (switched off, its node agent stopped) once `leave_at`
+/// captures are taken, and another, off from the start, whose node agent joins after
+/// `join_at` captures. Projectors are indices into the room's projectors. `hot`: the camera
+/// agent does not know the joining projector's attenuation and measures it when it joins.
+#[derive(Debug, Clone, Copy)]
+pub struct Churn {
+    pub leaving: usize,
+    pub leave_at: u64,
+    pub joining: usize,
+    pub join_at: u64,
+    pub hot: bool,
+}
+
+impl Churn {
+    /// The first standard luminaire with nodes leaves, the last one (off until then) joins.
+    pub fn pick(
+        room: &Room,
+        cal: &Calibrated,
+        leave_at: u64,
+        join_at: u64,
+        hot: bool,
+    ) -> Result<Self> {
+        let standard: Vec<usize> = room
+            .projectors()
+            .iter()
+            .enumerate()
+            .filter(|(k, p)| {
+                p.kind == ProjectorKind::Standard && cal.regions.iter().any(|r| r.projector == *k)
+            })
+            .map(|(k, _)| k)
+            .collect();
+        let (Some(&leaving), Some(&joining)) = (standard.first(), standard.last()) else {
+            bail!("the room has no standard luminaire with nodes");
+        };
+        if leaving == joining {
+            bail!("the room has a single standard luminaire: none to join after one left");
+        }
+        Ok(Self {
+            leaving,
+            leave_at,
+            joining,
+            join_at,
+            hot,
+        })
+    }
+}
+
+impl RunOptions {
+    /// The default: FISTA momentum with restarts and twenty model rounds per capture, the
+    /// fastest combination on the demo rooms in captures and in wall time (`roomlight demo`
+    /// prints the comparison). The rounds wait for every node's acknowledgement, so the errors
+    /// are never stale and momentum keeps its guarantee.
+    pub fn default_rule(seed: u64) -> Self {
+        Self {
+            rule: StepRule::Momentum { theta: 1.0 },
+            model_rounds: 20,
+            max_captures: 60,
+            stop_when_settled: true,
+            seed,
+            latency: 0,
+            discard_stale: false,
+            churn: None,
+        }
+    }
+}
+
+/// The room after each capture's rounds, against the simulator's truth.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct TracePoint {
+    /// Captures taken (0: the conventional start, before any).
+    pub capture: u64,
+    /// Wall time since the agents started.
+    pub seconds: f64,
+    /// `(G − G*)/G*` of the measured model from the camera's capture of these values (noisy;
+    /// none for the final values, which no capture saw).
+    pub measured_excess: Option<f64>,
+    /// `(G − G*)/G*` of the measured model for the values shown (noiseless: the quantity the
+    /// rules minimise).
+    pub model_excess: f64,
+    /// The same on the true problem for the values shown after this capture's rounds.
+    pub true_excess: f64,
+    /// True mean ΔE00 against the LED target for those values.
+    pub mean_de00: f64,
+}
+
+/// One run of the agents on one target.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    /// Captures until the camera agent settled (or the cap).
+    pub captures: u64,
+    /// Whether the camera agent reported settled (DESIGN §3.6) before the cap.
+    pub settled: bool,
+    /// Every capture's point, the conventional start first.
+    pub trace: Vec<TracePoint>,
+    /// The values the nodes show at the end.
+    pub x: Vec<LinearRgb>,
+    /// The measured model's `G` for them and its optimum `G*`.
+    pub g: f64,
+    /// The measured model's optimum.
+    pub g_star: f64,
+    /// `(G − G*)/G*` on the measured model.
+    pub final_excess: f64,
+    /// The same on the true problem.
+    pub true_excess: f64,
+    /// True ΔE00 per model patch at the end and at the conventional start.
+    pub de00: Vec<f64>,
+    /// True ΔE00 per model patch at the conventional start.
+    pub conventional_de00: Vec<f64>,
+    /// Mean ΔE00 the true optimum would reach (what the room allows).
+    pub best_mean_de00: f64,
+    /// Wall time of the run.
+    pub seconds: f64,
+    /// Of which the simulated camera (render, noise, chart sampling).
+    pub capture_seconds: f64,
+    /// Rounds run (captures and model rounds).
+    pub rounds: u64,
+    /// Projectors the camera agent calibrated hot during the run.
+    pub calibrated_hot: u64,
+    /// Protobuf bytes between the agents, both ways, per round once the agents are attached (the first capture's traffic, which
+    /// carries every node's attenuation, left out).
+    pub bytes_per_round: f64,
+}
+
+/// Runs the camera agent and one node agent per projector over loopback gRPC on `model`, from
+/// its conventional start until the camera agent reports settled (or `max_captures`), and
+/// measures the result against the simulator's truth.
+pub fn run_agents(
+    room: &Arc<Room>,
+    cal: &Calibrated,
+    model: &Model,
+    transport: &Transport,
+    truth: &Truth,
+    options: RunOptions,
+    bar: &indicatif::ProgressBar,
+) -> Result<RunResult> {
+    let nodes_of = |projector: usize| -> Vec<usize> {
+        (0..cal.regions.len())
+            .filter(|&n| cal.regions[n].projector == projector)
+            .collect()
+    };
+    let name_of = |projector: usize| -> Result<String> {
+        room.projectors()
+            .get(projector)
+            .map(|p| p.name.clone())
+            .with_context(|| format!("churn: the room has no projector {projector}"))
+    };
+    // With a projector leaving, the room it leaves behind is the reference: its optimum is what
+    // the others can reach without it.
+    let (gone, joining) = match options.churn {
+        Some(c) => {
+            if c.join_at >= options.max_captures || c.leave_at >= options.max_captures {
+                bail!(
+                    "churn at captures {} and {} does not fit a budget of {} captures",
+                    c.leave_at,
+                    c.join_at,
+                    options.max_captures
+                );
+            }
+            let (gone, joining) = (nodes_of(c.leaving), nodes_of(c.joining));
+            if gone.is_empty() || joining.is_empty() || c.leaving == c.joining {
+                bail!(
+                    "churn: projectors {} and {} must be two luminaires with nodes",
+                    name_of(c.leaving)?,
+                    name_of(c.joining)?
+                );
+            }
+            (gone, joining)
+        }
+        None => (Vec::new(), Vec::new()),
+    };
+    let mut initial = model.conventional.clone();
+    for &n in &joining {
+        initial[n] = LinearRgb::ZERO;
+    }
+    let hw = SimHardware {
+        room: room.clone(),
+        frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
+        corners: transport.corners.clone(),
+        config: transport.config,
+        shown: Arc::new(Mutex::new(initial.clone())),
+        patches: Arc::new(model.patches.clone()),
+        noise: Arc::new(Mutex::new(CameraNoise::with_seed(room, options.seed))),
+        log: Arc::new(Mutex::new(Vec::new())),
+        latency: options.latency,
+        delayed: Arc::new(Mutex::new(VecDeque::new())),
+    };
+    let best = optimum(&model.problem.without_nodes(&gone))?;
+    let true_best = optimum(&truth.problem.without_nodes(&gone))?;
+    let de_conv = patch_delta_e(&truth.target, &hw.noiseless(&initial)?)?;
+    let owners = cal.owners(room);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let t0 = Instant::now();
+    let mut steady = PerRound::default();
+    let last = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+        let endpoint = format!("http://{}", listener.local_addr()?);
+        let cancel = CancellationToken::new();
+        let config = CameraConfig {
+            room: "lab".into(),
+            token: "demo".into(),
+            heartbeat: Duration::from_millis(500),
+            deadline: Duration::from_secs(2),
+            model_rounds: options.model_rounds,
+            calibration_epoch: 1,
+            stale_frames: if options.discard_stale {
+                options.latency
+            } else {
+                0
+            },
+            model_out: None,
+        };
+        // A projector joining hot is measured by the camera agent when it joins.
+        let hot = match options.churn.filter(|c| c.hot) {
+            Some(c) => [name_of(c.joining)?].into(),
+            None => Default::default(),
+        };
+        let (mut status, camera_task) = camera::serve(
+            config,
+            RoomModel {
+                problem: model.problem.clone(),
+                owners: owners.clone(),
+                start: Some(model.conventional.clone()),
+                hot,
+                survey: None,
+            },
+            hw.clone(),
+            listener,
+            cancel.clone(),
+        );
+        let spawn = |id: &str| {
+            let config = NodeConfig {
+                endpoint: endpoint.clone(),
+                room: "lab".into(),
+                token: "demo".into(),
+                projector_id: id.to_string(),
+                kind: roomlight_proto::v1::ProjectorKind::Standard,
+                rule: options.rule,
+                start: LinearRgb::splat(0.5),
+                state_file: None,
+            };
+            let token = cancel.child_token();
+            let task = tokio::spawn(node::run(config, hw.clone(), token.clone()));
+            (id.to_string(), (token, task))
+        };
+        let (leaving, joining) = match options.churn {
+            Some(c) => (Some(name_of(c.leaving)?), Some(name_of(c.joining)?)),
+            None => (None, None),
+        };
+        let mut node_tasks: HashMap<_, _> = owners
+            .keys()
+            .filter(|id| Some(*id) != joining.as_ref())
+            .map(|id| spawn(id))
+            .collect();
+        let (mut left, mut joined) = (false, joining.is_none());
+        let outcome = tokio::time::timeout(Duration::from_secs(120), async {
+            loop {
+                status.changed().await?;
+                let s = status.borrow().clone();
+                steady.add(&s);
+                if !bar.is_hidden() {
+                    // The live line: ΔE00 against the truth costs a render, so only when shown.
+                    let de = hw
+                        .noiseless(&hw.shown())
+                        .and_then(|v| Ok(patch_delta_e(&truth.target, &v)?.mean))
+                        .unwrap_or(f64::NAN);
+                    bar.set_position(s.captures);
+                    bar.set_message(format!(
+                        "round {} · G {:.3e} · excess {:.1e} · ΔE00 {de:.2}",
+                        s.round,
+                        s.measured_objective,
+                        best.excess(s.measured_objective)
+                    ));
+                }
+                if let (Some(c), Some(id)) = (options.churn, &leaving)
+                    && !left
+                    && s.captures >= c.leave_at
+                {
+                    // The projector is switched off: its agent stops, its light is gone.
+                    if let Some((token, task)) = node_tasks.remove(id) {
+                        token.cancel();
+                        let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
+                    }
+                    let mut shown = hw.shown.lock().unwrap_or_else(PoisonError::into_inner);
+                    for &n in &gone {
+                        shown[n] = LinearRgb::ZERO;
+                    }
+                    left = true;
+                }
+                if let (Some(c), Some(id)) = (options.churn, &joining)
+                    && !joined
+                    && s.captures >= c.join_at
+                {
+                    let (id, handles) = spawn(id);
+                    node_tasks.insert(id, handles);
+                    joined = true;
+                }
+                let settled_or_done =
+                    s.settled && options.stop_when_settled || s.captures >= options.max_captures;
+                if s.live_projectors == node_tasks.len() && joined && settled_or_done {
+                    return Ok::<_, anyhow::Error>(s);
+                }
+            }
+        })
+        .await;
+        cancel.cancel();
+        for (_, (_, task)) in node_tasks {
+            let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
+        }
+        let _ = tokio::time::timeout(Duration::from_secs(5), camera_task).await;
+        outcome.with_context(|| {
+            format!(
+                "the agents neither stopped nor took {} captures within 120 s",
+                options.max_captures
+            )
+        })?
+    })?;
+    let end = Instant::now();
+    let x = hw
+        .shown
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .clone();
+    let final_values = hw.noiseless(&x)?;
+    let de = patch_delta_e(&truth.target, &final_values)?;
+    // The room after k captures' rounds is what capture k + 1 saw; after the last, what it shows.
+    let log = std::mem::take(&mut *hw.log.lock().unwrap_or_else(PoisonError::into_inner));
+    let capture_seconds: f64 = log.iter().map(|l| l.took.as_secs_f64()).sum();
+    let states = log
+        .iter()
+        .map(|l| (l.at, &l.shown, &l.noiseless, Some(&l.measured)))
+        .chain(std::iter::once((end, &x, &final_values, None)));
+    let trace = states
+        .enumerate()
+        .map(|(k, (at, shown, values, measured))| {
+            Ok(TracePoint {
+                capture: k as u64,
+                seconds: at.saturating_duration_since(t0).as_secs_f64(),
+                measured_excess: measured.map(|y| {
+                    best.excess(roomlight_core::metrics::objective(
+                        &model
+                            .problem
+                            .target()
+                            .iter()
+                            .zip(y)
+                            .map(|(r, y)| *r - *y)
+                            .collect::<Vec<_>>(),
+                    ))
+                }),
+                model_excess: best.excess(model.problem.objective(shown)),
+                true_excess: true_best.excess(truth.objective(values)),
+                mean_de00: patch_delta_e(&truth.target, values)?.mean,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let de_best = patch_delta_e(&truth.target, &truth.problem.response(&true_best.x))?;
+    let g = model.problem.objective(&x);
+    Ok(RunResult {
+        captures: last.captures,
+        settled: last.settled,
+        trace,
+        g,
+        g_star: best.objective,
+        final_excess: best.excess(g),
+        true_excess: true_best.excess(truth.objective(&final_values)),
+        x,
+        de00: de.per_patch,
+        conventional_de00: de_conv.per_patch,
+        best_mean_de00: de_best.mean,
+        seconds: t0.elapsed().as_secs_f64(),
+        capture_seconds,
+        rounds: last.round,
+        bytes_per_round: steady.bytes_per_round(),
+        calibrated_hot: last.calibrated_hot,
+    })
+}
+
+/// Bytes per round from the camera agent's status, the first status (attachment, attenuation)
+/// left out.
+#[derive(Debug, Default)]
+pub struct PerRound {
+    first_round: Option<u64>,
+    last_round: u64,
+    bytes: u64,
+    all_bytes: u64,
+}
+
+impl PerRound {
+    pub fn add(&mut self, s: &camera::RoomStatus) {
+        let b = s.bytes_in + s.bytes_out;
+        self.all_bytes += b;
+        if self.first_round.is_some() {
+            self.bytes += b;
+        } else {
+            self.first_round = Some(s.round);
+        }
+        self.last_round = s.round;
+    }
+
+    /// Over the rounds after the first status; with none, over all (0 before any round).
+    pub fn bytes_per_round(&self) -> f64 {
+        match self.first_round {
+            Some(first) if self.last_round > first => {
+                self.bytes as f64 / (self.last_round - first) as f64
+            }
+            _ => self.all_bytes as f64 / self.last_round.max(1) as f64,
+        }
+    }
+}
