@@ -108,11 +108,28 @@ impl<'a, R: Rig> Procedure<'a, R> {
     }
 
     /// Structured light on `projectors` (black, with `dark` and `whites` from [`Self::dark`]
-    /// and [`Self::whites`]): those whose footprints do not overlap coded at the same time,
-    /// each decoding the camera pixels it lights most, then a second pass for each standard
-    /// projector where the first left enough reached pixels unknown (on rigs that show
-    /// images). In the order of `projectors`.
+    /// and [`Self::whites`]): the first pass ([`Self::code`]), then a second pass for each
+    /// standard projector where the first left enough reached pixels unknown (on rigs that
+    /// show images). In the order of `projectors`.
     pub async fn structured_light(
+        &mut self,
+        projectors: &[Projector],
+        dark: &LinearImage,
+        whites: &[LinearImage],
+    ) -> Result<Vec<Decoded>, ProcedureError> {
+        let mut decoded = self.code(projectors, dark, whites).await?;
+        for d in &mut decoded {
+            let m =
+                Manifest::with_coding(d.projector.width, d.projector.height, coding(&d.projector))?;
+            d.second = self.second_pass(&d.projector, &m, &mut d.corr).await?;
+        }
+        Ok(decoded)
+    }
+
+    /// The first structured-light pass on `projectors` (see [`Self::structured_light`]):
+    /// those whose footprints do not overlap coded at the same time, each decoding the camera
+    /// pixels it lights most. In the order of `projectors`.
+    pub async fn code(
         &mut self,
         projectors: &[Projector],
         dark: &LinearImage,
@@ -153,19 +170,17 @@ impl<'a, R: Rig> Procedure<'a, R> {
                 corrs[k] = Some(c);
             }
         }
-        let mut out = Vec::with_capacity(projectors.len());
-        for ((p, m), corr) in projectors.iter().zip(&manifests).zip(corrs) {
-            let Some(mut corr) = corr else {
-                continue;
-            };
-            let second = self.second_pass(p, m, &mut corr).await?;
-            out.push(Decoded {
-                projector: p.clone(),
-                corr,
-                second,
-            });
-        }
-        Ok(out)
+        Ok(projectors
+            .iter()
+            .zip(corrs)
+            .filter_map(|(p, corr)| {
+                corr.map(|corr| Decoded {
+                    projector: p.clone(),
+                    corr,
+                    second: None,
+                })
+            })
+            .collect())
     }
 
     /// Shows one group's patterns slot by slot (member `k` its own pattern `j`, black once it
