@@ -1,0 +1,165 @@
+//! Admission and faults: who the camera agent refuses and why (both sides read the same
+//! refusal), a duplicate stream, a silent node, a rogue node's malformed contributions. Every
+//! wait has a deadline.
+
+use roomlight_agent::camera::Survey;
+use roomlight_proto::refusal::Refusal;
+use roomlight_proto::v1;
+use roomlight_tests::{Sandbox, TOKEN, hello};
+use std::time::Duration;
+use tokio_stream::StreamExt;
+
+const LONG: Duration = Duration::from_secs(30);
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_wrong_token_another_room_or_version_is_refused_with_a_clear_status() {
+    let sb = Sandbox::builder().start_camera().await;
+    let version = roomlight_proto::PROTOCOL_VERSION;
+    for (room, token, version, code) in [
+        ("lab", "guess", version, tonic::Code::Unauthenticated),
+        ("kitchen", TOKEN, version, tonic::Code::FailedPrecondition),
+        ("lab", TOKEN, 99, tonic::Code::FailedPrecondition),
+    ] {
+        let mut message = hello("p0");
+        if let Some(v1::node_message::Body::Hello(h)) = &mut message.body {
+            h.room = room.into();
+            h.token = token.into();
+            h.protocol_version = version;
+        }
+        let status = sb.attach_once(message).await.expect_err("refused");
+        assert_eq!(status.code(), code, "{room}/{token}/{version}: {status}");
+        assert!(
+            Refusal::is_fatal_status(&status),
+            "a node agent stops on {status}"
+        );
+    }
+    sb.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_duplicate_projector_is_refused_and_a_silent_one_leaves_within_two_seconds() {
+    let mut sb = Sandbox::builder().start_camera().await;
+    sb.add_node("p0");
+    sb.wait_for(Duration::from_secs(10), |s| {
+        s.live_projectors == 1 && s.captures >= 2
+    })
+    .await;
+    let status = sb.attach_once(hello("p0")).await.expect_err("duplicate");
+    assert_eq!(status.code(), tonic::Code::AlreadyExists, "{status}");
+    assert!(
+        !Refusal::is_fatal_status(&status),
+        "a reconnecting node retries: {status}"
+    );
+    // p1 says hello, then goes silent with its stream open: no heartbeats, no acknowledgements.
+    let mut p1 = sb.attach_by_hand("p1", false).await;
+    let joined = tokio::time::Instant::now();
+    // Its welcome and attenuation arrive; once it is dropped for silence its stream ends. (A
+    // status with two projectors may never be published: the rounds wait for its
+    // acknowledgement meanwhile.)
+    let mut received = 0;
+    loop {
+        match tokio::time::timeout(Duration::from_secs(5), p1.inbound.message()).await {
+            Ok(Ok(Some(_))) => received += 1,
+            Ok(Ok(None) | Err(_)) => break,
+            Err(_) => panic!("the silent projector's stream still open after 5 s"),
+        }
+    }
+    assert!(
+        received >= 2,
+        "welcome and assignment expected, got {received}"
+    );
+    assert!(
+        joined.elapsed() < Duration::from_secs(2),
+        "left after {:?}",
+        joined.elapsed()
+    );
+    sb.wait_for(Duration::from_secs(5), |s| s.live_projectors == 1)
+        .await;
+    // The room went on with p0 meanwhile.
+    sb.wait_captures(Duration::from_secs(10), 3).await;
+    drop(p1);
+    sb.shutdown().await;
+}
+
+/// A contribution whose values are not finite.
+fn nan_contribution(round: u64, node: u32) -> v1::NodeMessage {
+    let bad = v1::SparseRgb {
+        patches: vec![0],
+        values: vec![f64::NAN, 0.0, 0.0],
+    };
+    v1::NodeMessage {
+        body: Some(v1::node_message::Body::Contribution(v1::Contribution {
+            round,
+            node,
+            delta: Some(bad),
+        })),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn malformed_contributions_are_refused_without_disturbing_the_others() {
+    let mut sb = Sandbox::builder().model_rounds(5).start_camera().await;
+    sb.add_node("p0");
+    sb.add_node("p1");
+    // p2 is a rogue: it answers every round with NaN contributions for a node it does not own
+    // and for its own nodes, and acknowledges each round without showing anything.
+    let mut p2 = sb.attach_by_hand("p2", true).await;
+    let rogue = tokio::spawn(async move {
+        while let Some(Ok(m)) = p2.inbound.next().await {
+            let Some(v1::room_message::Body::Errors(e)) = m.body else {
+                continue;
+            };
+            for node in [e.node, 0] {
+                if p2.tx.send(nan_contribution(e.round, node)).await.is_err() {
+                    return;
+                }
+            }
+            let shown = v1::NodeMessage {
+                body: Some(v1::node_message::Body::Shown(v1::Shown {
+                    seq: e.round,
+                    pattern: false,
+                })),
+            };
+            let _ = p2.tx.send(shown).await;
+        }
+    });
+    let status = sb.wait_for(LONG, |s| s.captures >= 10).await;
+    assert!(status.measured_objective.is_finite());
+    // p2's nodes show nothing (it never drives a display): the optimum is the room without them.
+    sb.room.unplug(&sb.owners["p2"]);
+    sb.wait_captures(LONG, 6).await;
+    let excess = sb.excess(&sb.without("p2"));
+    assert!(
+        excess < 1e-2,
+        "the honest projectors still converge: excess {excess}"
+    );
+    rogue.abort();
+    sb.shutdown().await;
+}
+
+/// Calibration over the wire needs a projector that says its size: a projector the model does
+/// not know and whose Hello gives no resolution is refused with a status that says so.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_projector_without_a_resolution_cannot_be_calibrated_over_the_wire() {
+    let survey = Survey {
+        corners: Vec::new(),
+        sample: roomlight_calib::charts::SampleConfig::default(),
+        target_mask: Vec::new(),
+        patches: Vec::new(),
+    };
+    let sb = Sandbox::builder()
+        .model_rounds(5)
+        .survey(survey)
+        .start_camera()
+        .await;
+    let refused = sb
+        .attach_once(hello("newcomer"))
+        .await
+        .expect_err("no resolution: refused");
+    assert_eq!(refused.code(), tonic::Code::FailedPrecondition, "{refused}");
+    assert!(
+        refused.message().contains("newcomer") && refused.message().contains("resolution"),
+        "{refused}"
+    );
+    sb.shutdown().await;
+}
