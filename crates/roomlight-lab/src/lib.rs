@@ -8,6 +8,7 @@
 
 pub mod bench;
 pub mod demo;
+pub mod process;
 pub mod pipeline;
 pub mod pm;
 pub mod rendered;

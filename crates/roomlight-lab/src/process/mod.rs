@@ -1,0 +1,19 @@
+//! The processes of a simulated installation once their options are known: what `roomlight
+//! calibrate`, `sim`, `camera` and `node` do, and the files they hand each other (model, charts,
+//! survey, frames).
+//!
+//! It must not know the command line, config files or the process itself: the binary parses
+//! and validates, owns the runtime, logs and stop signals, and passes a cancellation token.
+
+mod calibrate;
+mod camera;
+mod files;
+mod node;
+mod sim;
+mod survey;
+
+pub use calibrate::{CalibrateOptions, calibrate_to_files};
+pub use camera::{CameraProcess, CameraSource, serve_camera};
+pub use files::{ChartsFile, ModelFile, SurveyFile, load_model, load_scene, optimum_summary};
+pub use node::{NodeDisplay, run_node};
+pub use sim::{PreparedSim, SimRoom, SyntheticSim, prepare_sim};
