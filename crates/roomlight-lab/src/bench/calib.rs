@@ -1,28 +1,24 @@
 //! `roomlight bench calib`: structured light on the simulated lab, measured against the
 //! simulator's true correspondence, and the cost of decoding. Timings are printed, not asserted.
+//! Structured light runs through the one calibration procedure ([`roomlight_calib::procedure`])
+//! on the simulated room as a rig; this module only measures what it decoded.
 
+use crate::pipeline::SimRig;
 use anyhow::{Context, Result};
 use roomlight_calib::charts::{PatchStatus, sample_charts};
-use roomlight_calib::graycode::{
-    Coding, Correspondence, DecodeConfig, Manifest, SECOND_PASS_LONGEST, decode, decode_where,
-    group_disjoint, second_pass,
-};
+use roomlight_calib::graycode::{Correspondence, DecodeConfig, Manifest, decode};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{
     NodeConfig, add_claim, partition_of_unity, projector_weights, segment, segment_beside,
 };
+use roomlight_calib::procedure::{
+    Decoded, Event, Procedure, Settings, Stage, coding, coding_groups,
+};
+use roomlight_calib::rig::{Rig, block_on};
 use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room, scenes};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
-
-/// A camera pixel belongs to a projector's footprint when that projector at white raises it by
-/// this share of its brightest pixel. Inter-reflected light stays below it in the lab.
-const FOOTPRINT_SHARE: f32 = 0.1;
-/// The same for a defocused projector: its blur's tail carries plain Gray code's coarse stripes
-/// (which inter-reflection does not average away) well below a tenth of its peak. At 0.1 the
-/// lab grouped floor-right with the large aperture, and 0.32% of floor-right's decoded pixels
-/// came out off by more than 2 (none coded alone).
-const FOOTPRINT_SHARE_DEFOCUSED: f32 = 0.01;
 
 fn shoot_preset(room: &Room, preset: Option<usize>) -> Result<LinearImage> {
     let frames = vec![Frame::Black; room.projectors().len()];
@@ -110,312 +106,7 @@ pub fn run(quick: bool) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     let n = room.projectors().len();
-    let mut noise = CameraNoise::new(&room);
-    let mut shoot = |frames: &[Frame]| -> Result<LinearImage> {
-        Ok(image(&noise.expose(&room.render(frames, None)?)))
-    };
-    // Footprints: one white capture per projector and one black (N + 1 captures).
-    let black = shoot(&vec![Frame::Black; n])?.intensity();
-    let mut footprints = Vec::with_capacity(n);
-    let mut gains: Vec<Vec<f32>> = Vec::with_capacity(n);
-    for k in 0..n {
-        let share = if room.projectors()[k].kind == ProjectorKind::LargeAperture {
-            FOOTPRINT_SHARE_DEFOCUSED
-        } else {
-            FOOTPRINT_SHARE
-        };
-        let mut frames = vec![Frame::Black; n];
-        frames[k] = Frame::Uniform([1.0; 3]);
-        let white = shoot(&frames)?.intensity();
-        gains.push(white.iter().zip(&black).map(|(w, b)| w - b).collect());
-        let peak = white
-            .iter()
-            .zip(&black)
-            .map(|(w, b)| w - b)
-            .fold(0.0f32, f32::max);
-        footprints.push(
-            white
-                .iter()
-                .zip(&black)
-                .map(|(w, b)| w - b > share * peak)
-                .collect::<Vec<bool>>(),
-        );
-    }
-    let groups = group_disjoint(&footprints);
-    // Defocused projectors blur the fine XOR stripes away: they get plain Gray code.
-    let manifests: Vec<Manifest> = room
-        .projectors()
-        .iter()
-        .map(|p| {
-            let coding = if p.kind == ProjectorKind::LargeAperture {
-                Coding::Gray
-            } else {
-                Coding::Xor04
-            };
-            Manifest::with_coding(p.pinhole.width, p.pinhole.height, coding)
-        })
-        .collect::<Result<_, _>>()?;
-    let alone: usize = manifests.iter().map(|m| m.patterns.len()).sum();
-    let grouped: usize = n
-        + 1
-        + groups
-            .iter()
-            .map(|g| {
-                g.iter()
-                    .map(|&k| manifests[k].patterns.len())
-                    .max()
-                    .unwrap_or(0)
-            })
-            .sum::<usize>();
-    println!(
-        "structured light: {alone} captures one projector at a time; {grouped} with simultaneous coding of non-overlapping projectors ({} groups: {:?}, including {} footprint captures)",
-        groups.len(),
-        groups
-            .iter()
-            .map(|g| g
-                .iter()
-                .map(|&k| room.projectors()[k].name.as_str())
-                .collect::<Vec<_>>())
-            .collect::<Vec<_>>(),
-        n + 1
-    );
-    println!(
-        "{:<18} {:>9} {:>12} {:>14} {:>10}   within ±1 where its direct light is ≥ 2% of its typical",
-        "projector", "reached", "within ±1", "off by > 2", "decoded",
-    );
-    let config = DecodeConfig::default();
-    let mut decode_secs = Vec::new();
-    let mut decoded_all: Vec<Option<Correspondence>> = vec![None; n];
-
-    // Every group, then each member of a shared group alone (as `roomlight calibrate` codes
-    // them): what coding at the same time costs in accuracy.
-    let alone_runs: Vec<Vec<usize>> = groups
-        .iter()
-        .filter(|g| g.len() > 1)
-        .flatten()
-        .map(|&k| vec![k])
-        .collect();
-    for (run, group) in groups.iter().chain(&alone_runs).enumerate() {
-        let alone = run >= groups.len();
-        let longest = group
-            .iter()
-            .map(|&k| manifests[k].patterns.len())
-            .max()
-            .unwrap_or(0);
-        // Slot j of the group: every member shows its own pattern j (black once it has no more).
-        let mut captures = Vec::with_capacity(longest);
-        for j in 0..longest {
-            let frames: Vec<Frame> = (0..n)
-                .map(
-                    |k| match (group.contains(&k), manifests[k].patterns.get(j)) {
-                        (true, Some(p)) => {
-                            let img = manifests[k].pattern_image(p.pattern);
-                            Frame::Image(ProjectorImage {
-                                width: img.width,
-                                height: img.height,
-                                pixels: img.pixels,
-                            })
-                        }
-                        _ => Frame::Black,
-                    },
-                )
-                .collect();
-            captures.push(shoot(&frames)?);
-        }
-        for &k in group {
-            let m = &manifests[k];
-            // In a group, a pixel belongs to the member whose white light raises it most.
-            let ours: Option<Vec<bool>> = (group.len() > 1).then(|| {
-                (0..gains[k].len())
-                    .map(|i| !group.iter().any(|&o| o != k && gains[o][i] > gains[k][i]))
-                    .collect()
-            });
-            let t = Instant::now();
-            let cfg = if room.projectors()[k].kind == ProjectorKind::LargeAperture {
-                DecodeConfig::strict()
-            } else {
-                config
-            };
-            let decoded = decode_where(m, &cfg, ours.as_deref(), |f| {
-                let j = m
-                    .patterns
-                    .iter()
-                    .position(|p| p.file == f.file)
-                    .unwrap_or(0);
-                Ok(&captures[j])
-            })?;
-            decode_secs.push(t.elapsed().as_secs_f64());
-            let truth = room.true_correspondence(k);
-            let (reached, close, far) = accuracy(&truth, &decoded, m.width);
-            // Of the decoded pixels off by more than 2, the share the simulator says this
-            // projector does not reach directly at all (a defocused projector's blur reaches
-            // beyond its pinhole footprint).
-            let decoded_n = decoded.map.iter().filter(|d| d.is_some()).count();
-            let outside = truth
-                .iter()
-                .zip(&decoded.map)
-                .filter(|(t, d)| t.is_none() && d.is_some())
-                .count() as f64
-                / decoded_n.max(1) as f64;
-            // The same, leaving out pixels where the projector's direct signal (light × albedo:
-            // grazing surfaces, black chart frames) is under 2% of its typical (99th percentile)
-            // level: there the direct light cannot be told from noise and global light, and
-            // unknown is the right answer.
-            let (factor, typical) = direct_signal(&room, k);
-            let (reached_lit, close_lit, _) =
-                accuracy_where(&truth, &decoded, m.width, |i| factor[i] >= 0.02 * typical);
-            if let Some(dir) = std::env::var_os("ROOMLIGHT_DIAG") {
-                let dir = std::path::PathBuf::from(dir);
-                std::fs::create_dir_all(&dir)?;
-                let w = decoded.width;
-                let data: Vec<u8> = (0..truth.len())
-                    .flat_map(|i| match (truth[i], decoded.map[i]) {
-                        (Some(_), None) => [255u8, 0, 0],
-                        (Some(_), Some(_)) => [0, 160, 0],
-                        (None, Some(_)) => [0, 0, 255],
-                        (None, None) => [(decoded.global[i] * 100.0).min(255.0) as u8; 3],
-                    })
-                    .collect();
-                if let Some(img) = image::RgbImage::from_raw(w, decoded.height, data) {
-                    img.save(dir.join(format!("decode-{}.png", room.projectors()[k].name)))?;
-                }
-                let unknown: Vec<usize> = (0..truth.len())
-                    .filter(|&i| truth[i].is_some() && decoded.map[i].is_none())
-                    .collect();
-                let global_dominates = unknown
-                    .iter()
-                    .filter(|&&i| decoded.direct[i] < decoded.global[i])
-                    .count();
-                let mut ld: Vec<f32> = unknown.iter().map(|&i| decoded.direct[i]).collect();
-                ld.sort_by(f32::total_cmp);
-                let mut ok: Vec<f32> = (0..truth.len())
-                    .filter(|&i| decoded.map[i].is_some())
-                    .map(|i| decoded.direct[i])
-                    .collect();
-                ok.sort_by(f32::total_cmp);
-                println!(
-                    "  unknown {} ({} with Lg > Ld), median Ld unknown {:.4}, median Ld decoded {:.4}",
-                    unknown.len(),
-                    global_dominates,
-                    ld.get(ld.len() / 2).copied().unwrap_or(0.0),
-                    ok.get(ok.len() / 2).copied().unwrap_or(0.0)
-                );
-            }
-            let p = &room.projectors()[k];
-            let kind = if p.kind == ProjectorKind::LargeAperture {
-                " (large aperture: defocused)"
-            } else {
-                ""
-            };
-            println!(
-                "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}% {:>12.2}% of {:>7}{kind}",
-                if alone {
-                    format!("{} alone", p.name)
-                } else {
-                    p.name.clone()
-                },
-                reached,
-                100.0 * close,
-                100.0 * far,
-                100.0 * decoded.decoded_share(),
-                100.0 * close_lit,
-                reached_lit
-            );
-            if far > 0.0 {
-                println!(
-                    "{:<18} of the decoded pixels, {:.3}% lie where the simulator has no direct correspondence for it",
-                    "",
-                    100.0 * outside
-                );
-            }
-            decoded_all[k] = Some(decoded);
-        }
-    }
-    // Second pass (one projector at a time, as `roomlight calibrate` does) where the first
-    // left enough reached pixels unknown.
-    let mut second_captures = 0usize;
-    let saturation = room.scene().camera.saturation as f32;
-    for k in 0..n {
-        if room.projectors()[k].kind != ProjectorKind::Standard {
-            continue;
-        }
-        let Some(first) = decoded_all[k].as_mut() else {
-            continue;
-        };
-        let m = &manifests[k];
-        let name = &room.projectors()[k].name;
-        let left = first
-            .reached_unknown(&config)
-            .iter()
-            .filter(|u| **u)
-            .count();
-        let decoded_before = first.map.iter().filter(|d| d.is_some()).count();
-        let t = Instant::now();
-        let done = second_pass(
-            m,
-            &config,
-            first,
-            saturation,
-            SECOND_PASS_LONGEST,
-            |img, exposure| -> Result<LinearImage> {
-                let mut frames = vec![Frame::Black; n];
-                frames[k] = Frame::Image(ProjectorImage {
-                    width: img.width,
-                    height: img.height,
-                    pixels: img.pixels.clone(),
-                });
-                Ok(image(&noise.expose_longer(
-                    &room.render(&frames, None)?,
-                    f64::from(exposure),
-                )))
-            },
-        )?;
-        let Some(done) = done else {
-            println!(
-                "{name:<18} second pass: not needed ({left} reached pixels unknown, {:.2}% of {decoded_before} decoded)",
-                100.0 * left as f64 / decoded_before.max(1) as f64
-            );
-            continue;
-        };
-        second_captures += done.captures;
-        let truth = room.true_correspondence(k);
-        let (reached, close, far) = accuracy(&truth, first, m.width);
-        // How much direct light the pixels still unknown get.
-        let (factor, typical) = direct_signal(&room, k);
-        let mut missed: Vec<f32> = (0..truth.len())
-            .filter(|&i| truth[i].is_some() && first.map[i].is_none())
-            .map(|i| factor[i] / typical.max(f32::MIN_POSITIVE))
-            .collect();
-        missed.sort_by(f32::total_cmp);
-        let under = |share: f32| missed.iter().filter(|m| **m < share).count();
-        println!(
-            "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}%   second pass: {left} reached pixels unknown ({:.2}% of {decoded_before}), {:.1}% of the frame shown, exposure ×{:.1}, {} captures, {} pixels added, {:.2} s with rendering",
-            format!("{name} +2nd"),
-            reached,
-            100.0 * close,
-            100.0 * far,
-            100.0 * first.decoded_share(),
-            100.0 * left as f64 / decoded_before.max(1) as f64,
-            100.0 * done.shown,
-            done.exposure,
-            done.captures,
-            done.taken,
-            t.elapsed().as_secs_f64()
-        );
-        println!(
-            "{:<18} still unknown: {} reached pixels; their direct light is a median {:.2}% of its typical, under 0.5% on {}, under 1% on {}, under 2% on {}",
-            "",
-            missed.len(),
-            100.0 * missed.get(missed.len() / 2).copied().unwrap_or(0.0),
-            under(0.005),
-            under(0.01),
-            under(0.02)
-        );
-    }
-    println!(
-        "second pass: {second_captures} more captures ({} in all one projector at a time)",
-        alone + second_captures
-    );
+    let (decoded_all, decode_secs) = structured_light(&room)?;
     // Charts and nodes on the same room.
     let charts = crate::pipeline::chart_corners(&room)?;
     let preset = room
@@ -526,7 +217,7 @@ pub fn run(quick: bool) -> Result<()> {
             100.0 * on_target / on_desk.max(1e-12)
         );
     }
-    let mut d = decode_secs.clone();
+    let mut d = decode_secs;
     d.sort_by(f64::total_cmp);
     println!(
         "decode per projector: median {:.2} s",
@@ -552,7 +243,7 @@ pub fn run(quick: bool) -> Result<()> {
         })
         .collect();
     let t = Instant::now();
-    let decoded = decode(&big, &config, |f| {
+    let decoded = decode(&big, &DecodeConfig::default(), |f| {
         Ok(&caps[big
             .patterns
             .iter()
@@ -566,4 +257,277 @@ pub fn run(quick: bool) -> Result<()> {
         100.0 * decoded.decoded_share()
     );
     Ok(())
+}
+
+/// Every projector's structured light through the one calibration procedure on the simulated
+/// room (its footprints, the groups coded together, then each member of a shared group alone
+/// for comparison, then the second passes), measured against the simulator's truth. Returns
+/// each projector's final correspondence and the decode time per projector.
+fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64>)> {
+    let mut noise = CameraNoise::new(room);
+    let mut rig = SimRig::new(room, &mut noise);
+    let events: Arc<Mutex<Vec<(Instant, Event)>>> = Arc::default();
+    let sink = events.clone();
+    let mut procedure = Procedure::new(&mut rig, Settings::default(), move |e| {
+        sink.lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push((Instant::now(), e));
+    });
+    let live = procedure.rig().projectors();
+    let n = live.len();
+    // Footprints: one black capture and one white per projector (N + 1 captures; in a
+    // calibration they are the ends of the response ramps too).
+    let dark = block_on(procedure.dark(&live))?;
+    let whites = block_on(procedure.whites(&live))?;
+    let groups = coding_groups(&live, &dark, &whites, procedure.settings());
+    let manifests: Vec<Manifest> = live
+        .iter()
+        .map(|p| Manifest::with_coding(p.width, p.height, coding(p)))
+        .collect::<Result<_, _>>()?;
+    let alone: usize = manifests.iter().map(|m| m.patterns.len()).sum();
+    let before = procedure.captures();
+    let mut decoded = block_on(procedure.code(&live, &dark, &whites))?;
+    let grouped = procedure.captures();
+    println!(
+        "structured light: {alone} captures one projector at a time; {grouped} with simultaneous coding of non-overlapping projectors ({} groups: {:?}, including {before} footprint captures)",
+        groups.len(),
+        groups
+            .iter()
+            .map(|g| g.iter().map(|&k| live[k].id.as_str()).collect::<Vec<_>>())
+            .collect::<Vec<_>>(),
+    );
+    println!(
+        "{:<18} {:>9} {:>12} {:>14} {:>10}   within ±1 where its direct light is ≥ 2% of its typical",
+        "projector", "reached", "within ±1", "off by > 2", "decoded",
+    );
+    for d in &decoded {
+        report(room, &d.projector.id, &d.corr, false)?;
+    }
+    // Each member of a shared group alone (as over the wire before): what coding at the same
+    // time costs in accuracy.
+    for &k in groups.iter().filter(|g| g.len() > 1).flatten() {
+        let one = block_on(procedure.code(
+            std::slice::from_ref(&live[k]),
+            &dark,
+            std::slice::from_ref(&whites[k]),
+        ))?;
+        for d in &one {
+            report(room, &d.projector.id, &d.corr, true)?;
+        }
+    }
+    let decode_secs = decode_times(&events.lock().unwrap_or_else(PoisonError::into_inner));
+    // Second pass (one projector at a time) where the first left enough reached pixels unknown.
+    let mut second_captures = 0usize;
+    for (d, m) in decoded.iter_mut().zip(&manifests) {
+        if d.projector.kind != roomlight_calib::rig::ProjectorKind::Standard {
+            continue;
+        }
+        second_captures += second_pass(room, &mut procedure, d, m)?;
+    }
+    println!(
+        "second pass: {second_captures} more captures ({} in all one projector at a time)",
+        alone + second_captures
+    );
+    let mut all = vec![None; n];
+    for (k, d) in decoded.into_iter().enumerate() {
+        all[k] = Some(d.corr);
+    }
+    Ok((all, decode_secs))
+}
+
+/// Seconds from each group's last structured-light capture to its members' decodes, shared
+/// among them: the decode time per projector.
+fn decode_times(events: &[(Instant, Event)]) -> Vec<f64> {
+    let mut out = Vec::new();
+    let mut last_capture = None;
+    let mut pending: Vec<Instant> = Vec::new();
+    for (at, e) in events {
+        match e {
+            Event::Captured {
+                stage: Stage::StructuredLight,
+            } => {
+                if let (Some(start), false) = (last_capture, pending.is_empty()) {
+                    flush(&mut out, start, &mut pending);
+                }
+                last_capture = Some(*at);
+            }
+            Event::Decoded { .. } => pending.push(*at),
+            _ => {}
+        }
+    }
+    if let Some(start) = last_capture {
+        flush(&mut out, start, &mut pending);
+    }
+    out
+}
+
+fn flush(out: &mut Vec<f64>, start: Instant, pending: &mut Vec<Instant>) {
+    if let Some(end) = pending.last() {
+        let each = end.duration_since(start).as_secs_f64() / pending.len() as f64;
+        out.extend(std::iter::repeat_n(each, pending.len()));
+    }
+    pending.clear();
+}
+
+/// One projector's accuracy line (and, with `ROOMLIGHT_DIAG` set, its diagnostic image).
+fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Result<()> {
+    let k = room.projector(id)?;
+    let truth = room.true_correspondence(k);
+    let width = room.projectors()[k].pinhole.width;
+    let (reached, close, far) = accuracy(&truth, decoded, width);
+    // Of the decoded pixels off by more than 2, the share the simulator says this projector
+    // does not reach directly at all (a defocused projector's blur reaches beyond its pinhole
+    // footprint).
+    let decoded_n = decoded.map.iter().filter(|d| d.is_some()).count();
+    let outside = truth
+        .iter()
+        .zip(&decoded.map)
+        .filter(|(t, d)| t.is_none() && d.is_some())
+        .count() as f64
+        / decoded_n.max(1) as f64;
+    // The same, leaving out pixels where the projector's direct signal (light × albedo:
+    // grazing surfaces, black chart frames) is under 2% of its typical (99th percentile)
+    // level: there the direct light cannot be told from noise and global light, and unknown is
+    // the right answer.
+    let (factor, typical) = direct_signal(room, k);
+    let (reached_lit, close_lit, _) =
+        accuracy_where(&truth, decoded, width, |i| factor[i] >= 0.02 * typical);
+    if let Some(dir) = std::env::var_os("ROOMLIGHT_DIAG") {
+        diagnose(room, k, &truth, decoded, std::path::Path::new(&dir))?;
+    }
+    let p = &room.projectors()[k];
+    let kind = if p.kind == ProjectorKind::LargeAperture {
+        " (large aperture: defocused)"
+    } else {
+        ""
+    };
+    println!(
+        "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}% {:>12.2}% of {:>7}{kind}",
+        if alone {
+            format!("{} alone", p.name)
+        } else {
+            p.name.clone()
+        },
+        reached,
+        100.0 * close,
+        100.0 * far,
+        100.0 * decoded.decoded_share(),
+        100.0 * close_lit,
+        reached_lit
+    );
+    if far > 0.0 {
+        println!(
+            "{:<18} of the decoded pixels, {:.3}% lie where the simulator has no direct correspondence for it",
+            "",
+            100.0 * outside
+        );
+    }
+    Ok(())
+}
+
+/// A diagnostic image of one decode (red: reached but unknown, green: decoded, blue: decoded
+/// where the projector does not reach) and where the unknown pixels' light comes from.
+fn diagnose(
+    room: &Room,
+    k: usize,
+    truth: &[Option<u32>],
+    decoded: &Correspondence,
+    dir: &std::path::Path,
+) -> Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let data: Vec<u8> = (0..truth.len())
+        .flat_map(|i| match (truth[i], decoded.map[i]) {
+            (Some(_), None) => [255u8, 0, 0],
+            (Some(_), Some(_)) => [0, 160, 0],
+            (None, Some(_)) => [0, 0, 255],
+            (None, None) => [(decoded.global[i] * 100.0).min(255.0) as u8; 3],
+        })
+        .collect();
+    if let Some(img) = image::RgbImage::from_raw(decoded.width, decoded.height, data) {
+        img.save(dir.join(format!("decode-{}.png", room.projectors()[k].name)))?;
+    }
+    let unknown: Vec<usize> = (0..truth.len())
+        .filter(|&i| truth[i].is_some() && decoded.map[i].is_none())
+        .collect();
+    let global_dominates = unknown
+        .iter()
+        .filter(|&&i| decoded.direct[i] < decoded.global[i])
+        .count();
+    let mut ld: Vec<f32> = unknown.iter().map(|&i| decoded.direct[i]).collect();
+    ld.sort_by(f32::total_cmp);
+    let mut ok: Vec<f32> = (0..truth.len())
+        .filter(|&i| decoded.map[i].is_some())
+        .map(|i| decoded.direct[i])
+        .collect();
+    ok.sort_by(f32::total_cmp);
+    println!(
+        "  unknown {} ({} with Lg > Ld), median Ld unknown {:.4}, median Ld decoded {:.4}",
+        unknown.len(),
+        global_dominates,
+        ld.get(ld.len() / 2).copied().unwrap_or(0.0),
+        ok.get(ok.len() / 2).copied().unwrap_or(0.0)
+    );
+    Ok(())
+}
+
+/// The procedure's second pass on one standard projector, reported against the truth;
+/// returns the captures it took.
+fn second_pass(
+    room: &Room,
+    procedure: &mut Procedure<'_, SimRig<'_>>,
+    d: &mut Decoded,
+    m: &Manifest,
+) -> Result<usize> {
+    let config = procedure.settings().decode;
+    let name = d.projector.id.clone();
+    let first = &mut d.corr;
+    let left = first
+        .reached_unknown(&config)
+        .iter()
+        .filter(|u| **u)
+        .count();
+    let decoded_before = first.map.iter().filter(|d| d.is_some()).count();
+    let t = Instant::now();
+    let Some(done) = block_on(procedure.second_pass(&d.projector, m, first))? else {
+        println!(
+            "{name:<18} second pass: not needed ({left} reached pixels unknown, {:.2}% of {decoded_before} decoded)",
+            100.0 * left as f64 / decoded_before.max(1) as f64
+        );
+        return Ok(0);
+    };
+    let k = room.projector(&name)?;
+    let truth = room.true_correspondence(k);
+    let (reached, close, far) = accuracy(&truth, first, m.width);
+    // How much direct light the pixels still unknown get.
+    let (factor, typical) = direct_signal(room, k);
+    let mut missed: Vec<f32> = (0..truth.len())
+        .filter(|&i| truth[i].is_some() && first.map[i].is_none())
+        .map(|i| factor[i] / typical.max(f32::MIN_POSITIVE))
+        .collect();
+    missed.sort_by(f32::total_cmp);
+    let under = |share: f32| missed.iter().filter(|m| **m < share).count();
+    println!(
+        "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}%   second pass: {left} reached pixels unknown ({:.2}% of {decoded_before}), {:.1}% of the frame shown, exposure ×{:.1}, {} captures, {} pixels added, {:.2} s with rendering",
+        format!("{name} +2nd"),
+        reached,
+        100.0 * close,
+        100.0 * far,
+        100.0 * first.decoded_share(),
+        100.0 * left as f64 / decoded_before.max(1) as f64,
+        100.0 * done.shown,
+        done.exposure,
+        done.captures,
+        done.taken,
+        t.elapsed().as_secs_f64()
+    );
+    println!(
+        "{:<18} still unknown: {} reached pixels; their direct light is a median {:.2}% of its typical, under 0.5% on {}, under 1% on {}, under 2% on {}",
+        "",
+        missed.len(),
+        100.0 * missed.get(missed.len() / 2).copied().unwrap_or(0.0),
+        under(0.005),
+        under(0.01),
+        under(0.02)
+    );
+    Ok(done.captures)
 }

@@ -10,12 +10,14 @@
 
 mod calibration;
 mod model;
+mod rig;
 mod run;
 mod sim_hw;
 mod truth;
 
 pub use calibration::*;
 pub use model::*;
+pub use rig::{SimRig, projector};
 pub use run::*;
 use sim_hw::*;
 pub use truth::*;
