@@ -41,7 +41,7 @@ cat > camera.toml <<TOML
 room = "rendered"
 token = "change-me"
 listen = "127.0.0.1:50061"
-hardware = "http://127.0.0.1:50060"
+hardware = { sim = "http://127.0.0.1:50060" }
 $source_lines
 model_rounds = 20
 mdns = false
@@ -54,7 +54,7 @@ start_node() { # projector, then the lines that say where its weights come from
 room = "rendered"
 token = "change-me"
 camera = "http://127.0.0.1:50061"
-hardware = "http://127.0.0.1:50060"
+hardware = { sim = "http://127.0.0.1:50060" }
 projector = "$1"
 state_file = "$1.state.json"
 $2

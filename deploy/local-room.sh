@@ -27,7 +27,7 @@ pids+=($!)
 sleep 0.5
 for ((k = 0; k < projectors; k++)); do
     sed -e "s/^projector = .*/projector = \"p$k\"/" -e "s/^state_file = .*/state_file = \"p$k.state.json\"/" \
-        -e 's/^camera = .*/camera = "mdns"/' -e 's/^mdns_port = .*/mdns_port = 53530/' \
+        -e 's/^camera = .*/camera = { mdns = "lab" }/' -e 's/^mdns_port = .*/mdns_port = 53530/' \
         -e 's/^mdns_loopback_only = .*/mdns_loopback_only = true/' "$here/deploy/node.toml" > "p$k.toml"
     "$bin" node --config "p$k.toml" > "p$k.log" 2>&1 &
     pids+=($!)

@@ -1,5 +1,6 @@
 //! The `roomlight` command: a thin clap front over the crates.
 
+mod config;
 mod graycode_cmd;
 mod procs;
 
@@ -237,6 +238,8 @@ fn bench(args: BenchArgs) -> Result<()> {
         ),
         Some(BenchCommand::Net { quick }) => bench::net::run(quick, &ALLOCATOR).map(|_| ()),
         Some(BenchCommand::Calib { quick }) => bench::calib::run(quick),
-        Some(BenchCommand::Sim { quick, out }) => bench::sim::run(quick, out.as_deref(), &ALLOCATOR),
+        Some(BenchCommand::Sim { quick, out }) => {
+            bench::sim::run(quick, out.as_deref(), &ALLOCATOR)
+        }
     }
 }

@@ -1,19 +1,15 @@
-//! The processes of an installation: `roomlight sim`, `roomlight camera`, `roomlight node`.
-//! Each prints `listening on ADDR` once it serves, logs with tracing (RUST_LOG), and stops
-//! cleanly on Ctrl-C or SIGTERM (nodes say goodbye and flush their state file).
+//! The processes of an installation as the binary runs them: `roomlight sim`, `calibrate`,
+//! `camera`, `node`, `optimum` — their arguments, the runtime, logs and stop signals; what they
+//! do is roomlight-lab's `process`. Each server prints `listening on ADDR` once it serves, logs
+//! with tracing (RUST_LOG), and stops cleanly on Ctrl-C or SIGTERM (nodes say goodbye and
+//! flush their state file).
 
+use crate::config::{self, CameraLocation};
 use anyhow::{Context, Result, bail};
-use roomlight_agent::camera::CameraConfig;
-use roomlight_agent::discovery::{self, MdnsConfig};
-use roomlight_agent::node::NodeConfig;
-use roomlight_core::{LinearRgb, StepRule};
-use roomlight_lab::process::{
-    self, CalibrateOptions, CameraProcess, CameraSource, NodeDisplay, SimRoom, SyntheticSim,
-};
-use serde::Deserialize;
+use roomlight_agent::discovery;
+use roomlight_lab::process::{self, CalibrateOptions, SimRoom, SyntheticSim};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 use tokio_util::sync::CancellationToken;
 
 #[derive(Debug, clap::Args)]
@@ -91,126 +87,6 @@ where
         stop_on_signals(cancel.clone());
         serve(listener, cancel).await
     })
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CameraFile {
-    room: String,
-    token: String,
-    listen: String,
-    hardware: String,
-    /// The calibrated model (`roomlight calibrate` or `roomlight sim` writes it); or `survey`.
-    #[serde(default)]
-    model: Option<PathBuf>,
-    /// A rendered room: the charts file (`roomlight calibrate` writes it); absent: the
-    /// synthetic room's patches.
-    #[serde(default)]
-    charts: Option<PathBuf>,
-    /// Calibration over the wire on a rendered room: the survey file (`roomlight calibrate
-    /// --survey-only` writes it); each projector is calibrated through its node agent as it
-    /// joins. Instead of `model` and `charts`.
-    #[serde(default)]
-    survey: Option<PathBuf>,
-    /// With `survey`: the LED preset whose light the projectors reproduce (default: the first).
-    #[serde(default)]
-    preset: Option<String>,
-    /// Where to write the model (problem, owners, starts) whenever a projector has been
-    /// calibrated over the wire or hot.
-    #[serde(default)]
-    model_out: Option<PathBuf>,
-    #[serde(default = "heartbeat_default")]
-    heartbeat_ms: u64,
-    #[serde(default = "deadline_default")]
-    deadline_ms: u64,
-    #[serde(default)]
-    model_rounds: usize,
-    #[serde(default = "epoch_default")]
-    calibration_epoch: u64,
-    #[serde(default)]
-    stale_frames: usize,
-    /// Advertise the camera agent over mDNS.
-    #[serde(default = "mdns_default")]
-    mdns: bool,
-    #[serde(default = "mdns_port_default")]
-    mdns_port: u16,
-    /// mDNS on the loopback interface only (one machine).
-    #[serde(default)]
-    mdns_loopback_only: bool,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct NodeFile {
-    room: String,
-    token: String,
-    /// The camera agent's endpoint, or "mdns" to find the agent of `room` over mDNS.
-    camera: String,
-    #[serde(default = "mdns_port_default")]
-    mdns_port: u16,
-    #[serde(default)]
-    mdns_loopback_only: bool,
-    /// How long to look for the camera agent over mDNS, in seconds.
-    #[serde(default = "mdns_wait_default")]
-    mdns_wait_s: u64,
-    hardware: String,
-    /// A rendered room: this projector's frame file (`roomlight calibrate` writes it); absent:
-    /// node values on the synthetic room, or (with `rendered`) weights from the camera agent.
-    #[serde(default)]
-    frame: Option<PathBuf>,
-    /// A rendered room without a frame file: the camera agent calibrates this projector over
-    /// the wire (its display shows the patterns and draws the weights it is sent).
-    #[serde(default)]
-    rendered: bool,
-    /// `standard` or `large-aperture`.
-    #[serde(default = "kind_default")]
-    kind: String,
-    projector: String,
-    #[serde(default)]
-    state_file: Option<PathBuf>,
-    #[serde(default = "rule_default")]
-    rule: String,
-    #[serde(default = "theta_default")]
-    theta: f64,
-    #[serde(default = "start_default")]
-    start: f64,
-}
-
-fn kind_default() -> String {
-    "standard".into()
-}
-fn mdns_default() -> bool {
-    true
-}
-fn mdns_port_default() -> u16 {
-    5353
-}
-fn mdns_wait_default() -> u64 {
-    30
-}
-fn heartbeat_default() -> u64 {
-    500
-}
-fn deadline_default() -> u64 {
-    2000
-}
-fn epoch_default() -> u64 {
-    1
-}
-fn rule_default() -> String {
-    "momentum".into()
-}
-fn theta_default() -> f64 {
-    1.0
-}
-fn start_default() -> f64 {
-    0.5
-}
-
-fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("{}: not a valid config", path.display()))
 }
 
 fn runtime() -> Result<tokio::runtime::Runtime> {
@@ -317,51 +193,7 @@ pub fn optimum(path: &Path) -> Result<()> {
 
 pub fn camera(path: &Path) -> Result<()> {
     init_logs();
-    let file: CameraFile = read_toml(path)?;
-    if file.model.is_some() == file.survey.is_some() {
-        bail!(
-            "{}: give either model (a calibrated room) or survey (calibration over the wire)",
-            path.display()
-        );
-    }
-    // Without its model a restarted camera agent would measure the room's black and target
-    // again while the node agents keep their light on, and get both wrong.
-    if file.survey.is_some() && file.model_out.is_none() {
-        bail!(
-            "{}: survey needs model_out, the file from which a restarted camera agent resumes",
-            path.display()
-        );
-    }
-    let source = match (file.model, file.survey) {
-        (Some(model), _) => CameraSource::Model {
-            model,
-            charts: file.charts,
-        },
-        (None, Some(survey)) => CameraSource::Survey {
-            survey,
-            preset: file.preset,
-        },
-        (None, None) => unreachable!("checked above"),
-    };
-    let process = CameraProcess {
-        agent: CameraConfig {
-            room: file.room.clone(),
-            token: file.token,
-            heartbeat: Duration::from_millis(file.heartbeat_ms.max(50)),
-            deadline: Duration::from_millis(file.deadline_ms.max(10)),
-            model_rounds: file.model_rounds,
-            calibration_epoch: file.calibration_epoch,
-            stale_frames: file.stale_frames,
-            model_out: file.model_out,
-        },
-        hardware: file.hardware,
-        source,
-        listen: file.listen,
-        advertise: file.mdns.then_some(MdnsConfig {
-            port: file.mdns_port,
-            loopback_only: file.mdns_loopback_only,
-        }),
-    };
+    let process = config::load_camera(path)?;
     runtime()?.block_on(async {
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
@@ -371,65 +203,21 @@ pub fn camera(path: &Path) -> Result<()> {
 
 pub fn node(path: &Path) -> Result<()> {
     init_logs();
-    let file: NodeFile = read_toml(path)?;
-    let rule = match file.rule.as_str() {
-        "safe" => StepRule::Safe { theta: file.theta },
-        "momentum" => StepRule::Momentum { theta: file.theta },
-        "paper" => StepRule::paper(),
-        other => bail!(
-            "{}: rule {other:?}, expected safe, momentum or paper",
-            path.display()
-        ),
+    let setup = config::load_node(path)?;
+    let endpoint = match &setup.camera {
+        CameraLocation::Address(address) => address.clone(),
+        CameraLocation::Mdns(room) => {
+            let found = discovery::find_camera(room, &setup.mdns, setup.mdns_wait)
+                .with_context(|| format!("{}: camera over mDNS", path.display()))?;
+            tracing::info!(camera = %found, room = %room, "found over mDNS");
+            found
+        }
     };
-    rule.validate()
-        .with_context(|| format!("{}: theta", path.display()))?;
-    let kind = match file.kind.as_str() {
-        "standard" => roomlight_proto::v1::ProjectorKind::Standard,
-        "large-aperture" => roomlight_proto::v1::ProjectorKind::LargeAperture,
-        other => bail!(
-            "{}: kind {other:?}, expected standard or large-aperture",
-            path.display()
-        ),
-    };
-    if !(0.0..=1.0).contains(&file.start) {
-        bail!(
-            "{}: start {}, expected a value in [0, 1]",
-            path.display(),
-            file.start
-        );
-    }
-    let endpoint = if file.camera == "mdns" {
-        let mdns = MdnsConfig {
-            port: file.mdns_port,
-            loopback_only: file.mdns_loopback_only,
-        };
-        let found =
-            discovery::find_camera(&file.room, &mdns, Duration::from_secs(file.mdns_wait_s))
-                .with_context(|| format!("{}: camera = \"mdns\"", path.display()))?;
-        tracing::info!(camera = %found, room = %file.room, "found over mDNS");
-        found
-    } else {
-        file.camera.clone()
-    };
-    let display = match (file.frame, file.rendered) {
-        (Some(frame), _) => NodeDisplay::Frame(frame),
-        (None, true) => NodeDisplay::OverTheWire,
-        (None, false) => NodeDisplay::Synthetic,
-    };
-    let config = NodeConfig {
-        endpoint,
-        room: file.room,
-        token: file.token,
-        projector_id: file.projector,
-        kind,
-        rule,
-        start: LinearRgb::splat(file.start),
-        state_file: file.state_file,
-    };
+    let agent = setup.agent_config(endpoint);
     runtime()?.block_on(async {
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
-        process::run_node(config, &file.hardware, &display, cancel)
+        process::run_node(agent, &setup.hardware, &setup.display, cancel)
             .await
             .with_context(|| format!("the node agent of {}", path.display()))
     })

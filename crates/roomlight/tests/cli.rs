@@ -619,7 +619,7 @@ fn configs_for_calibration_over_the_wire_are_checked() {
         std::fs::write(
             &path,
             format!(
-                "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://127.0.0.1:1\"\nmdns = false\n{lines}"
+                "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = {{ sim = \"http://127.0.0.1:1\" }}\nmdns = false\n{lines}"
             ),
         )
         .expect("config");
@@ -644,12 +644,12 @@ fn configs_for_calibration_over_the_wire_are_checked() {
     let node = d.join("node.toml");
     std::fs::write(
         &node,
-        "room = \"r\"\ntoken = \"t\"\ncamera = \"http://127.0.0.1:1\"\nhardware = \"http://127.0.0.1:1\"\nprojector = \"p\"\nrendered = true\nkind = \"fresnel\"\n",
+        "room = \"r\"\ntoken = \"t\"\ncamera = \"http://127.0.0.1:1\"\nhardware = { sim = \"http://127.0.0.1:1\" }\nprojector = \"p\"\nrendered = true\nkind = \"fresnel\"\n",
     )
     .expect("node config");
     let e = roomlight_err(&["node", "--config", node.to_str().expect("utf-8")]);
     assert!(
-        e.contains("node.toml") && e.contains("kind \"fresnel\""),
+        e.contains("node.toml") && e.contains("kind") && e.contains("fresnel"),
         "{e}"
     );
 }

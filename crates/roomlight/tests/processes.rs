@@ -140,7 +140,7 @@ fn small_room_and_camera(
     std::fs::write(
         d.join("camera.toml"),
         format!(
-            "room = \"small\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://{sim}\"\n{source}\nheartbeat_ms = 500\nmodel_rounds = 20\nmdns = false\n"
+            "room = \"small\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nhardware = {{ sim = \"http://{sim}\" }}\n{source}\nheartbeat_ms = 500\nmodel_rounds = 20\nmdns = false\n"
         ),
     )
     .expect("camera config");
@@ -177,7 +177,7 @@ fn status(line: &str) -> Option<(u64, f64, usize)> {
 
 fn write_node(dir: &Path, projector: &str, camera: &str, sim: &str) {
     let text = format!(
-        "room = \"lab\"\ntoken = \"t0k3n\"\ncamera = \"http://{camera}\"\nhardware = \"http://{sim}\"\nprojector = \"{projector}\"\nstate_file = \"{projector}.state.json\"\n"
+        "room = \"lab\"\ntoken = \"t0k3n\"\ncamera = \"http://{camera}\"\nhardware = {{ sim = \"http://{sim}\" }}\nprojector = \"{projector}\"\nstate_file = \"{projector}.state.json\"\n"
     );
     std::fs::write(dir.join(format!("{projector}.toml")), text).expect("node config");
 }
@@ -246,7 +246,7 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
     // The camera agent advertises itself over mDNS on loopback, on a port of this test's own;
     // the replacement node below finds it that way.
     let mdns_port = 20_000 + (std::process::id() % 20_000);
-    std::fs::write(d.join("camera.toml"), format!("room = \"lab\"\ntoken = \"t0k3n\"\nlisten = \"127.0.0.1:0\"\nhardware = \"http://{sim}\"\nmodel = \"model.json\"\nheartbeat_ms = 200\nmodel_rounds = 5\nmdns = true\nmdns_port = {mdns_port}\nmdns_loopback_only = true\n")).expect("camera config");
+    std::fs::write(d.join("camera.toml"), format!("room = \"lab\"\ntoken = \"t0k3n\"\nlisten = \"127.0.0.1:0\"\nhardware = {{ sim = \"http://{sim}\" }}\nmodel = \"model.json\"\nheartbeat_ms = 200\nmodel_rounds = 5\nmdns = true\nmdns_port = {mdns_port}\nmdns_loopback_only = true\n")).expect("camera config");
     let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
     let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
         l.starts_with("camera listening on")
@@ -270,9 +270,11 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
     let p2 = std::fs::read_to_string(d.join("p2.toml")).expect("p2 config");
     let p2 = p2.replace(
         &format!("camera = \"http://{camera}\""),
-        &format!("camera = \"mdns\"\nmdns_port = {mdns_port}\nmdns_loopback_only = true"),
+        &format!(
+            "camera = {{ mdns = \"lab\" }}\nmdns_port = {mdns_port}\nmdns_loopback_only = true"
+        ),
     );
-    assert!(p2.contains("\"mdns\""), "{p2}");
+    assert!(p2.contains("mdns = \"lab\""), "{p2}");
     std::fs::write(d.join("p2-mdns.toml"), p2).expect("p2 config over mDNS");
     procs.spawn("p2-new", &["node", "--config", "p2-mdns.toml"], d);
     wait_line(&cam_out, Duration::from_secs(60), |l| {
@@ -471,7 +473,7 @@ fn the_rendered_room_converges_through_separate_processes() {
         std::fs::write(
             d.join(format!("{p}.toml")),
             format!(
-                "room = \"small\"\ntoken = \"t\"\ncamera = \"http://{camera}\"\nhardware = \"http://{sim}\"\nframe = \"frame-{p}.json\"\nprojector = \"{p}\"\n"
+                "room = \"small\"\ntoken = \"t\"\ncamera = \"http://{camera}\"\nhardware = {{ sim = \"http://{sim}\" }}\nframe = \"frame-{p}.json\"\nprojector = \"{p}\"\n"
             ),
         )
         .expect("node config");
@@ -529,7 +531,7 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
         std::fs::write(
             d.join(format!("{name}.toml")),
             format!(
-                "room = \"small\"\ntoken = \"t\"\ncamera = \"http://{camera}\"\nhardware = \"http://{sim}\"\nrendered = true\nkind = \"{}\"\nprojector = \"{name}\"\nstate_file = \"{name}.state\"\n",
+                "room = \"small\"\ntoken = \"t\"\ncamera = \"http://{camera}\"\nhardware = {{ sim = \"http://{sim}\" }}\nrendered = true\nkind = \"{}\"\nprojector = \"{name}\"\nstate_file = \"{name}.state\"\n",
                 if large { "large-aperture" } else { "standard" }
             ),
         )

@@ -1,0 +1,163 @@
+//! The camera agent's config file and the one conversion into the process that runs it.
+
+use super::{Hardware, check, check_nonempty, read_toml};
+use anyhow::{Result, bail};
+use roomlight_agent::camera::CameraConfig;
+use roomlight_agent::discovery::MdnsConfig;
+use roomlight_lab::process::{CameraProcess, CameraSource};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraFile {
+    room: String,
+    token: String,
+    listen: String,
+    hardware: Hardware,
+    /// The calibrated model (`roomlight calibrate` or `roomlight sim` writes it); or `survey`.
+    #[serde(default)]
+    model: Option<PathBuf>,
+    /// A rendered room: the charts file (`roomlight calibrate` writes it); absent: the
+    /// synthetic room's patches.
+    #[serde(default)]
+    charts: Option<PathBuf>,
+    /// Calibration over the wire on a rendered room: the survey file (`roomlight calibrate
+    /// --survey-only` writes it). Instead of `model` and `charts`.
+    #[serde(default)]
+    survey: Option<PathBuf>,
+    /// With `survey`: the LED preset whose light the projectors reproduce (default: the first).
+    #[serde(default)]
+    preset: Option<String>,
+    /// Where to write the model whenever a projector has been calibrated over the wire or hot.
+    #[serde(default)]
+    model_out: Option<PathBuf>,
+    #[serde(default = "heartbeat_default")]
+    heartbeat_ms: u64,
+    #[serde(default = "deadline_default")]
+    deadline_ms: u64,
+    #[serde(default)]
+    model_rounds: usize,
+    #[serde(default = "epoch_default")]
+    calibration_epoch: u64,
+    #[serde(default)]
+    stale_frames: usize,
+    /// Advertise the camera agent over mDNS.
+    #[serde(default = "mdns_default")]
+    mdns: bool,
+    #[serde(default = "super::mdns_port_default")]
+    mdns_port: u16,
+    /// mDNS on the loopback interface only (one machine).
+    #[serde(default)]
+    mdns_loopback_only: bool,
+}
+
+fn heartbeat_default() -> u64 {
+    500
+}
+fn deadline_default() -> u64 {
+    2000
+}
+fn epoch_default() -> u64 {
+    1
+}
+fn mdns_default() -> bool {
+    true
+}
+
+/// The camera agent's config file, checked and turned into the process to run.
+pub fn load_camera(path: &Path) -> Result<CameraProcess> {
+    let file: CameraFile = read_toml(path)?;
+    file.check(path)?;
+    Ok(file.into_process())
+}
+
+impl CameraFile {
+    fn check(&self, path: &Path) -> Result<()> {
+        check_nonempty(path, "room", &self.room)?;
+        check_nonempty(path, "listen", &self.listen)?;
+        check_nonempty(path, "hardware.sim", self.hardware.endpoint())?;
+        // Under 50 ms heartbeats swamp a large room; over a minute a dead node holds rounds.
+        check(
+            path,
+            "heartbeat_ms",
+            self.heartbeat_ms,
+            50..=60_000,
+            "milliseconds",
+        )?;
+        // Time arithmetic on the deadline must not overflow (u64::MAX ms panicked).
+        check(
+            path,
+            "deadline_ms",
+            self.deadline_ms,
+            10..=600_000,
+            "milliseconds",
+        )?;
+        check(path, "model_rounds", self.model_rounds, 0..=1_000, "rounds")?;
+        // Any epoch is valid: it is only compared with the node state files'.
+        check(path, "stale_frames", self.stale_frames, 0..=100, "frames")?;
+        check(
+            path,
+            "mdns_port",
+            self.mdns_port,
+            1..=u16::MAX,
+            "(a UDP port)",
+        )?;
+        if self.model.is_some() == self.survey.is_some() {
+            bail!(
+                "{}: give either model (a calibrated room) or survey (calibration over the wire)",
+                path.display()
+            );
+        }
+        if self.survey.is_some() && self.charts.is_some() {
+            bail!("{}: charts comes with model, not survey", path.display());
+        }
+        // Without its model a restarted camera agent would measure the room's black and target
+        // again while the node agents keep their light on, and get both wrong.
+        if self.survey.is_some() && self.model_out.is_none() {
+            bail!(
+                "{}: survey needs model_out, the file from which a restarted camera agent resumes",
+                path.display()
+            );
+        }
+        if self.model.is_some() && self.preset.is_some() {
+            bail!("{}: preset comes with survey, not model", path.display());
+        }
+        Ok(())
+    }
+
+    /// The one place a checked camera config becomes the agent's `CameraConfig` and process.
+    fn into_process(self) -> CameraProcess {
+        let source = match (self.model, self.survey) {
+            (Some(model), _) => CameraSource::Model {
+                model,
+                charts: self.charts,
+            },
+            (None, survey) => CameraSource::Survey {
+                survey: survey.unwrap_or_default(),
+                preset: self.preset,
+            },
+        };
+        let Hardware::Sim(hardware) = self.hardware;
+        CameraProcess {
+            agent: CameraConfig {
+                room: self.room,
+                token: self.token,
+                heartbeat: Duration::from_millis(self.heartbeat_ms),
+                deadline: Duration::from_millis(self.deadline_ms),
+                model_rounds: self.model_rounds,
+                calibration_epoch: self.calibration_epoch,
+                stale_frames: self.stale_frames,
+                model_out: self.model_out,
+            },
+            hardware,
+            source,
+            listen: self.listen,
+            advertise: self.mdns.then_some(MdnsConfig {
+                port: self.mdns_port,
+                loopback_only: self.mdns_loopback_only,
+            }),
+        }
+    }
+}

@@ -1,0 +1,74 @@
+//! The agents' config files (deploy/camera.toml, deploy/node.toml) as types: enums, not
+//! strings; unknown fields refused; every number range-checked once, at load, with the file and
+//! the field in the error. `camera` and `node` each end in the one function that turns a checked
+//! config into what the process runs. Nothing here knows what the agents do with it.
+
+mod camera;
+mod node;
+#[cfg(test)]
+mod tests;
+
+pub use camera::load_camera;
+pub use node::{CameraLocation, load_node};
+
+use anyhow::{Context, Result, bail};
+use serde::Deserialize;
+use std::fmt::Display;
+use std::ops::RangeInclusive;
+use std::path::Path;
+
+/// The hardware a process drives. Only the simulator for now; real displays and cameras
+/// become variants of their own (`hardware = { v4l2 = "/dev/video0" }`, …).
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Hardware {
+    /// A `roomlight sim` process at this endpoint: `hardware = { sim = "http://host:port" }`.
+    Sim(String),
+}
+
+impl Hardware {
+    /// The endpoint of the process that serves it.
+    fn endpoint(&self) -> &str {
+        match self {
+            Self::Sim(endpoint) => endpoint,
+        }
+    }
+}
+
+/// Reads and parses `path`; serde's message names the field and the line.
+fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("{}: not a valid config", path.display()))
+}
+
+/// Refuses `value` of `field` outside `range`, naming the file, the field and what was expected.
+fn check<T: PartialOrd + Display>(
+    path: &Path,
+    field: &str,
+    value: T,
+    range: RangeInclusive<T>,
+    unit: &str,
+) -> Result<()> {
+    if !range.contains(&value) {
+        bail!(
+            "{}: {field} = {value}: expected {} to {} {unit}",
+            path.display(),
+            range.start(),
+            range.end()
+        );
+    }
+    Ok(())
+}
+
+/// Refuses an empty string field (an endpoint, a room, a projector id).
+fn check_nonempty(path: &Path, field: &str, value: &str) -> Result<()> {
+    if value.trim().is_empty() {
+        bail!("{}: {field} is empty", path.display());
+    }
+    Ok(())
+}
+
+fn mdns_port_default() -> u16 {
+    5353
+}
