@@ -1,6 +1,11 @@
 //! Restarts: while the camera agent is away the lights stay on, and the node agents reconnect
 //! and resume where they were; a node agent restarted with its state file relights before it
 //! reaches any camera agent. Every wait has a deadline.
+//!
+//! These run on real time: under `tokio::time::pause` (a single-threaded runtime) the
+//! three-node room with model rounds hung before its first eight captures, the process busy,
+//! and was not diagnosed further. The reconnect backoff itself is tested under paused time in
+//! `roomlight_agent::node::backoff`.
 
 use roomlight_agent::hardware::Display;
 use roomlight_agent::node::SavedState;

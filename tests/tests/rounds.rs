@@ -214,8 +214,9 @@ async fn a_stop_request_lets_the_current_round_finish() {
 
 /// A projector that leaves in the middle of a round (its stream ends after it received its
 /// errors) is not waited for: with a one-minute deadline, the round and the next ones go on
-/// with the projector that stayed at once.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+/// with the projector that stayed at once. Under paused time, so "at once" is the agents' clock:
+/// twenty seconds of it, a third of the deadline.
+#[tokio::test(start_paused = true)]
 async fn a_round_does_not_wait_for_a_projector_that_left_during_it() {
     let mut sb = Sandbox::builder()
         .room(8, 2)
