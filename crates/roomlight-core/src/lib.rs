@@ -7,6 +7,8 @@
 //! - [`conventional`]: the conventional start of DESIGN §3.1.
 //! - [`optimum`]: the exact bounded least-squares optimum, the yardstick.
 //! - [`metrics`]: `G`, CIEDE2000, RMS and ANSI contrast.
+//! - [`round`]: the round controller: live projectors and their readiness, what a round waits
+//!   for, the settle rule, calibration retries. A state machine; time is passed in.
 //! - [`closed_loop`]: an in-memory plant and loop to compare rules without a network.
 //! - [`synthetic`]: synthetic rooms for benchmarks and tests.
 //!
@@ -20,6 +22,7 @@ pub mod metrics;
 pub mod model;
 pub mod optimum;
 pub mod rgb;
+pub mod round;
 pub mod rules;
 pub mod synthetic;
 

@@ -33,14 +33,13 @@ async fn show_pattern(
         seq,
         pattern: Some(pattern),
     });
-    if !shared.send(tx, show).await {
+    if !shared.offer(projector, tx, vec![show]) {
         return false;
     }
     let shown = shared
         .registry
         .wait_for(shared.config.deadline, |r| {
-            r.peers
-                .get(projector)
+            r.peer(projector)
                 .is_some_and(|p| p.pattern_shown.is_some_and(|s| s >= seq))
         })
         .await;
@@ -186,10 +185,10 @@ async fn segment_over_wire(
     let mut batch = vec![first];
     let others: Vec<String> = {
         let reg = shared.registry.lock();
-        if reg.dark() {
-            reg.peers
-                .iter()
-                .filter(|(id, p)| *id != projector && !p.calibrated && p.nodes.is_empty())
+        let room = reg.projectors();
+        if room.dark() {
+            room.iter()
+                .filter(|(id, p)| *id != projector && !p.calibrated() && p.nodes().is_empty())
                 .map(|(id, _)| id.clone())
                 .collect()
         } else {
@@ -219,8 +218,7 @@ async fn decode_over_wire(
     let (tx, width, height, kind) = shared
         .registry
         .lock()
-        .peers
-        .get(projector)
+        .peer(projector)
         .map(|p| (p.tx.clone(), p.width, p.height, p.kind))?;
     // A large aperture's defocus blurs XOR-04's fine stripes: plain Gray code, one node.
     let large = kind == v1::ProjectorKind::LargeAperture;
@@ -335,7 +333,13 @@ async fn assign_decoded(shared: &Shared, batch: Vec<Decoded>) -> Vec<String> {
     // are segmented anew, whatever they had). One that is not attached now does not hold its
     // share: a projector that replaces a dead one takes its place (should the old one come
     // back, the model holds both where they overlap).
-    let attached: HashSet<String> = shared.registry.lock().peers.keys().cloned().collect();
+    let attached: HashSet<String> = shared
+        .registry
+        .lock()
+        .projectors()
+        .iter()
+        .map(|(id, _)| id.clone())
+        .collect();
     let claimed: Option<Vec<f32>> = {
         let live = shared.live();
         let mut sum: Option<Vec<f32>> = None;
@@ -370,11 +374,9 @@ async fn assign_decoded(shared: &Shared, batch: Vec<Decoded>) -> Vec<String> {
             continue;
         };
         let ids: Vec<u32> = assignment.nodes.iter().map(|(n, _)| *n).collect();
-        if let Some(peer) = shared.registry.lock().peers.get_mut(projector) {
-            peer.nodes = ids.clone();
-        }
+        shared.registry.lock().set_nodes(projector, ids.clone());
         let assign = v1::room_message::Body::Assign(assign_message(&assignment));
-        if !shared.send(&d.tx, assign).await {
+        if !shared.offer(projector, &d.tx, vec![assign]) {
             continue;
         }
         tracing::info!(%projector, nodes = ids.len(), decoded = format!("{:.1}%", 100.0 * decoded), gamma = ?assignment.response.gamma, "segmented over the wire");
@@ -533,19 +535,13 @@ pub(super) async fn calibrate_hot(
     let needs_nodes = shared
         .registry
         .lock()
-        .peers
+        .projectors()
         .get(projector)
-        .is_some_and(|p| p.nodes.is_empty());
+        .is_some_and(|p| p.nodes().is_empty());
     if needs_nodes && !segment_over_wire(shared, eye, projector).await {
         return false;
     }
-    let Some((tx, nodes)) = shared
-        .registry
-        .lock()
-        .peers
-        .get(projector)
-        .map(|p| (p.tx.clone(), p.nodes.clone()))
-    else {
+    let Some((tx, nodes)) = shared.registry.lock().outbox(projector) else {
         return false;
     };
     tracing::info!(%projector, nodes = nodes.len(), "hot calibration");
@@ -561,16 +557,15 @@ pub(super) async fn calibrate_hot(
     // in the dark as well (the light of lit projectors adds camera noise and costs decoded
     // pixels); all are lit once the last is measured.
     let dark = {
-        let reg = shared.registry.lock();
-        reg.dark()
-            && reg
-                .peers
+        let mut reg = shared.registry.lock();
+        let room = reg.projectors();
+        let dark = room.dark()
+            && room
                 .iter()
-                .any(|(id, p)| id != projector && !p.calibrated)
+                .any(|(id, p)| id != projector && !p.calibrated());
+        reg.mark_calibrated(projector);
+        dark
     };
-    if let Some(peer) = shared.registry.lock().peers.get_mut(projector) {
-        peer.calibrated = true;
-    }
     if dark {
         let values = nodes
             .iter()
@@ -582,11 +577,11 @@ pub(super) async fn calibrate_hot(
             .collect();
         let black = v1::show::Pattern::Nodes(v1::NodeValues { values });
         if !show_pattern(shared, projector, &tx, black).await {
-            shared.light_all().await;
+            shared.light_all();
         }
     } else {
         // Its attenuation to the new projector, `s` anew to everyone; then it joins the rounds.
-        shared.light_all().await;
+        shared.light_all();
     }
     tracing::info!(%projector, dark, "hot calibration done");
     shared.save_model();

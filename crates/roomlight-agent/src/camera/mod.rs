@@ -29,10 +29,11 @@ use roomlight_core::{LinearRgb, Problem};
 use roomlight_proto::v1;
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
+use std::sync::{Arc, Mutex, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
+use tokio_util::task::TaskTracker;
 
 /// How the camera agent runs.
 #[derive(Debug, Clone)]
@@ -153,6 +154,10 @@ struct Shared {
     /// Cancelled once the camera agent has stopped its rounds: ends every node's reader and
     /// the server (the caller's token only asks the rounds to stop after the current one).
     cancel: CancellationToken,
+    /// The peers' reader tasks, joined on shutdown.
+    tracker: TaskTracker,
+    /// Peers dropped for lagging, logged at a limited rate.
+    lagging: Mutex<LagLog>,
 }
 
 impl Shared {
@@ -164,12 +169,39 @@ impl Shared {
         self.live.write().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// Sends `body` to a node agent, counting its bytes; false when the node has left.
-    async fn send(&self, tx: &Outbox, body: v1::room_message::Body) -> bool {
-        let message = v1::RoomMessage { body: Some(body) };
-        self.bytes_out
-            .fetch_add(message.encoded_len() as u64, Ordering::Relaxed);
-        tx.send(Ok(message)).await.is_ok()
+    /// Queues `bodies` to one peer without waiting, counting their bytes; false when the node
+    /// has left or was dropped. A fan-out never waits for one slow node: a peer whose queue
+    /// cannot take them (and keep one place for a goodbye) lags; it is told so, best effort, and
+    /// dropped, and the others go on.
+    fn offer(&self, projector: &str, tx: &Outbox, bodies: Vec<v1::room_message::Body>) -> bool {
+        if tx.is_closed() {
+            return false;
+        }
+        if tx.capacity() <= bodies.len() {
+            let goodbye = v1::room_message::Body::Goodbye(v1::Goodbye {
+                reason: "lagging".into(),
+            });
+            let _ = tx.try_send(Ok(v1::RoomMessage {
+                body: Some(goodbye),
+            }));
+            if self.registry.drop_peer(projector, tx) {
+                self.lagging
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .dropped(projector);
+            }
+            return false;
+        }
+        for body in bodies {
+            let message = v1::RoomMessage { body: Some(body) };
+            self.bytes_out
+                .fetch_add(message.encoded_len() as u64, Ordering::Relaxed);
+            // Only the round loop queues to an admitted peer: the place checked above is there.
+            if tx.try_send(Ok(message)).is_err() {
+                return false;
+            }
+        }
+        true
     }
 
     /// Writes the model to `model_out`, if configured (a failure is logged: the rounds go on).
@@ -206,6 +238,8 @@ pub fn serve(
         bytes_out: AtomicU64::new(0),
         bytes_in: AtomicU64::new(0),
         cancel: CancellationToken::new(),
+        tracker: TaskTracker::new(),
+        lagging: Mutex::new(LagLog::default()),
     });
     let (status_tx, status_rx) = watch::channel(RoomStatus::default());
     let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx, status_tx);
@@ -253,6 +287,17 @@ async fn run<C: Camera>(
             })),
         }));
     }
+    // Every reader has been cancelled: join them.
+    shared.tracker.close();
+    if tokio::time::timeout(Duration::from_secs(2), shared.tracker.wait())
+        .await
+        .is_err()
+    {
+        tracing::warn!(
+            readers = shared.tracker.len(),
+            "readers still running 2 s after stopping"
+        );
+    }
     // The server's graceful shutdown now only waits for the streams to drain.
     match tokio::time::timeout(Duration::from_secs(2), server).await {
         Ok(result) => result.map_err(crate::AgentError::from),
@@ -263,26 +308,38 @@ async fn run<C: Camera>(
     }
 }
 
+/// Peers dropped for lagging: the first is logged at once, later ones at most once a second
+/// with their count (a room of thousands of slow nodes must not flood the log).
+#[derive(Debug, Default)]
+struct LagLog {
+    last: Option<tokio::time::Instant>,
+    unlogged: u64,
+}
+
+impl LagLog {
+    fn dropped(&mut self, projector: &str) {
+        self.unlogged += 1;
+        let now = tokio::time::Instant::now();
+        if self
+            .last
+            .is_none_or(|t| now.duration_since(t) >= Duration::from_secs(1))
+        {
+            tracing::warn!(%projector, dropped = self.unlogged, "lagging: its queue is full; told and dropped (count since the last report)");
+            self.last = Some(now);
+            self.unlogged = 0;
+        }
+    }
+}
+
 impl Shared {
     /// Sends every attached, calibrated projector its nodes' attenuation, `s` and start: a
     /// projector measured but not yet lit starts showing its start, a running one keeps its
     /// values with the new `s`.
-    async fn light_all(&self) {
-        let outbox: Vec<(Outbox, Vec<u32>)> = self
-            .registry
-            .lock()
-            .peers
-            .values()
-            .filter(|p| p.calibrated)
-            .map(|p| (p.tx.clone(), p.nodes.clone()))
-            .collect();
-        for (tx, nodes) in outbox {
+    fn light_all(&self) {
+        let outbox = self.registry.lock().calibrated();
+        for (projector, tx, nodes) in outbox {
             let bodies = self.live().attenuation_bodies(&nodes);
-            for body in bodies {
-                if !self.send(&tx, body).await {
-                    break;
-                }
-            }
+            self.offer(&projector, &tx, bodies);
         }
     }
 }

@@ -1,30 +1,29 @@
-//! The registry of live peers: one entry per attached projector (its outbound queue, its nodes,
-//! what it shows), admission (checks and insert under one lock), and removal by a guard's
-//! `Drop`, so that every way a peer's reader ends cleans up. Waiters are woken on every change.
-//! It knows nothing of the model, the camera or the wire's message contents.
+//! The registry of live peers: per attached projector its outbound queue and what only the wire
+//! knows of it (its stream, its resolution, the last calibration pattern it shows), beside the
+//! core's [`Projectors`] (its nodes, what it shows, readiness, node → projector). Admission
+//! checks and inserts under one lock; a guard's `Drop` removes a peer, so every way a reader
+//! ends cleans up; the nodes of peers that left are kept for the round waiting on them. Waiters
+//! are woken on every change. It knows nothing of the model, the camera or message contents.
 
+use roomlight_core::round::Projectors;
 use roomlight_proto::v1;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 use tokio::sync::{Notify, mpsc};
+use tokio_util::sync::CancellationToken;
 use tonic::Status;
 
 /// The queue of messages to one node agent (the items of its `Attach` response stream).
 pub(super) type Outbox = mpsc::Sender<Result<v1::RoomMessage, Status>>;
 
-/// One attached projector.
+/// A projector to send to: its id, its queue and its nodes.
+pub(super) type Recipient = (String, Outbox, Vec<u32>);
+
+/// What the wire knows of one attached projector.
 #[derive(Debug)]
 pub(super) struct Peer {
     pub(super) tx: Outbox,
-    pub(super) nodes: Vec<u32>,
-    /// The last round whose errors this projector has applied and shows (`Some(0)`: its start).
-    pub(super) shown: Option<u64>,
-    /// The last round sent to it.
-    pub(super) awaiting: Option<u64>,
-    /// False until its attenuation is known (a hot projector before its calibration): it takes
-    /// part in no round.
-    pub(super) calibrated: bool,
     /// The last Show pattern it has on its display.
     pub(super) pattern_shown: Option<u64>,
     /// Its resolution and kind, as its Hello said (for calibration over the wire).
@@ -33,53 +32,118 @@ pub(super) struct Peer {
     pub(super) kind: v1::ProjectorKind,
     /// Which stream this entry belongs to (a reconnected projector gets a new one).
     connection: u64,
+    /// Ends its reader when the peer is dropped by the camera agent (lagging, shutdown).
+    cancel: CancellationToken,
 }
 
 impl Peer {
-    /// A peer as its Hello describes it, before it has shown anything.
-    pub(super) fn new(tx: Outbox, nodes: Vec<u32>, calibrated: bool, hello: &v1::Hello) -> Self {
+    /// A peer as its Hello describes it; its reader stops when `cancel` is.
+    pub(super) fn new(tx: Outbox, hello: &v1::Hello, cancel: CancellationToken) -> Self {
         Self {
             tx,
-            nodes,
-            shown: None,
-            awaiting: None,
-            calibrated,
             pattern_shown: None,
             width: hello.width,
             height: hello.height,
             kind: v1::ProjectorKind::try_from(hello.kind).unwrap_or(v1::ProjectorKind::Unspecified),
             connection: 0,
+            cancel,
         }
-    }
-
-    /// Shows the last frame it was sent (its start at least): it can take the next round.
-    pub(super) fn ready(&self) -> bool {
-        self.shown.is_some()
-            && self
-                .awaiting
-                .is_none_or(|a| self.shown.is_some_and(|s| s >= a))
     }
 }
 
 /// The peers, as seen under the registry's lock.
 #[derive(Debug, Default)]
 pub(super) struct Peers {
-    pub(super) peers: HashMap<String, Peer>,
+    /// Nodes, readiness and owners, as the round controller keeps them.
+    round: Projectors,
+    wire: HashMap<String, Peer>,
     next_connection: u64,
+    /// Nodes of the peers that left since the round loop last took them.
+    departed: Vec<u32>,
 }
 
 impl Peers {
-    /// The room is still dark: no projector has shown a round's frame yet (bring-up).
-    pub(super) fn dark(&self) -> bool {
-        self.peers.values().all(|p| p.shown.is_none())
+    /// The round controller's view of the live projectors.
+    pub(super) fn projectors(&self) -> &Projectors {
+        &self.round
     }
 
-    /// True when every attached, calibrated projector shows the last frame it was sent.
-    pub(super) fn all_shown(&self) -> bool {
-        self.peers
-            .values()
-            .filter(|p| p.calibrated)
-            .all(Peer::ready)
+    /// A peer's wire side.
+    pub(super) fn peer(&self, id: &str) -> Option<&Peer> {
+        self.wire.get(id)
+    }
+
+    /// The projectors attached now.
+    pub(super) fn len(&self) -> usize {
+        self.wire.len()
+    }
+
+    /// Its queue and nodes.
+    pub(super) fn outbox(&self, id: &str) -> Option<(Outbox, Vec<u32>)> {
+        let tx = self.wire.get(id)?.tx.clone();
+        Some((tx, self.round.get(id)?.nodes().to_vec()))
+    }
+
+    /// Every calibrated projector's id, queue and nodes.
+    pub(super) fn calibrated(&self) -> Vec<Recipient> {
+        self.round
+            .iter()
+            .filter(|(_, p)| p.calibrated())
+            .filter_map(|(id, p)| {
+                Some((
+                    id.clone(),
+                    self.wire.get(id)?.tx.clone(),
+                    p.nodes().to_vec(),
+                ))
+            })
+            .collect()
+    }
+
+    /// Its attenuation is known: it takes part in the rounds.
+    pub(super) fn mark_calibrated(&mut self, id: &str) {
+        self.round.calibrated(id);
+    }
+
+    /// Its nodes, once segmented over the wire.
+    pub(super) fn set_nodes(&mut self, id: &str, nodes: Vec<u32>) {
+        self.round.set_nodes(id, nodes);
+    }
+
+    /// Starts `round` (see [`Projectors::start_round`]): the ready projectors' ids, queues and
+    /// nodes; the late ones' ids. The nodes that left before are forgotten: this round was not
+    /// sent to them.
+    pub(super) fn start_round(&mut self, round: u64) -> (Vec<Recipient>, Vec<String>) {
+        self.departed.clear();
+        let (sent, late) = self.round.start_round(round);
+        let sent = sent
+            .into_iter()
+            .filter_map(|id| {
+                let tx = self.wire.get(&id)?.tx.clone();
+                let nodes = self.round.get(&id)?.nodes().to_vec();
+                Some((id, tx, nodes))
+            })
+            .collect();
+        (sent, late)
+    }
+
+    /// The nodes of the peers that left since the last call.
+    pub(super) fn take_departed(&mut self) -> Vec<u32> {
+        std::mem::take(&mut self.departed)
+    }
+
+    /// Removes `id` if `keep` holds for its entry; true when removed. Its reader is stopped and
+    /// its nodes are recorded as departed.
+    fn remove_if(&mut self, id: &str, keep: impl FnOnce(&Peer) -> bool) -> bool {
+        if !self.wire.get(id).is_some_and(keep) {
+            return false;
+        }
+        if let Some(peer) = self.wire.remove(id) {
+            peer.cancel.cancel();
+        }
+        if let Some(p) = self.round.leave(id) {
+            self.departed.extend_from_slice(p.nodes());
+        }
+        true
     }
 }
 
@@ -101,34 +165,58 @@ impl Registry {
         self.changed.notify_waiters();
     }
 
-    /// Admits `projector`: refused when it is attached already (one stream per projector: a
-    /// reconnecting node is admitted once its old stream has ended or missed its heartbeats);
-    /// else inserted, in the same lock. The guard removes it when dropped.
+    /// Admits `projector` with these nodes: refused (the peer handed back) when it is attached
+    /// already (one stream per projector: a reconnecting node is admitted once its old stream
+    /// has ended or missed its heartbeats); else inserted, in the same lock. The guard removes
+    /// it when dropped.
     pub(super) fn admit(
         self: &Arc<Self>,
         projector: &str,
         mut peer: Peer,
+        nodes: Vec<u32>,
+        calibrated: bool,
     ) -> Result<PeerGuard, Box<Peer>> {
         let mut peers = self.lock();
-        if peers.peers.contains_key(projector) {
+        if peers.wire.contains_key(projector) {
             return Err(Box::new(peer));
         }
         peers.next_connection += 1;
         peer.connection = peers.next_connection;
         let connection = peer.connection;
-        peers.peers.insert(projector.to_string(), peer);
+        let cancel = peer.cancel.clone();
+        peers.wire.insert(projector.to_string(), peer);
+        peers.round.join(projector, nodes, calibrated);
         drop(peers);
         self.notify();
         Ok(PeerGuard {
             registry: self.clone(),
             projector: projector.to_string(),
             connection,
+            cancel,
         })
+    }
+
+    /// Drops the peer whose queue is `tx` (lagging); true when it was still attached.
+    pub(super) fn drop_peer(&self, id: &str, tx: &Outbox) -> bool {
+        let removed = self.lock().remove_if(id, |p| p.tx.same_channel(tx));
+        self.notify();
+        removed
     }
 
     /// Removes every peer (shutdown); their queues, to say goodbye on.
     pub(super) fn drain(&self) -> Vec<Outbox> {
-        let tx: Vec<Outbox> = self.lock().peers.drain().map(|(_, p)| p.tx).collect();
+        let tx: Vec<Outbox> = {
+            let mut peers = self.lock();
+            peers.round.clear();
+            peers
+                .wire
+                .drain()
+                .map(|(_, p)| {
+                    p.cancel.cancel();
+                    p.tx
+                })
+                .collect()
+        };
         self.notify();
         tx
     }
@@ -164,6 +252,7 @@ pub(super) struct PeerGuard {
     registry: Arc<Registry>,
     projector: String,
     connection: u64,
+    cancel: CancellationToken,
 }
 
 impl PeerGuard {
@@ -172,27 +261,49 @@ impl PeerGuard {
         &self.projector
     }
 
-    /// Runs `f` on this peer's entry, if it is still this stream's.
-    pub(super) fn with<T>(&self, f: impl FnOnce(&mut Peer) -> T) -> Option<T> {
-        let mut peers = self.registry.lock();
-        peers
-            .peers
-            .get_mut(&self.projector)
-            .filter(|p| p.connection == self.connection)
-            .map(f)
+    /// Cancelled when the camera agent drops this peer.
+    pub(super) fn cancelled(&self) -> &CancellationToken {
+        &self.cancel
+    }
+
+    /// It acknowledged showing a round's frame (`pattern`: a calibration pattern) `seq`.
+    pub(super) fn shown(&self, seq: u64, pattern: bool) {
+        {
+            let mut peers = self.registry.lock();
+            let Some(peer) = peers
+                .wire
+                .get_mut(&self.projector)
+                .filter(|p| p.connection == self.connection)
+            else {
+                return;
+            };
+            if pattern {
+                peer.pattern_shown = Some(peer.pattern_shown.map_or(seq, |old| old.max(seq)));
+            } else {
+                peers.round.shown(&self.projector, seq);
+            }
+        }
+        self.registry.notify();
+    }
+
+    /// This stream's projector owns `node` (O(1): the controller's node → projector index).
+    pub(super) fn owns(&self, node: u32) -> bool {
+        let peers = self.registry.lock();
+        peers.round.owner(node) == Some(self.projector.as_str())
+            && peers
+                .wire
+                .get(&self.projector)
+                .is_some_and(|p| p.connection == self.connection)
     }
 }
 
 impl Drop for PeerGuard {
     fn drop(&mut self) {
-        let removed = {
-            let mut peers = self.registry.lock();
-            let mine = peers
-                .peers
-                .get(&self.projector)
-                .is_some_and(|p| p.connection == self.connection);
-            mine && peers.peers.remove(&self.projector).is_some()
-        };
+        let connection = self.connection;
+        let removed = self
+            .registry
+            .lock()
+            .remove_if(&self.projector, |p| p.connection == connection);
         if removed {
             tracing::info!(projector = %self.projector, "left");
         }
@@ -204,59 +315,96 @@ impl Drop for PeerGuard {
 mod tests {
     use super::*;
 
-    fn peer(nodes: Vec<u32>) -> (Peer, mpsc::Receiver<Result<v1::RoomMessage, Status>>) {
+    fn peer() -> (Peer, mpsc::Receiver<Result<v1::RoomMessage, Status>>) {
         let (tx, rx) = mpsc::channel(4);
-        (Peer::new(tx, nodes, true, &v1::Hello::default()), rx)
+        let p = Peer::new(tx, &v1::Hello::default(), CancellationToken::new());
+        (p, rx)
     }
 
     #[test]
     fn a_second_stream_of_an_attached_projector_is_refused() {
         let registry = Arc::new(Registry::default());
-        let (a, _ra) = peer(vec![0, 1]);
-        let (b, _rb) = peer(vec![0, 1]);
-        let guard = registry.admit("p0", a).expect("first");
-        assert!(registry.admit("p0", b).is_err());
+        let (a, _ra) = peer();
+        let (b, _rb) = peer();
+        let guard = registry.admit("p0", a, vec![0, 1], true).expect("first");
+        assert!(registry.admit("p0", b, vec![0, 1], true).is_err());
         assert_eq!(guard.projector(), "p0");
-        assert_eq!(registry.lock().peers.len(), 1);
+        assert_eq!(registry.lock().len(), 1);
+        assert!(guard.owns(1) && !guard.owns(2));
     }
 
     #[test]
     fn dropping_the_guard_removes_the_peer_but_not_a_newer_stream() {
         let registry = Arc::new(Registry::default());
-        let (a, _ra) = peer(vec![0]);
-        let old = registry.admit("p0", a).expect("first");
+        let (a, _ra) = peer();
+        let old = registry.admit("p0", a, vec![0], true).expect("first");
         drop(old);
-        assert!(registry.lock().peers.is_empty());
-        let (b, _rb) = peer(vec![0]);
-        let new = registry.admit("p0", b).expect("again after it left");
-        // The old stream's entry was replaced (drained at shutdown, say) and re-admitted: a
-        // stale guard of another connection must not remove the new entry.
-        let (c, _rc) = peer(vec![0]);
+        assert_eq!(registry.lock().len(), 0);
+        assert_eq!(registry.lock().take_departed(), vec![0]);
+        let (b, _rb) = peer();
+        let new = registry
+            .admit("p0", b, vec![0], true)
+            .expect("again after it left");
+        // Its entry drained (shutdown) and the projector admitted anew: the stale guard of the
+        // old connection must not remove the new entry.
+        let (c, _rc) = peer();
         registry.drain();
-        let newer = registry.admit("p0", c).expect("after the drain");
+        assert!(
+            new.cancelled().is_cancelled(),
+            "the drained reader is stopped"
+        );
+        let newer = registry
+            .admit("p0", c, vec![0], true)
+            .expect("after the drain");
         drop(new);
-        assert_eq!(registry.lock().peers.len(), 1);
+        assert_eq!(registry.lock().len(), 1);
+        assert!(newer.owns(0));
         drop(newer);
-        assert!(registry.lock().peers.is_empty());
+        assert_eq!(registry.lock().len(), 0);
     }
 
     #[test]
     fn readiness_follows_what_each_calibrated_peer_shows() {
         let registry = Arc::new(Registry::default());
-        let (a, _ra) = peer(vec![0]);
-        let (mut b, _rb) = peer(vec![1]);
-        b.calibrated = false;
-        let ga = registry.admit("a", a).expect("a");
-        let _gb = registry.admit("b", b).expect("b");
-        assert!(registry.lock().dark());
-        assert!(!registry.lock().all_shown());
-        ga.with(|p| p.shown = Some(0));
-        assert!(!registry.lock().dark());
+        let (a, _ra) = peer();
+        let (b, _rb) = peer();
+        let ga = registry.admit("a", a, vec![0], true).expect("a");
+        let _gb = registry.admit("b", b, vec![1], false).expect("b");
+        let ready = |r: &Registry| r.lock().projectors().all_shown();
+        assert!(registry.lock().projectors().dark());
+        assert!(!ready(&registry));
+        ga.shown(0, false);
+        assert!(!registry.lock().projectors().dark());
         // The uncalibrated one takes part in no round: the room is ready without it.
-        assert!(registry.lock().all_shown());
-        ga.with(|p| p.awaiting = Some(3));
-        assert!(!registry.lock().all_shown());
-        ga.with(|p| p.shown = Some(3));
-        assert!(registry.lock().all_shown());
+        assert!(ready(&registry));
+        let (sent, late) = registry.lock().start_round(3);
+        assert_eq!((sent.len(), late.len()), (1, 0));
+        assert!(!ready(&registry));
+        // A calibration pattern is not a round's frame.
+        ga.shown(3, true);
+        assert!(!ready(&registry));
+        ga.shown(3, false);
+        assert!(ready(&registry));
+    }
+
+    #[test]
+    fn a_lagging_peer_is_dropped_its_reader_stopped_and_its_nodes_departed() {
+        let registry = Arc::new(Registry::default());
+        let (a, _ra) = peer();
+        let tx = a.tx.clone();
+        let guard = registry.admit("a", a, vec![4, 5], true).expect("a");
+        let (other, _) = mpsc::channel(1);
+        assert!(
+            !registry.drop_peer("a", &other),
+            "another queue is not this peer"
+        );
+        assert!(registry.drop_peer("a", &tx));
+        assert!(guard.cancelled().is_cancelled());
+        assert!(!guard.owns(4));
+        let mut departed = registry.lock().take_departed();
+        departed.sort_unstable();
+        assert_eq!(departed, vec![4, 5]);
+        drop(guard);
+        assert!(registry.lock().take_departed().is_empty(), "removed once");
     }
 }

@@ -4,16 +4,14 @@
 //! and report a status. It knows nothing of the handshake or how a peer's stream is read.
 
 use super::capture::Captures;
-use super::registry::Outbox;
 use super::{Contribution, RoomStatus, Shared};
 use crate::hardware::Camera;
-use prost::Message;
 use roomlight_core::LinearRgb;
 use roomlight_core::aggregator::{ErrorAggregator, ErrorKind, RoundSummary};
 use roomlight_core::closed_loop::objective_noise;
+use roomlight_core::round::{Backoff, Collection, Received, Settle};
 use roomlight_proto::convert::to_sparse;
 use roomlight_proto::v1;
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
@@ -40,12 +38,12 @@ pub(super) struct Rounds<C> {
     /// The model's per-patch noise (for the settle rule).
     sigma: Vec<LinearRgb>,
     calibrated_hot: u64,
-    /// Projector → when to try its calibration again, and its failures so far.
-    retry: HashMap<String, (tokio::time::Instant, u32)>,
-    /// `G` of the last measured round.
-    previous: Option<f64>,
-    /// Measured rounds running whose `G` moved less than its noise.
-    quiet: u32,
+    /// When to try a failed calibration again.
+    backoff: Backoff,
+    /// The settle rule over the measured `G`s.
+    settle: Settle,
+    /// The round controller's clock: time since the loop started.
+    epoch: tokio::time::Instant,
 }
 
 impl<C: Camera> Rounds<C> {
@@ -67,9 +65,9 @@ impl<C: Camera> Rounds<C> {
             aggregator: ErrorAggregator::new(patches),
             sigma,
             calibrated_hot: 0,
-            retry: HashMap::new(),
-            previous: None,
-            quiet: 0,
+            backoff: Backoff::default(),
+            settle: Settle::default(),
+            epoch: tokio::time::Instant::now(),
         }
     }
 
@@ -79,7 +77,7 @@ impl<C: Camera> Rounds<C> {
             // Someone must be there, and have shown its last frame (or wait to be measured).
             let present = tokio::select! {
                 present = self.shared.registry.wait_for(Duration::from_secs(3600), |r| {
-                    r.peers.values().any(|p| p.shown.is_some() || !p.calibrated)
+                    r.projectors().any_present()
                 }) => present,
                 () = cancel.cancelled() => break,
             };
@@ -98,76 +96,42 @@ impl<C: Camera> Rounds<C> {
     /// for the next retry or a change.
     async fn calibrate_waiting(&mut self, cancel: &CancellationToken) -> Next {
         let shared = self.shared.clone();
-        let now = tokio::time::Instant::now();
-        let (waiting, due) = {
-            let reg = shared.registry.lock();
-            let waiting: Vec<String> = reg
-                .peers
-                .iter()
-                .filter(|(_, p)| !p.calibrated)
-                .map(|(id, _)| id.clone())
-                .collect();
-            let due = waiting
-                .iter()
-                .find(|id| self.retry.get(*id).is_none_or(|(at, _)| now >= *at))
-                .cloned();
-            (waiting, due)
-        };
-        self.retry.retain(|id, _| waiting.contains(id));
+        let now = self.now();
+        let waiting = shared.registry.lock().projectors().uncalibrated();
+        let due = self.backoff.next_due(&waiting, now).cloned();
+        self.backoff.retain(&waiting);
         if let Some(projector) = due {
             // The room's errors without it, once a round has measured them.
-            let errors = self.previous.is_some().then(|| self.aggregator.errors());
+            let errors = self.settle.measured().then(|| self.aggregator.errors());
             if super::calibration::calibrate_hot(&shared, &mut self.eye, &projector, errors).await {
                 self.calibrated_hot += 1;
-                self.retry.remove(&projector);
+                self.backoff.forget(&projector);
                 return Next::Again;
             }
-            // Tried again after the others, backing off to 3.2 s (the cause is logged each time).
-            let failures = self
-                .retry
-                .get(&projector)
-                .map_or(0, |r| r.1)
-                .saturating_add(1);
-            let wait = Duration::from_millis(200) * (1 << failures.min(4));
-            self.retry
-                .insert(projector, (tokio::time::Instant::now() + wait, failures));
+            // Tried again after the others (the cause is logged each time).
+            self.backoff.failed(&projector, self.now());
             // Projectors kept dark for a bring-up light up now rather than wait for one that
             // may never be measured.
-            let unlit = shared
-                .registry
-                .lock()
-                .peers
-                .values()
-                .any(|p| p.calibrated && p.shown.is_none());
-            if unlit {
-                shared.light_all().await;
+            if shared.registry.lock().projectors().any_unlit() {
+                shared.light_all();
             }
-        }
-        if waiting.is_empty() {
-            return Next::Round;
         }
         // Meanwhile the calibrated projectors go on with their rounds: one that cannot be
         // calibrated must not stop the others' corrections.
-        let others = shared
-            .registry
-            .lock()
-            .peers
-            .values()
-            .any(|p| p.calibrated && p.shown.is_some());
-        if others {
+        if waiting.is_empty() || shared.registry.lock().projectors().any_running() {
             return Next::Round;
         }
-        let next = self
-            .retry
-            .values()
-            .map(|(at, _)| *at)
-            .min()
-            .unwrap_or_else(tokio::time::Instant::now);
+        let next = self.epoch + self.backoff.earliest().unwrap_or_else(|| self.now());
         tokio::select! {
             () = tokio::time::sleep_until(next) => Next::Again,
             () = shared.registry.changed() => Next::Again,
             () = cancel.cancelled() => Next::Stop,
         }
+    }
+
+    /// The controller's time.
+    fn now(&self) -> Duration {
+        self.epoch.elapsed()
     }
 
     /// One capture and the rounds that follow it: the measured round, then the model rounds;
@@ -176,7 +140,7 @@ impl<C: Camera> Rounds<C> {
         let shared = self.shared.clone();
         shared
             .registry
-            .wait_for(shared.config.deadline, |r| r.all_shown())
+            .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
             .await;
         let Some((y, ok)) = self.eye.measured(&shared).await else {
             // The camera is unreachable: the lights stay as they are; try again.
@@ -195,30 +159,19 @@ impl<C: Camera> Rounds<C> {
         let mut round = summary.round;
         let measured_objective = summary.objective;
         let noise = objective_noise(self.aggregator.errors(), &self.sigma);
-        self.quiet = match self.previous {
-            // A noiseless camera: settled when G stops changing to rounding.
-            Some(g)
-                if (measured_objective - g).abs()
-                    <= (3.0 * std::f64::consts::SQRT_2 * noise)
-                        .max(1e-12 * measured_objective.max(g)) =>
-            {
-                self.quiet + 1
-            }
-            _ => 0,
-        };
-        self.previous = Some(measured_objective);
+        let settled = self.settle.observe(measured_objective, noise);
         self.round_trip(&summary).await;
         for _ in 0..shared.config.model_rounds {
             // Acknowledgements follow contributions: wait for them too.
             shared
                 .registry
-                .wait_for(shared.config.deadline, |r| r.all_shown())
+                .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
                 .await;
             let summary = self.aggregator.predicted();
             round = summary.round;
             self.round_trip(&summary).await;
         }
-        let live_projectors = shared.registry.lock().peers.len();
+        let live_projectors = shared.registry.lock().len();
         self.status.send_replace(RoomStatus {
             round,
             captures: self.eye.count,
@@ -226,7 +179,7 @@ impl<C: Camera> Rounds<C> {
             live_projectors,
             bytes_out: shared.bytes_out.swap(0, Ordering::Relaxed),
             bytes_in: shared.bytes_in.swap(0, Ordering::Relaxed),
-            settled: self.quiet >= 2,
+            settled,
             calibrated_hot: self.calibrated_hot,
         });
     }
@@ -252,125 +205,103 @@ impl<C: Camera> Rounds<C> {
         };
         if let Some(newly) = cut {
             tracing::info!(patches = ?newly, "patches no longer measurable under the room's light: left out");
-            shared.light_all().await;
+            shared.light_all();
             shared.save_model();
         }
     }
 
     /// Sends the round's errors and collects its contributions.
     async fn round_trip(&mut self, summary: &RoundSummary) {
-        let sent = broadcast(&self.shared, self.aggregator.errors(), summary).await;
-        collect(
-            &self.shared,
-            &mut self.contributions,
-            &mut self.aggregator,
-            summary.round,
-            sent,
-        )
-        .await;
+        let sent = broadcast(&self.shared, self.aggregator.errors(), summary);
+        let collection =
+            Collection::new(summary.round, sent, self.now(), self.shared.config.deadline);
+        self.collect(collection).await;
+    }
+
+    /// Collects a round's contributions into the aggregator until every node sent has answered
+    /// or left, or the deadline passes. O(1) per message: a projector that leaves hands the
+    /// round its nodes (the registry keeps them), nothing scans the peers.
+    async fn collect(&mut self, mut collection: Collection) {
+        let until = self.epoch + collection.deadline();
+        loop {
+            let changed = self.shared.registry.changed();
+            // A projector that left will not answer: its nodes are not waited for.
+            let gone = self.shared.registry.lock().take_departed();
+            collection.left(&gone);
+            if collection.done() {
+                return;
+            }
+            let received = tokio::select! {
+                received = tokio::time::timeout_at(until, self.contributions.recv()) => received,
+                () = changed => continue,
+            };
+            match received {
+                Ok(Some(c)) => match collection.receive(c.round, c.node) {
+                    Received::Counted => {
+                        if let Err(e) = self.aggregator.add_contribution(c.delta) {
+                            tracing::warn!(node = c.node, error = %e, "contribution refused");
+                        }
+                    }
+                    Received::OtherRound => tracing::debug!(
+                        node = c.node,
+                        round = c.round,
+                        expected = collection.round(),
+                        "out-of-order contribution ignored"
+                    ),
+                    Received::NotAwaited => {}
+                },
+                Ok(None) | Err(_) => {
+                    tracing::warn!(
+                        round = collection.round(),
+                        missing = collection.missing(),
+                        "contributions missing at the deadline"
+                    );
+                    return;
+                }
+            }
+        }
     }
 }
 
-/// Sends every ready projector the errors of its nodes; returns the nodes that were sent.
-async fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary) -> Vec<u32> {
+/// Sends every ready projector the errors of its nodes, without waiting for any (a peer whose
+/// queue is full is dropped: see `Shared::offer`); returns the nodes that were sent.
+fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary) -> Vec<u32> {
     let kind = match summary.kind {
         ErrorKind::Measured => v1::ErrorKind::Measured,
         ErrorKind::Predicted => v1::ErrorKind::Predicted,
     };
-    let mut outbox: Vec<(Outbox, u32, v1::Errors)> = Vec::new();
-    {
-        let mut reg = shared.registry.lock();
-        let live = shared.live();
-        for (projector, peer) in reg.peers.iter_mut().filter(|(_, p)| p.calibrated) {
-            if !peer.ready() {
-                tracing::warn!(%projector, round = summary.round, "late: left out of this round");
-                continue;
-            }
-            peer.awaiting = Some(summary.round);
-            for &n in &peer.nodes {
-                let column = &live.problem.columns()[n as usize];
-                let e: Vec<LinearRgb> = column
-                    .support()
-                    .iter()
-                    .map(|&i| errors[i as usize])
-                    .collect();
-                outbox.push((
-                    peer.tx.clone(),
-                    n,
-                    v1::Errors {
+    let (ready, late) = shared.registry.lock().start_round(summary.round);
+    for projector in late {
+        tracing::warn!(%projector, round = summary.round, "late: left out of this round");
+    }
+    let mut sent = Vec::new();
+    for (projector, tx, nodes) in ready {
+        let bodies: Vec<v1::room_message::Body> = {
+            let live = shared.live();
+            nodes
+                .iter()
+                .filter_map(|&n| {
+                    let column = live.problem.columns().get(n as usize)?;
+                    let e: Vec<LinearRgb> = column
+                        .support()
+                        .iter()
+                        .map(|&i| errors[i as usize])
+                        .collect();
+                    Some(v1::room_message::Body::Errors(v1::Errors {
                         round: summary.round,
                         kind: kind as i32,
                         objective: summary.objective,
                         restart: summary.restart,
                         node: n,
                         errors: Some(to_sparse(column.support(), &e)),
-                    },
-                ));
-            }
-        }
-    }
-    let mut sent = Vec::with_capacity(outbox.len());
-    for (tx, n, msg) in outbox {
-        shared
-            .bytes_out
-            .fetch_add(msg.encoded_len() as u64, Ordering::Relaxed);
-        // A failed send means the node left; its reader removes it.
-        let message = v1::RoomMessage {
-            body: Some(v1::room_message::Body::Errors(msg)),
+                    }))
+                })
+                .collect()
         };
-        if tx.send(Ok(message)).await.is_ok() {
-            sent.push(n);
+        // A failed offer means the node left or lags: it is not waited for.
+        if shared.offer(&projector, &tx, bodies) {
+            sent.extend_from_slice(&nodes);
         }
     }
     sent
-}
-
-/// Collects the contributions of `nodes` for `round` into the aggregator (until the deadline).
-async fn collect(
-    shared: &Shared,
-    rx: &mut mpsc::Receiver<Contribution>,
-    aggregator: &mut ErrorAggregator,
-    round: u64,
-    mut nodes: Vec<u32>,
-) {
-    let until = tokio::time::Instant::now() + shared.config.deadline;
-    while !nodes.is_empty() {
-        let changed = shared.registry.changed();
-        // A projector that left will not answer: its nodes are not waited for.
-        {
-            let reg = shared.registry.lock();
-            nodes.retain(|n| reg.peers.values().any(|p| p.nodes.contains(n)));
-        }
-        if nodes.is_empty() {
-            return;
-        }
-        let received = tokio::select! {
-            received = tokio::time::timeout_at(until, rx.recv()) => received,
-            () = changed => continue,
-        };
-        match received {
-            Ok(Some(c)) if c.round == round => {
-                if let Some(k) = nodes.iter().position(|&n| n == c.node) {
-                    nodes.swap_remove(k);
-                    if let Err(e) = aggregator.add_contribution(c.delta) {
-                        tracing::warn!(node = c.node, error = %e, "contribution refused");
-                    }
-                }
-            }
-            Ok(Some(c)) => tracing::debug!(
-                node = c.node,
-                round = c.round,
-                expected = round,
-                "out-of-order contribution ignored"
-            ),
-            Ok(None) | Err(_) => {
-                tracing::warn!(
-                    round,
-                    missing = nodes.len(),
-                    "contributions missing at the deadline"
-                );
-                return;
-            }
-        }
-    }
 }

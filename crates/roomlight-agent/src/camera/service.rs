@@ -18,7 +18,9 @@ use tokio_stream::wrappers::ReceiverStream;
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
-/// Messages a peer's queue holds beyond its handshake.
+/// Messages a peer's queue holds beyond its handshake: a node agent that falls this far behind
+/// is dropped as lagging (the rounds never wait for one node). Rounds send one message per node,
+/// a bring-up one per node too, so a healthy node is never near it.
 const QUEUE: usize = 256;
 
 /// The gRPC service.
@@ -67,8 +69,11 @@ impl v1::room_server::Room for Service {
                 .map_err(|_| Status::internal("the greeting did not fit its queue"))?;
         }
         let projector = hello.projector_id.clone();
-        let peer = Peer::new(tx, nodes.clone(), calibrated, &hello);
-        let guard = match shared.registry.admit(&projector, peer) {
+        let peer = Peer::new(tx, &hello, shared.cancel.child_token());
+        let guard = match shared
+            .registry
+            .admit(&projector, peer, nodes.clone(), calibrated)
+        {
             Ok(guard) => guard,
             Err(_) => {
                 tracing::warn!(%projector, "refused: already attached");
@@ -79,7 +84,8 @@ impl v1::room_server::Room for Service {
             }
         };
         tracing::info!(%projector, nodes = nodes.len(), "joined");
-        tokio::spawn(read_node(shared, guard, inbound));
+        let tracker = shared.tracker.clone();
+        tracker.spawn(read_node(shared, guard, inbound));
         Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
     }
 }
@@ -183,7 +189,7 @@ async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming
     let silence = 3 * shared.config.heartbeat;
     loop {
         let next = tokio::select! {
-            () = shared.cancel.cancelled() => break,
+            () = guard.cancelled().cancelled() => break,
             next = tokio::time::timeout(silence, inbound.next()) => next,
         };
         let next = match next {
@@ -205,19 +211,10 @@ async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming
         };
         match next.body {
             Some(v1::node_message::Body::Shown(s)) => {
-                guard.with(|peer| {
-                    let seen = if s.pattern {
-                        &mut peer.pattern_shown
-                    } else {
-                        &mut peer.shown
-                    };
-                    *seen = Some(seen.map_or(s.seq, |old| old.max(s.seq)));
-                });
-                shared.registry.notify();
+                guard.shown(s.seq, s.pattern);
             }
             Some(v1::node_message::Body::Contribution(c)) => {
-                let owns = guard.with(|p| p.nodes.contains(&c.node)).unwrap_or(false);
-                if !owns {
+                if !guard.owns(c.node) {
                     tracing::warn!(%projector, node = c.node, "contribution for a node it does not own: ignored");
                     continue;
                 }

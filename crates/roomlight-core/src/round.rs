@@ -1,0 +1,411 @@
+//! The round controller (DESIGN §3.4, §3.6, §6): which projectors and nodes are live and
+//! calibrated and what each shows, what a round waits for (acknowledgements of a frame,
+//! contributions with a deadline), how many model rounds follow a capture, when the room has
+//! settled, and when to try a failed calibration again.
+//!
+//! A pure state machine: no I/O, no async, no clocks. Time is a `Duration` since an epoch the
+//! caller chooses, passed in with every call that needs it. It knows nothing of messages,
+//! streams or cameras: the camera agent and the in-memory loop drive it.
+
+use std::collections::{HashMap, HashSet};
+use std::time::Duration;
+
+/// One live projector, as the rounds see it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Projector {
+    nodes: Vec<u32>,
+    calibrated: bool,
+    /// The last round whose errors it has applied and shows (`Some(0)`: its start).
+    shown: Option<u64>,
+    /// The last round sent to it.
+    awaiting: Option<u64>,
+}
+
+impl Projector {
+    /// Its nodes.
+    pub fn nodes(&self) -> &[u32] {
+        &self.nodes
+    }
+
+    /// False until its attenuation is known: it takes part in no round.
+    pub fn calibrated(&self) -> bool {
+        self.calibrated
+    }
+
+    /// The last round's frame it shows (`Some(0)`: its start), `None` before any.
+    pub fn shown(&self) -> Option<u64> {
+        self.shown
+    }
+
+    /// It shows the last frame it was sent (its start at least): it can take the next round.
+    pub fn ready(&self) -> bool {
+        self.shown.is_some()
+            && self
+                .awaiting
+                .is_none_or(|a| self.shown.is_some_and(|s| s >= a))
+    }
+
+    /// Which of the counted states it is in: (calibrated and not ready, lit, uncalibrated,
+    /// calibrated and unlit, calibrated and lit).
+    fn counts(&self) -> [usize; 5] {
+        let c = self.calibrated;
+        let lit = self.shown.is_some();
+        [
+            usize::from(c && !self.ready()),
+            usize::from(lit),
+            usize::from(!c),
+            usize::from(c && !lit),
+            usize::from(c && lit),
+        ]
+    }
+}
+
+/// The live projectors, their nodes' owners and readiness counts, so that every question a
+/// round asks is answered in O(1) (a room of thousands of nodes asks them on every message).
+#[derive(Debug, Clone, Default)]
+pub struct Projectors {
+    projectors: HashMap<String, Projector>,
+    /// Node → the projector that owns it.
+    owner: HashMap<u32, String>,
+    /// See [`Projector::counts`].
+    counts: [usize; 5],
+}
+
+impl Projectors {
+    /// Adds a projector (replacing one of the same id): not yet showing anything.
+    pub fn join(&mut self, id: &str, nodes: Vec<u32>, calibrated: bool) {
+        self.leave(id);
+        let p = Projector {
+            nodes,
+            calibrated,
+            shown: None,
+            awaiting: None,
+        };
+        for &n in &p.nodes {
+            self.owner.insert(n, id.to_string());
+        }
+        self.add_counts(&p, 1);
+        self.projectors.insert(id.to_string(), p);
+    }
+
+    /// Removes a projector; what it was.
+    pub fn leave(&mut self, id: &str) -> Option<Projector> {
+        let p = self.projectors.remove(id)?;
+        self.add_counts(&p, -1);
+        for n in &p.nodes {
+            if self.owner.get(n).is_some_and(|o| o == id) {
+                self.owner.remove(n);
+            }
+        }
+        Some(p)
+    }
+
+    /// Removes every projector; their ids.
+    pub fn clear(&mut self) -> Vec<String> {
+        self.owner.clear();
+        self.counts = [0; 5];
+        self.projectors.drain().map(|(id, _)| id).collect()
+    }
+
+    /// A projector by id.
+    pub fn get(&self, id: &str) -> Option<&Projector> {
+        self.projectors.get(id)
+    }
+
+    /// The projectors.
+    pub fn iter(&self) -> impl Iterator<Item = (&String, &Projector)> {
+        self.projectors.iter()
+    }
+
+    /// How many are live.
+    pub fn len(&self) -> usize {
+        self.projectors.len()
+    }
+
+    /// None is live.
+    pub fn is_empty(&self) -> bool {
+        self.projectors.is_empty()
+    }
+
+    /// The projector that owns `node`.
+    pub fn owner(&self, node: u32) -> Option<&str> {
+        self.owner.get(&node).map(String::as_str)
+    }
+
+    /// It acknowledged showing round `seq`'s frame (acknowledgements may come out of order: the
+    /// latest counts).
+    pub fn shown(&mut self, id: &str, seq: u64) {
+        self.update(id, |p| {
+            p.shown = Some(p.shown.map_or(seq, |old| old.max(seq)))
+        });
+    }
+
+    /// Its attenuation is known: it takes part in the rounds.
+    pub fn calibrated(&mut self, id: &str) {
+        self.update(id, |p| p.calibrated = true);
+    }
+
+    /// Its nodes (segmented over the wire).
+    pub fn set_nodes(&mut self, id: &str, nodes: Vec<u32>) {
+        let Some(old) = self.projectors.get(id).map(|p| p.nodes.clone()) else {
+            return;
+        };
+        for n in &old {
+            if self.owner.get(n).is_some_and(|o| o == id) {
+                self.owner.remove(n);
+            }
+        }
+        for &n in &nodes {
+            self.owner.insert(n, id.to_string());
+        }
+        self.update(id, |p| p.nodes = nodes);
+    }
+
+    /// True when every calibrated projector shows the last frame it was sent.
+    pub fn all_shown(&self) -> bool {
+        self.counts[0] == 0
+    }
+
+    /// The room is still dark: no projector has shown a round's frame yet (bring-up).
+    pub fn dark(&self) -> bool {
+        self.counts[1] == 0
+    }
+
+    /// Some projector waits for its calibration.
+    pub fn any_uncalibrated(&self) -> bool {
+        self.counts[2] > 0
+    }
+
+    /// Some calibrated projector has not lit up yet.
+    pub fn any_unlit(&self) -> bool {
+        self.counts[3] > 0
+    }
+
+    /// Some calibrated projector runs rounds.
+    pub fn any_running(&self) -> bool {
+        self.counts[4] > 0
+    }
+
+    /// There is something to do: a projector shows a frame or waits for its calibration.
+    pub fn any_present(&self) -> bool {
+        !self.dark() || self.any_uncalibrated()
+    }
+
+    /// The projectors waiting for their calibration (O(projectors): asked once per cycle).
+    pub fn uncalibrated(&self) -> Vec<String> {
+        if !self.any_uncalibrated() {
+            return Vec::new();
+        }
+        self.projectors
+            .iter()
+            .filter(|(_, p)| !p.calibrated)
+            .map(|(id, _)| id.clone())
+            .collect()
+    }
+
+    /// Starts `round`: every calibrated projector that is ready is sent it (and awaited);
+    /// `(sent, late)` by id.
+    pub fn start_round(&mut self, round: u64) -> (Vec<String>, Vec<String>) {
+        let mut sent = Vec::new();
+        let mut late = Vec::new();
+        for (id, p) in &self.projectors {
+            if !p.calibrated {
+                continue;
+            }
+            if p.ready() {
+                sent.push(id.clone());
+            } else {
+                late.push(id.clone());
+            }
+        }
+        for id in &sent {
+            self.update(id, |p| p.awaiting = Some(round));
+        }
+        (sent, late)
+    }
+
+    fn update(&mut self, id: &str, f: impl FnOnce(&mut Projector)) {
+        let Some(p) = self.projectors.get_mut(id) else {
+            return;
+        };
+        let before = p.counts();
+        f(p);
+        let after = p.counts();
+        for k in 0..5 {
+            self.counts[k] = self.counts[k] + after[k] - before[k];
+        }
+    }
+
+    fn add_counts(&mut self, p: &Projector, sign: isize) {
+        for (c, k) in self.counts.iter_mut().zip(p.counts()) {
+            *c = c.saturating_add_signed(sign * k as isize);
+        }
+    }
+}
+
+/// What a contribution did to the round waiting for it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Received {
+    /// Awaited: counts (add it to the errors).
+    Counted,
+    /// Of another round (late or early): ignored.
+    OtherRound,
+    /// Of a node not awaited (not sent, already in, or its projector left): ignored.
+    NotAwaited,
+}
+
+/// The contributions one round waits for, until a deadline. O(1) per message.
+#[derive(Debug, Clone)]
+pub struct Collection {
+    round: u64,
+    outstanding: HashSet<u32>,
+    deadline: Duration,
+}
+
+impl Collection {
+    /// Round `round` was sent to `nodes` at `now`; it waits until `now + wait`.
+    pub fn new(
+        round: u64,
+        nodes: impl IntoIterator<Item = u32>,
+        now: Duration,
+        wait: Duration,
+    ) -> Self {
+        Self {
+            round,
+            outstanding: nodes.into_iter().collect(),
+            deadline: now.saturating_add(wait),
+        }
+    }
+
+    /// The round collected.
+    pub fn round(&self) -> u64 {
+        self.round
+    }
+
+    /// A contribution of `node` for `round` arrived.
+    pub fn receive(&mut self, round: u64, node: u32) -> Received {
+        if round != self.round {
+            Received::OtherRound
+        } else if self.outstanding.remove(&node) {
+            Received::Counted
+        } else {
+            Received::NotAwaited
+        }
+    }
+
+    /// These nodes left (their projector did): they will not answer.
+    pub fn left(&mut self, nodes: &[u32]) {
+        for n in nodes {
+            self.outstanding.remove(n);
+        }
+    }
+
+    /// Every node awaited has answered or left.
+    pub fn done(&self) -> bool {
+        self.outstanding.is_empty()
+    }
+
+    /// Nodes still awaited.
+    pub fn missing(&self) -> usize {
+        self.outstanding.len()
+    }
+
+    /// When the round stops waiting.
+    pub fn deadline(&self) -> Duration {
+        self.deadline
+    }
+
+    /// The deadline has passed at `now`.
+    pub fn expired(&self, now: Duration) -> bool {
+        now >= self.deadline
+    }
+}
+
+/// The settle rule (DESIGN §3.6): the measured `G` moved less than its noise, 3√2 σ_G (the
+/// standard deviation of a difference of two noisy `G`s is √2 σ_G; three of them), over each of
+/// the last two captures. With a noiseless camera `G` must stop changing to rounding (a relative
+/// 1e-12). Further rounds only chase camera noise.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Settle {
+    previous: Option<f64>,
+    quiet: u32,
+}
+
+impl Settle {
+    /// Captures running that must be quiet.
+    pub const QUIET_CAPTURES: u32 = 2;
+
+    /// A new capture measured `objective` with standard deviation `noise` (see
+    /// `closed_loop::objective_noise`); true when the room has settled.
+    pub fn observe(&mut self, objective: f64, noise: f64) -> bool {
+        self.quiet = match self.previous {
+            Some(g)
+                if (objective - g).abs()
+                    <= (3.0 * std::f64::consts::SQRT_2 * noise).max(1e-12 * objective.max(g)) =>
+            {
+                self.quiet + 1
+            }
+            _ => 0,
+        };
+        self.previous = Some(objective);
+        self.settled()
+    }
+
+    /// The last captures were quiet.
+    pub fn settled(&self) -> bool {
+        self.quiet >= Self::QUIET_CAPTURES
+    }
+
+    /// A capture has been observed.
+    pub fn measured(&self) -> bool {
+        self.previous.is_some()
+    }
+}
+
+/// When to try a failed calibration again: 200 ms · 2^failures after each failure, at most
+/// 3.2 s, so one projector that cannot be calibrated is retried after the others.
+#[derive(Debug, Clone, Default)]
+pub struct Backoff {
+    /// Projector → when it may be tried again and its failures so far.
+    retry: HashMap<String, (Duration, u32)>,
+}
+
+impl Backoff {
+    /// The first wait's unit.
+    pub const UNIT: Duration = Duration::from_millis(200);
+    /// The longest wait.
+    pub const MAX: Duration = Duration::from_millis(3200);
+
+    /// Its calibration failed at `now`; when to try again.
+    pub fn failed(&mut self, id: &str, now: Duration) -> Duration {
+        let failures = self.retry.get(id).map_or(0, |r| r.1).saturating_add(1);
+        let at = now.saturating_add((Self::UNIT * (1 << failures.min(4))).min(Self::MAX));
+        self.retry.insert(id.to_string(), (at, failures));
+        at
+    }
+
+    /// It was calibrated (or left): forget its failures.
+    pub fn forget(&mut self, id: &str) {
+        self.retry.remove(id);
+    }
+
+    /// Keeps only the projectors still waiting.
+    pub fn retain(&mut self, waiting: &[String]) {
+        self.retry.retain(|id, _| waiting.contains(id));
+    }
+
+    /// It may be tried at `now`.
+    pub fn due(&self, id: &str, now: Duration) -> bool {
+        self.retry.get(id).is_none_or(|(at, _)| now >= *at)
+    }
+
+    /// The first of `waiting` whose try is due at `now`.
+    pub fn next_due<'a>(&self, waiting: &'a [String], now: Duration) -> Option<&'a String> {
+        waiting.iter().find(|id| self.due(id, now))
+    }
+
+    /// The earliest retry time, if any projector is backing off.
+    pub fn earliest(&self) -> Option<Duration> {
+        self.retry.values().map(|(at, _)| *at).min()
+    }
+}
