@@ -12,6 +12,7 @@ use roomlight_agent::AgentError;
 use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus, Survey};
 use roomlight_agent::hardware::{Camera, VirtualCamera, VirtualRoom};
 use roomlight_agent::node::{self, NodeConfig};
+use roomlight_calib::image_io::LinearImage;
 use roomlight_core::closed_loop::{Plant, PlantConfig};
 use roomlight_core::optimum::optimum;
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
@@ -49,6 +50,7 @@ pub struct SandboxBuilder {
     hot: Option<String>,
     survey: Option<Survey>,
     rule: StepRule,
+    exposure: Duration,
 }
 
 impl Default for SandboxBuilder {
@@ -71,6 +73,7 @@ impl Default for SandboxBuilder {
             hot: None,
             survey: None,
             rule: StepRule::Momentum { theta: 1.0 },
+            exposure: Duration::ZERO,
         }
     }
 }
@@ -132,6 +135,14 @@ impl SandboxBuilder {
         self
     }
 
+    /// Every capture takes `exposure` of the agents' clock, as a real camera's does. Tests under
+    /// `tokio::time::pause` need it: a virtual room that captures in no time keeps the
+    /// runtime busy, so the paused clock (and every timer: backoff, deadlines) stands still.
+    pub fn exposure(mut self, exposure: Duration) -> Self {
+        self.exposure = exposure;
+        self
+    }
+
     /// Starts the camera agent over the virtual room's camera; no node agent yet.
     pub async fn start_camera(self) -> Sandbox {
         self.start_with_camera(|camera, _, _| camera).await
@@ -169,7 +180,10 @@ impl SandboxBuilder {
             survey: self.survey,
         };
         let cancel = root.child_token();
-        let camera = wrap(room.camera(), room.clone(), cancel.clone());
+        let camera = Exposed {
+            inner: wrap(room.camera(), room.clone(), cancel.clone()),
+            exposure: self.exposure,
+        };
         let (status, task) =
             camera::serve(self.config.clone(), model, camera, listener, cancel.clone());
         Sandbox {
@@ -180,6 +194,7 @@ impl SandboxBuilder {
             address,
             config: self.config,
             rule: self.rule,
+            exposure: self.exposure,
             status,
             camera: Some(Agent { cancel, task }),
             nodes: HashMap::new(),
@@ -215,6 +230,29 @@ fn camera_model(
     .expect("the camera agent's model")
 }
 
+/// A camera whose captures take `exposure` of the agents' clock.
+#[derive(Debug)]
+struct Exposed<C> {
+    inner: C,
+    exposure: Duration,
+}
+
+impl<C: Camera> Camera for Exposed<C> {
+    async fn capture(&mut self) -> Result<Vec<LinearRgb>, AgentError> {
+        if !self.exposure.is_zero() {
+            tokio::time::sleep(self.exposure).await;
+        }
+        self.inner.capture().await
+    }
+
+    async fn capture_image(&mut self) -> Result<LinearImage, AgentError> {
+        if !self.exposure.is_zero() {
+            tokio::time::sleep(self.exposure).await;
+        }
+        self.inner.capture_image().await
+    }
+}
+
 /// One running agent: its token and its task.
 #[derive(Debug)]
 struct Agent {
@@ -246,6 +284,7 @@ pub struct Sandbox {
     address: SocketAddr,
     config: CameraConfig,
     rule: StepRule,
+    exposure: Duration,
     status: watch::Receiver<RoomStatus>,
     camera: Option<Agent>,
     nodes: HashMap<String, Agent>,
@@ -381,13 +420,12 @@ impl Sandbox {
             survey: None,
         };
         let cancel = self.root.child_token();
-        let (status, task) = camera::serve(
-            self.config.clone(),
-            model,
-            self.room.camera(),
-            listener,
-            cancel.clone(),
-        );
+        let camera = Exposed {
+            inner: self.room.camera(),
+            exposure: self.exposure,
+        };
+        let (status, task) =
+            camera::serve(self.config.clone(), model, camera, listener, cancel.clone());
         self.status = status;
         self.camera = Some(Agent { cancel, task });
     }

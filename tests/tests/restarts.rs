@@ -2,10 +2,9 @@
 //! and resume where they were; a node agent restarted with its state file relights before it
 //! reaches any camera agent. Every wait has a deadline.
 //!
-//! These run on real time: under `tokio::time::pause` (a single-threaded runtime) the
-//! three-node room with model rounds hung before its first eight captures, the process busy,
-//! and was not diagnosed further. The reconnect backoff itself is tested under paused time in
-//! `roomlight_agent::node::backoff`.
+//! They run under `tokio::time::pause`: the camera agent's absence, the node agents' backoff
+//! and the deadlines are the agents' clock, whatever the machine's load. Captures take an
+//! exposure of that clock, as a real camera's do (see `SandboxBuilder::exposure`).
 
 use roomlight_agent::hardware::Display;
 use roomlight_agent::node::SavedState;
@@ -14,6 +13,8 @@ use roomlight_tests::Sandbox;
 use std::time::Duration;
 
 const LONG: Duration = Duration::from_secs(30);
+/// A camera's exposure: long enough for the paused clock to move during each capture.
+const EXPOSURE: Duration = Duration::from_millis(30);
 
 /// Starts a new camera agent and checks that the nodes resume where they were: all three
 /// attached and the very first capture already within 0.1% of the optimum.
@@ -29,9 +30,13 @@ async fn restart_camera_and_expect_resumption(sb: &mut Sandbox) {
     );
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[tokio::test(start_paused = true)]
 async fn the_lights_stay_on_while_the_camera_agent_restarts_and_the_nodes_resume() {
-    let mut sb = Sandbox::builder().model_rounds(5).start_camera().await;
+    let mut sb = Sandbox::builder()
+        .model_rounds(5)
+        .exposure(EXPOSURE)
+        .start_camera()
+        .await;
     sb.add_all_nodes();
     sb.wait_for(LONG, |s| s.live_projectors == 3 && s.captures >= 8)
         .await;
@@ -59,11 +64,15 @@ async fn the_lights_stay_on_while_the_camera_agent_restarts_and_the_nodes_resume
     sb.shutdown().await;
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[tokio::test(start_paused = true)]
 async fn a_restarted_node_relights_from_its_state_file_before_it_reconnects() {
     let dir = tempfile::tempdir().expect("temp dir");
     let state = dir.path().join("p0.state.json");
-    let mut sb = Sandbox::builder().model_rounds(5).start_camera().await;
+    let mut sb = Sandbox::builder()
+        .model_rounds(5)
+        .exposure(EXPOSURE)
+        .start_camera()
+        .await;
     sb.add_node_with_state("p0", state.clone());
     sb.add_node("p1");
     sb.add_node("p2");
