@@ -8,6 +8,7 @@
 use crate::aggregator::ErrorAggregator;
 use crate::model::{ModelError, Problem, check_len};
 use crate::rgb::LinearRgb;
+use crate::round::Settle;
 use crate::rules::{NodeState, StepRule};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -155,9 +156,9 @@ pub struct LoopConfig {
     /// Capture budget, the conventional start's capture included.
     pub max_captures: usize,
     /// Stop (DESIGN §3.6) when no node moved by more than [`HALF_CODE_STEP`] in the last
-    /// cycle, or when the measured `G` changed by less than its own noise (three standard
-    /// deviations, from the model's per-patch `σ`) in two captures running: with a real camera
-    /// the noise keeps every node moving a little, and the second test ends the flicker.
+    /// cycle, or when the measured `G` has settled ([`Settle`]: it changed by less than its own
+    /// noise in two captures running): with a real camera the noise keeps every node moving a
+    /// little, and the second test ends the flicker.
     pub stop_when_settled: bool,
     /// Benchmark oracle: stop once the plant's true `G` is at or below this value. A real
     /// camera does not know the true `G`; benchmarks use it to stop runs that are done.
@@ -284,7 +285,7 @@ pub fn run_observed(
     let mut node_updates = 0;
     let mut max_step = 0.0;
     let mut stop = StopReason::Budget;
-    let mut quiet_captures = 0;
+    let mut settle = Settle::default();
     for capture in 1..=config.max_captures {
         let shown: Vec<LinearRgb> = nodes.iter().map(NodeState::shown).collect();
         let measured = plant.capture(&shown, capture);
@@ -317,18 +318,11 @@ pub fn run_observed(
             stop = StopReason::Settled;
             break;
         }
-        if let [.., before, now] = records.as_slice() {
-            let noise = objective_noise(aggregator.errors(), model.noise());
-            let change = (now.measured_objective - before.measured_objective).abs();
-            quiet_captures = if change <= 3.0 * std::f64::consts::SQRT_2 * noise {
-                quiet_captures + 1
-            } else {
-                0
-            };
-            if config.stop_when_settled && quiet_captures >= 2 {
-                stop = StopReason::NoiseFloor;
-                break;
-            }
+        // The one settle rule, as the camera agent applies it.
+        let noise = objective_noise(aggregator.errors(), model.noise());
+        if settle.observe(summary.objective, noise) && config.stop_when_settled {
+            stop = StopReason::NoiseFloor;
+            break;
         }
         if capture == config.max_captures {
             break;
