@@ -316,14 +316,10 @@ impl Sandbox {
         self.status.borrow().clone()
     }
 
-    /// Starts a node agent for `projector` (with the state file it was given before, if any).
-    pub fn add_node(&mut self, projector: &str) {
-        assert!(
-            !self.nodes.contains_key(projector),
-            "{projector} already runs"
-        );
-        let cancel = self.root.child_token();
-        let config = NodeConfig {
+    /// The configuration `add_node` gives `projector`'s node agent: the sandbox's room and
+    /// token, its rule, and the state file it was given before, if any.
+    pub fn node_config(&self, projector: &str) -> NodeConfig {
+        NodeConfig {
             endpoint: self.endpoint.clone(),
             room: ROOM.into(),
             token: TOKEN.into(),
@@ -332,9 +328,25 @@ impl Sandbox {
             rule: self.rule,
             start: LinearRgb::splat(0.5),
             state_file: self.state_files.get(projector).cloned(),
-        };
+        }
+    }
+
+    /// Starts a node agent for `projector` (with the state file it was given before, if any).
+    pub fn add_node(&mut self, projector: &str) {
+        self.add_node_with(self.node_config(projector));
+    }
+
+    /// Starts a node agent with `config` (e.g. [`Sandbox::node_config`] with another token),
+    /// known to the sandbox by its projector id.
+    pub fn add_node_with(&mut self, config: NodeConfig) {
+        let projector = config.projector_id.clone();
+        assert!(
+            !self.nodes.contains_key(&projector),
+            "{projector} already runs"
+        );
+        let cancel = self.root.child_token();
         let task = tokio::spawn(node::run(config, self.room.display(), cancel.clone()));
-        self.nodes.insert(projector.into(), Agent { cancel, task });
+        self.nodes.insert(projector, Agent { cancel, task });
     }
 
     /// Starts a node agent for `projector` that keeps its values in `state_file` (and will

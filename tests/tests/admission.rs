@@ -2,6 +2,7 @@
 //! refusal), a duplicate stream, a silent node, a rogue node's malformed contributions. Every
 //! wait has a deadline.
 
+use roomlight_agent::AgentError;
 use roomlight_agent::camera::Survey;
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::v1;
@@ -33,6 +34,27 @@ async fn a_wrong_token_another_room_or_version_is_refused_with_a_clear_status() 
             "a node agent stops on {status}"
         );
     }
+    sb.shutdown().await;
+}
+
+/// A node agent refused for what retrying cannot fix stops with the camera agent's status, which
+/// it judged fatal; the room goes on without it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_node_agent_refused_for_its_token_stops_with_the_refusal() {
+    let mut sb = Sandbox::builder().start_camera().await;
+    sb.add_node("p0");
+    let mut intruder = sb.node_config("p1");
+    intruder.token = "guess".into();
+    sb.add_node_with(intruder);
+    let ended = sb.node_ended("p1", Duration::from_secs(10)).await;
+    let Err(AgentError::Status(status)) = ended else {
+        panic!("expected the camera agent's refusal, got {ended:?}");
+    };
+    assert_eq!(status.code(), tonic::Code::Unauthenticated, "{status}");
+    assert!(Refusal::is_fatal_status(&status), "{status}");
+    sb.wait_for(LONG, |s| s.live_projectors == 1 && s.captures >= 2)
+        .await;
+    assert!(sb.node_running("p0"));
     sb.shutdown().await;
 }
 
