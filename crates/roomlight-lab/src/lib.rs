@@ -8,9 +8,9 @@
 
 pub mod bench;
 pub mod demo;
-pub mod process;
 pub mod pipeline;
 pub mod pm;
+pub mod process;
 pub mod rendered;
 pub mod report;
 pub mod shadow;

@@ -6,14 +6,9 @@ mod procs;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
-use peak_alloc::PeakAlloc;
 use roomlight_lab::bench;
 use roomlight_lab::demo::{self, DemoOptions};
 use std::path::PathBuf;
-
-/// Counts heap use so that benchmarks can report memory.
-#[global_allocator]
-static ALLOCATOR: PeakAlloc = PeakAlloc;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -158,12 +153,16 @@ enum BenchCommand {
         #[arg(long)]
         quick: bool,
     },
-    /// The distributed runtime over loopback gRPC: round overhead and bytes for 10, 100 and
-    /// 1000 nodes (ten nodes per node agent).
+    /// The distributed runtime over loopback gRPC: round overhead, bytes and resident memory
+    /// per node for 10, 100, 1000, 5000 and 10 000 nodes (ten nodes per node agent), and the
+    /// growth exponent. A size too slow to measure is reported as such.
     Net {
         /// 10 and 100 nodes only.
         #[arg(long)]
         quick: bool,
+        /// Write the table (every size, the growth exponents) as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
     },
     /// The simulator on the embedded lab: precomputation, capture times, memory.
     Sim {
@@ -197,22 +196,19 @@ fn main() -> Result<()> {
 
 fn bench(args: BenchArgs) -> Result<()> {
     match args.which {
-        None => bench::room::run(
-            &bench::room::Plan {
-                quick: args.quick,
-                presets: true,
-                hard: true,
-                scaling: true,
-                repeats: args.repeats.unwrap_or(if args.quick { 1 } else { 3 }),
-                seed: args.seed,
-                json: args.json,
-                out: args.out,
-                case: args.case,
-            },
-            &ALLOCATOR,
-        ),
+        None => bench::room::run(&bench::room::Plan {
+            quick: args.quick,
+            presets: true,
+            hard: true,
+            scaling: true,
+            repeats: args.repeats.unwrap_or(if args.quick { 1 } else { 3 }),
+            seed: args.seed,
+            json: args.json,
+            out: args.out,
+            case: args.case,
+        }),
         Some(BenchCommand::Core { quick, json, seed }) => {
-            bench::core::core(quick, json.as_deref(), seed, &ALLOCATOR)
+            bench::core::core(quick, json.as_deref(), seed)
         }
         Some(BenchCommand::Room {
             quick,
@@ -222,24 +218,21 @@ fn bench(args: BenchArgs) -> Result<()> {
             repeats,
             seed,
             case,
-        }) => bench::room::run(
-            &bench::room::Plan {
-                quick,
-                presets: !hard,
-                hard,
-                scaling: false,
-                repeats,
-                seed,
-                json,
-                out,
-                case,
-            },
-            &ALLOCATOR,
-        ),
-        Some(BenchCommand::Net { quick }) => bench::net::run(quick, &ALLOCATOR).map(|_| ()),
-        Some(BenchCommand::Calib { quick }) => bench::calib::run(quick),
-        Some(BenchCommand::Sim { quick, out }) => {
-            bench::sim::run(quick, out.as_deref(), &ALLOCATOR)
+        }) => bench::room::run(&bench::room::Plan {
+            quick,
+            presets: !hard,
+            hard,
+            scaling: false,
+            repeats,
+            seed,
+            json,
+            out,
+            case,
+        }),
+        Some(BenchCommand::Net { quick, json }) => {
+            bench::net::run(quick, json.as_deref()).map(|_| ())
         }
+        Some(BenchCommand::Calib { quick }) => bench::calib::run(quick),
+        Some(BenchCommand::Sim { quick, out }) => bench::sim::run(quick, out.as_deref()),
     }
 }

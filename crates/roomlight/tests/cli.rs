@@ -653,3 +653,38 @@ fn configs_for_calibration_over_the_wire_are_checked() {
         "{e}"
     );
 }
+
+/// `bench net --quick` measures 10 and 100 nodes through the real agents and writes every size,
+/// the growth exponent and how memory was measured into `--json`.
+#[test]
+fn bench_net_quick_writes_its_table() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let json = dir.path().join("net.json");
+    let stdout = roomlight(&[
+        "bench",
+        "net",
+        "--quick",
+        "--json",
+        json.to_str().expect("utf-8 path"),
+    ]);
+    assert!(stdout.contains("growth exponent"), "{stdout}");
+    let run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json written"))
+            .expect("valid json");
+    let sizes = run["sizes"].as_array().expect("sizes");
+    let nodes: Vec<u64> = sizes.iter().filter_map(|s| s["nodes"].as_u64()).collect();
+    assert_eq!(nodes, [10, 100], "{run}");
+    for s in sizes {
+        assert!(s["rounds"].as_u64().is_some_and(|r| r > 0), "{s}");
+        assert!(s["median_ms"].as_f64().is_some_and(|m| m > 0.0), "{s}");
+        assert!(
+            s["bytes_out_per_round"].as_u64().is_some_and(|b| b > 0),
+            "{s}"
+        );
+    }
+    assert!(run["growth_exponent"].as_f64().is_some(), "{run}");
+    assert!(
+        run["memory"].as_str().is_some_and(|m| m.contains("VmRSS")),
+        "{run}"
+    );
+}

@@ -4,7 +4,6 @@
 
 use anyhow::{Context, Result};
 use comfy_table::{Table, presets::UTF8_FULL_CONDENSED};
-use peak_alloc::PeakAlloc;
 use roomlight_core::aggregator::ErrorAggregator;
 use roomlight_core::closed_loop::{self, LoopConfig, Plant, PlantConfig};
 use roomlight_core::conventional::conventional_start;
@@ -90,26 +89,30 @@ fn median(v: &mut [f64]) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
-/// Wall time and heap of one full distributed round (every node gathers, updates and
-/// contributes), as the ms median of repeated rounds and the peak MB of the node states.
-fn full_round(problem: &Problem, start: &[LinearRgb], alloc: &PeakAlloc) -> Result<(f64, f64)> {
+/// Wall time and memory of one full distributed round (every node gathers, updates and
+/// contributes), as the ms median of repeated rounds and how far the resident set's peak rose
+/// while the node states were built and used (see `bench::memory`).
+fn full_round(problem: &Problem, start: &[LinearRgb]) -> Result<(f64, Option<f64>)> {
     let errors = problem.errors(start);
-    let before = alloc.current_usage();
-    alloc.reset_peak_usage();
+    let (samples, peak_mb) = super::memory::peak_growth(|| rounds(problem, start, &errors));
+    let mut samples = samples?;
+    Ok((median(&mut samples), peak_mb))
+}
+
+/// Fifteen distributed rounds from `start`, each timed in ms.
+fn rounds(problem: &Problem, start: &[LinearRgb], errors: &[LinearRgb]) -> Result<Vec<f64>> {
     let mut nodes: Vec<NodeState> =
         closed_loop::build_nodes(problem, StepRule::Momentum { theta: 1.0 }, start)?;
     let mut aggregator = ErrorAggregator::new(problem.patches());
-    aggregator.measured(errors.clone())?;
+    aggregator.measured(errors.to_vec())?;
     let active = vec![true; nodes.len()];
     let mut samples = Vec::new();
     for _ in 0..15 {
         let t0 = Instant::now();
-        closed_loop::distributed_round(&mut nodes, &active, &errors, false, &mut aggregator)?;
+        closed_loop::distributed_round(&mut nodes, &active, errors, false, &mut aggregator)?;
         samples.push(t0.elapsed().as_secs_f64() * 1e3);
     }
-    let peak_mb = alloc.peak_usage().saturating_sub(before) as f64 / 1e6;
-    drop(nodes);
-    Ok((median(&mut samples), peak_mb))
+    Ok(samples)
 }
 
 /// One synthetic room of the benchmark.
@@ -130,7 +133,7 @@ impl Case {
 }
 
 /// Runs the core benchmark and prints the table.
-pub fn core(quick: bool, json: Option<&Path>, seed: u64, alloc: &PeakAlloc) -> Result<()> {
+pub fn core(quick: bool, json: Option<&Path>, seed: u64) -> Result<()> {
     let budget = if quick { 150 } else { 400 };
     let mut cases: Vec<Case> = [10, 100, 1000]
         .into_iter()
@@ -205,10 +208,11 @@ pub fn core(quick: bool, json: Option<&Path>, seed: u64, alloc: &PeakAlloc) -> R
                 captures: last.capture,
             });
         }
-        let (round_ms, round_mb) = full_round(problem, &start, alloc)?;
+        let (round_ms, round_mb) = full_round(problem, &start)?;
         let support: f64 = kept as f64 / nodes as f64;
         println!(
-            "  one distributed round of {nodes} nodes (mean support {support:.0} patches): {round_ms:.3} ms, node state {round_mb:.1} MB"
+            "  one distributed round of {nodes} nodes (mean support {support:.0} patches): {round_ms:.3} ms, peak resident growth {}",
+            super::memory::mb(round_mb)
         );
     }
     print_table(&rows);

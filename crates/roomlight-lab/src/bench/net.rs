@@ -1,16 +1,20 @@
 //! `roomlight bench net`: the cost of one round of the distributed runtime over loopback gRPC —
 //! errors out to every node, its update, the contribution and acknowledgement back — with a
-//! virtual camera whose capture costs microseconds. Timings are printed, not asserted.
+//! virtual camera whose capture costs microseconds, for 10 to 10 000 nodes. Timings are
+//! printed, not asserted. A size whose agents do not join or whose rounds are too slow is
+//! reported as such and the bench goes on. Memory is the process's resident set (camera
+//! agent, node agents and their streams, all in this process; see `bench::memory`).
 
 use anyhow::{Context, Result};
-use peak_alloc::PeakAlloc;
 use roomlight_agent::camera::{self, CameraConfig, RoomModel};
 use roomlight_agent::hardware::VirtualRoom;
 use roomlight_agent::node::{self, NodeConfig};
 use roomlight_core::closed_loop::{Plant, PlantConfig};
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, StepRule};
+use serde::Serialize;
 use std::collections::HashMap;
+use std::path::Path;
 use std::time::{Duration, Instant};
 use tokio_util::sync::CancellationToken;
 
@@ -27,9 +31,32 @@ pub struct NetPoint {
     pub compute_ms: f64,
     pub bytes_out_per_round: u64,
     pub bytes_in_per_round: u64,
-    /// Heap the node agents hold, over all of them.
-    pub heap_mb: f64,
+    /// Rounds measured (fewer than planned when they took too long).
+    pub rounds: usize,
+    /// How far the resident set grew while the node agents joined and the first rounds ran,
+    /// per node, in KB (camera agent's per-node state and the streams included).
+    pub rss_kb_per_node: Option<f64>,
+    /// Why the figures are missing or partial, if they are.
+    pub note: Option<String>,
 }
+
+/// The whole run, as `--json` writes it.
+#[derive(Debug, Clone, Serialize)]
+pub struct NetRun {
+    pub sizes: Vec<NetPoint>,
+    /// Least-squares slope of log(median round time) on log(nodes) over the sizes measured.
+    pub growth_exponent: Option<f64>,
+    /// The same for the compute alone.
+    pub compute_exponent: Option<f64>,
+    /// The same for the resident set per node (0: flat per node).
+    pub memory_exponent: Option<f64>,
+    pub memory: &'static str,
+}
+
+/// How long a size may take before it is reported too slow instead of measured.
+const JOIN_LIMIT: Duration = Duration::from_secs(180);
+const ROUND_LIMIT: Duration = Duration::from_secs(30);
+const ROUNDS_LIMIT: Duration = Duration::from_secs(90);
 
 /// Least squares on log-log: `y ∝ x^b` over the points with both positive; `None` with fewer
 /// than two such points or when every `x` is the same (no slope to fit).
@@ -50,7 +77,9 @@ pub fn growth_exponent(points: &[(f64, f64)]) -> Option<f64> {
     (sxx > 0.0).then(|| sxy / sxx)
 }
 
-pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
+/// Runs every size (10 and 100 with `quick`; up to 10 000 otherwise), prints the table and
+/// the growth exponents, and writes the run to `json` if given.
+pub fn run(quick: bool, json: Option<&Path>) -> Result<NetRun> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -59,10 +88,10 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
     let sizes: &[usize] = if quick {
         &[10, 100]
     } else {
-        &[10, 100, 1000, 5000]
+        &[10, 100, 1000, 5000, 10_000]
     };
     println!(
-        "{:>6} {:>7} {:>13} {:>11} {:>11} {:>15} {:>14} {:>18}",
+        "{:>6} {:>7} {:>10} {:>10} {:>11} {:>14} {:>13} {:>7} {:>13}",
         "nodes",
         "agents",
         "median ms",
@@ -70,32 +99,75 @@ pub fn run(quick: bool, alloc: &PeakAlloc) -> Result<Vec<NetPoint>> {
         "compute ms",
         "bytes out/rnd",
         "bytes in/rnd",
-        "heap per agent"
+        "rounds",
+        "RSS KB/node"
     );
     let mut points = Vec::new();
     for &n in sizes {
-        points.push(runtime.block_on(case(n, alloc))?);
+        let point = runtime.block_on(case(n))?;
+        print_row(&point);
+        points.push(point);
     }
-    let time: Vec<(f64, f64)> = points
-        .iter()
-        .map(|p| (p.nodes as f64, p.median_ms))
-        .collect();
-    let heap: Vec<(f64, f64)> = points.iter().map(|p| (p.nodes as f64, p.heap_mb)).collect();
-    let compute: Vec<(f64, f64)> = points
-        .iter()
-        .map(|p| (p.nodes as f64, p.compute_ms))
-        .collect();
-    if let (Some(t), Some(c), Some(m)) = (
-        growth_exponent(&time),
-        growth_exponent(&compute),
-        growth_exponent(&heap),
-    ) {
+    let fit = |f: fn(&NetPoint) -> f64| {
+        let xy: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|p| p.rounds > 0)
+            .map(|p| (p.nodes as f64, f(p)))
+            .collect();
+        growth_exponent(&xy)
+    };
+    let run = NetRun {
+        growth_exponent: fit(|p| p.median_ms),
+        compute_exponent: fit(|p| p.compute_ms),
+        memory_exponent: fit(|p| p.rss_kb_per_node.unwrap_or(0.0)),
+        sizes: points,
+        memory: "resident set growth (VmRSS) while the node agents join, per node",
+    };
+    let show = |e: Option<f64>| e.map_or_else(|| "n/a".to_string(), |e| format!("{e:.2}"));
+    println!(
+        "growth exponent: round time as nodes^{} (its compute as nodes^{}), resident memory per node as nodes^{} (least squares on log-log over the sizes measured; supports of fixed size)",
+        show(run.growth_exponent),
+        show(run.compute_exponent),
+        show(run.memory_exponent),
+    );
+    if let Some(path) = json {
+        std::fs::write(path, serde_json::to_string_pretty(&run)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(run)
+}
+
+fn print_row(p: &NetPoint) {
+    let rss = p
+        .rss_kb_per_node
+        .map_or_else(|| "n/a".to_string(), |v| format!("{v:.1}"));
+    if p.rounds == 0 {
         println!(
-            "round time grows as nodes^{t:.2} (its compute as nodes^{c:.2}), node agents' heap as nodes^{m:.2} (least squares on log-log over {} sizes, supports of fixed size)",
-            points.len()
+            "{:>6} {:>7} {:>10} {:>10} {:>11.3} {:>14} {:>13} {:>7} {rss:>13}  {}",
+            p.nodes,
+            p.agents,
+            "-",
+            "-",
+            p.compute_ms,
+            "-",
+            "-",
+            0,
+            p.note.as_deref().unwrap_or("")
         );
+        return;
     }
-    Ok(points)
+    println!(
+        "{:>6} {:>7} {:>10.3} {:>10.3} {:>11.3} {:>14} {:>13} {:>7} {rss:>13}  {}",
+        p.nodes,
+        p.agents,
+        p.median_ms,
+        p.p99_ms,
+        p.compute_ms,
+        p.bytes_out_per_round,
+        p.bytes_in_per_round,
+        p.rounds,
+        p.note.as_deref().unwrap_or("")
+    );
 }
 
 /// A synthetic room served by a camera agent over loopback gRPC, with a virtual camera, and
@@ -184,17 +256,23 @@ impl SyntheticAgents {
         }
     }
 
-    /// Stops every agent and waits (5 s at most each) until they are gone.
+    /// Stops every agent and waits until they are gone, 10 s at most in all (a thousand
+    /// agents must not wait 5 s each); those still running then are aborted.
     pub async fn stop(self) {
         self.cancel.cancel();
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
         for task in self.tasks {
-            let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
+            let abort = task.abort_handle();
+            if tokio::time::timeout_at(deadline, task).await.is_err() {
+                abort.abort();
+            }
         }
     }
 }
 
-/// One size: prints its row and returns it.
-async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
+/// One size, bounded: agents that do not all join within `JOIN_LIMIT`, a round over
+/// `ROUND_LIMIT` or rounds past `ROUNDS_LIMIT` end the size early with a note.
+async fn case(nodes: usize) -> Result<NetPoint> {
     let problem = synthetic_room(&SyntheticConfig::new(nodes, 1))?.problem;
     let rule = StepRule::Safe { theta: 1.0 };
     let compute_ms = crate::bench::core::us_per_node_update(
@@ -204,59 +282,106 @@ async fn case(nodes: usize, alloc: &PeakAlloc) -> Result<NetPoint> {
     )? * nodes as f64
         / 1e3;
     let mut room = SyntheticAgents::camera(&problem, PlantConfig::default(), None, 0).await?;
-    let agents = room.agents;
-    let before = alloc.current_usage();
+    let mut point = NetPoint {
+        nodes,
+        agents: room.agents,
+        median_ms: f64::NAN,
+        p99_ms: f64::NAN,
+        compute_ms,
+        bytes_out_per_round: 0,
+        bytes_in_per_round: 0,
+        rounds: 0,
+        rss_kb_per_node: None,
+        note: None,
+    };
+    let before = super::memory::resident();
     room.spawn_nodes(rule);
-    let status = &mut room.status;
-    let ready = tokio::time::timeout(Duration::from_secs(180), async {
-        loop {
-            let s = status.borrow().clone();
-            if s.live_projectors == agents && s.captures >= 2 {
-                return Ok::<_, anyhow::Error>(());
-            }
-            status.changed().await?;
+    let joined = tokio::time::timeout(JOIN_LIMIT, joined(&mut room)).await;
+    match joined {
+        Ok(result) => result?,
+        Err(_) => {
+            point.note = Some(format!("too slow: not all joined within {JOIN_LIMIT:?}"));
+            room.stop().await;
+            return Ok(point);
         }
-    })
-    .await;
-    ready.context("the agents did not all join within 180 s")??;
-    let heap_mb = alloc.current_usage().saturating_sub(before) as f64 / 1e6;
-    let heap_per_agent = heap_mb / agents as f64;
-    let rounds = if nodes >= 1000 { 20 } else { 60 };
-    let mut times = Vec::with_capacity(rounds);
+    }
+    if let (Some(b), Some(a)) = (before, super::memory::resident()) {
+        point.rss_kb_per_node = Some(a.now.saturating_sub(b.now) as f64 / 1024.0 / nodes as f64);
+    }
+    measure_rounds(&mut room, &mut point).await?;
+    room.stop().await;
+    Ok(point)
+}
+
+/// Until every node agent is live and two captures are taken.
+async fn joined(room: &mut SyntheticAgents) -> Result<()> {
+    let agents = room.agents;
+    loop {
+        let s = room.status.borrow().clone();
+        if s.live_projectors == agents && s.captures >= 2 {
+            return Ok(());
+        }
+        room.status.changed().await?;
+    }
+}
+
+/// Times rounds (the first left out, it waits on the join) into `point`.
+async fn measure_rounds(room: &mut SyntheticAgents, point: &mut NetPoint) -> Result<()> {
+    let planned = if point.nodes >= 1000 { 20 } else { 60 };
+    let mut times = Vec::with_capacity(planned);
     let (mut out, mut inn) = (0u64, 0u64);
-    let mut last = Instant::now();
-    for _ in 0..rounds {
-        tokio::time::timeout(Duration::from_secs(30), status.changed())
+    let started = Instant::now();
+    let mut last = started;
+    for _ in 0..planned {
+        if started.elapsed() > ROUNDS_LIMIT {
+            point.note = Some(format!("too slow: rounds past {ROUNDS_LIMIT:?}"));
+            break;
+        }
+        if tokio::time::timeout(ROUND_LIMIT, room.status.changed())
             .await
-            .context("a round took over 30 s")??;
+            .is_err()
+        {
+            point.note = Some(format!("too slow: a round over {ROUND_LIMIT:?}"));
+            break;
+        }
         let now = Instant::now();
         times.push((now - last).as_secs_f64() * 1e3);
         last = now;
-        let s = status.borrow().clone();
+        let s = room.status.borrow().clone();
         out += s.bytes_out;
         inn += s.bytes_in;
     }
-    room.stop().await;
-    times.remove(0);
+    let counted = times.len() as u64;
+    if counted >= 2 {
+        times.remove(0);
+    }
+    if times.is_empty() {
+        return Ok(());
+    }
     times.sort_by(f64::total_cmp);
     let pct = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
-    println!(
-        "{nodes:>6} {agents:>7} {:>13.3} {:>11.3} {:>11.3} {:>15} {:>14} {:>15.2} MB",
-        pct(0.5),
-        pct(0.99),
-        compute_ms,
-        out / rounds as u64,
-        inn / rounds as u64,
-        heap_per_agent
-    );
-    Ok(NetPoint {
-        nodes,
-        agents,
-        median_ms: pct(0.5),
-        p99_ms: pct(0.99),
-        compute_ms,
-        bytes_out_per_round: out / rounds as u64,
-        bytes_in_per_round: inn / rounds as u64,
-        heap_mb,
-    })
+    point.median_ms = pct(0.5);
+    point.p99_ms = pct(0.99);
+    point.rounds = times.len();
+    point.bytes_out_per_round = out / counted;
+    point.bytes_in_per_round = inn / counted;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::growth_exponent;
+
+    #[test]
+    fn the_growth_exponent_is_the_log_log_slope() {
+        let points: Vec<(f64, f64)> = [10.0_f64, 100.0, 1000.0, 5000.0]
+            .iter()
+            .map(|&n| (n, 3.0 * n.powf(1.5)))
+            .collect();
+        let b = growth_exponent(&points).expect("a slope");
+        assert!((b - 1.5).abs() < 1e-9, "{b}");
+        // Sizes without a figure (too slow: 0) are left out; one size has no slope.
+        assert!(growth_exponent(&[(10.0, 1.0), (100.0, 0.0)]).is_none());
+        assert!(growth_exponent(&[(10.0, 1.0), (10.0, 2.0)]).is_none());
+    }
 }

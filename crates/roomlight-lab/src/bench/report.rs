@@ -127,7 +127,7 @@ fn html(outcome: &Outcome, figures: &str) -> String {
         for p in &outcome.scaling {
             let _ = write!(
                 rows,
-                "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{:.2}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                 p.nodes,
                 p.agents,
                 p.median_ms,
@@ -135,13 +135,16 @@ fn html(outcome: &Outcome, figures: &str) -> String {
                 p.compute_ms,
                 p.bytes_out_per_round,
                 p.bytes_in_per_round,
-                p.heap_mb
+                p.rss_kb_per_node
+                    .map_or_else(|| "n/a".to_string(), |v| format!("{v:.1}")),
+                escape(p.note.as_deref().unwrap_or(""))
             );
         }
         let fit = |f: fn(&crate::bench::net::NetPoint) -> f64| {
             let points: Vec<(f64, f64)> = outcome
                 .scaling
                 .iter()
+                .filter(|p| p.rounds > 0)
                 .map(|p| (p.nodes as f64, f(p)))
                 .collect();
             growth_exponent(&points).map_or("—".to_string(), |b| format!("{b:.2}"))
@@ -150,13 +153,14 @@ fn html(outcome: &Outcome, figures: &str) -> String {
             "<h2>How cost grows</h2><p>One round over loopback gRPC (errors out, update, contribution and \
 acknowledgement back; a virtual camera), supports of fixed size, ten nodes per node agent; compute is every \
 node's update timed alone, the rest of a round is messages and waiting. Round time grows as \
-nodes<sup>{}</sup>, its compute as nodes<sup>{}</sup>, the node agents' heap as nodes<sup>{}</sup> \
-(least squares on log-log).</p>\
+nodes<sup>{}</sup>, its compute as nodes<sup>{}</sup>, the resident memory per node as nodes<sup>{}</sup> \
+(least squares on log-log; memory is the process's resident set growth while the node agents join, \
+the camera agent's per-node state and the streams included).</p>\
 <table><tr><th>nodes</th><th>agents</th><th>median ms</th><th>p99 ms</th><th>compute ms</th><th>bytes out/round</th>\
-<th>bytes in/round</th><th>node agents' heap MB</th></tr>{rows}</table>",
+<th>bytes in/round</th><th>resident KB per node</th><th>note</th></tr>{rows}</table>",
             fit(|p| p.median_ms),
             fit(|p| p.compute_ms),
-            fit(|p| p.heap_mb)
+            fit(|p| p.rss_kb_per_node.unwrap_or(0.0))
         );
     }
     format!(

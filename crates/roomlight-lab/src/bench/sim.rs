@@ -1,7 +1,6 @@
 //! `roomlight bench sim`: what the simulated room costs. Timings are printed, never asserted.
 
 use anyhow::{Context, Result};
-use peak_alloc::PeakAlloc;
 use roomlight_sim::room::PngEncoding;
 use roomlight_sim::{Frame, NodeBasis, NodeRegion, Room, Scene, scenes};
 use std::path::Path;
@@ -18,14 +17,13 @@ fn median_ms(mut f: impl FnMut() -> Result<()>, runs: usize) -> Result<(f64, f64
     Ok((t[t.len() / 2], t[0], t[t.len() - 1]))
 }
 
-fn build(scene: Scene, alloc: &PeakAlloc) -> Result<(Room, f64, f64)> {
-    let before = alloc.current_usage();
-    alloc.reset_peak_usage();
+/// The room, its precomputation's seconds and how far the resident set's peak rose meanwhile
+/// (MB, see `bench::memory`).
+fn build(scene: Scene) -> Result<(Room, f64, Option<f64>)> {
     let t0 = Instant::now();
-    let room = Room::build(scene).context("building the room")?;
-    let secs = t0.elapsed().as_secs_f64();
-    let mb = alloc.peak_usage().saturating_sub(before) as f64 / 1e6;
-    Ok((room, secs, mb))
+    let (room, mb) = super::memory::peak_growth(|| Room::build(scene));
+    let room = room.context("building the room")?;
+    Ok((room, t0.elapsed().as_secs_f64(), mb))
 }
 
 /// Four nodes per projector: its image split into quadrants.
@@ -49,18 +47,19 @@ fn quadrants(room: &Room) -> Vec<NodeRegion> {
     nodes
 }
 
-pub fn run(quick: bool, out: Option<&Path>, alloc: &PeakAlloc) -> Result<()> {
+pub fn run(quick: bool, out: Option<&Path>) -> Result<()> {
     let scene = if quick {
         scenes::small()?
     } else {
         scenes::lab()?
     };
     let name = scene.name.clone();
-    let (room, secs, mb) = build(scene.clone(), alloc)?;
+    let (room, secs, mb) = build(scene.clone())?;
     let (w, h) = (room.camera().width, room.camera().height);
     println!(
-        "{name}: precomputation {secs:.2} s (geometry, {} radiosity elements, form factors, {w}x{h} camera pixels, 3 probe sets), peak heap {mb:.0} MB",
-        room.geometry().elements.len()
+        "{name}: precomputation {secs:.2} s (geometry, {} radiosity elements, form factors, {w}x{h} camera pixels, 3 probe sets), peak resident growth {}",
+        room.geometry().elements.len(),
+        super::memory::mb(mb)
     );
     let n = room.projectors().len();
     let preset = room.scene().presets.first().map(|p| p.name.clone());
@@ -133,7 +132,7 @@ pub fn run(quick: bool, out: Option<&Path>, alloc: &PeakAlloc) -> Result<()> {
     if !quick {
         let mut small_cam = scene;
         small_cam.camera.resolution = [640, 480];
-        let (room640, secs, mb) = build(small_cam, alloc)?;
+        let (room640, secs, mb) = build(small_cam)?;
         let (med, lo, hi) = median_ms(
             || {
                 room640
@@ -144,7 +143,8 @@ pub fn run(quick: bool, out: Option<&Path>, alloc: &PeakAlloc) -> Result<()> {
             7,
         )?;
         println!(
-            "{name} at 640x480: precomputation {secs:.2} s, peak heap {mb:.0} MB; capture with inter-reflection: median {med:.1} ms (min {lo:.1}, max {hi:.1})"
+            "{name} at 640x480: precomputation {secs:.2} s, peak resident growth {}; capture with inter-reflection: median {med:.1} ms (min {lo:.1}, max {hi:.1})",
+            super::memory::mb(mb)
         );
     }
     if let Some(dir) = out {

@@ -55,9 +55,7 @@ enum AnyCamera {
 }
 
 impl roomlight_agent::hardware::Camera for AnyCamera {
-    fn capture_image(
-        &mut self,
-    ) -> impl Future<Output = Result<LinearImage, AgentError>> + Send {
+    fn capture_image(&mut self) -> impl Future<Output = Result<LinearImage, AgentError>> + Send {
         let capture: Pin<Box<dyn Future<Output = _> + Send + '_>> = match self {
             Self::Synthetic(c) => Box::pin(c.capture_image()),
             Self::Rendered(c) => Box::pin(c.capture_image()),
@@ -162,7 +160,8 @@ pub async fn serve_camera(
         ),
         None => None,
     };
-    let (mut status, handle) = camera::serve(process.agent, model, camera, listener, cancel.clone());
+    let (mut status, handle) =
+        camera::serve(process.agent, model, camera, listener, cancel.clone());
     loop {
         tokio::select! {
             () = cancel.cancelled() => break,

@@ -52,7 +52,11 @@ pub enum PreparedSim {
 /// Builds the room; a synthetic room's model file is written here.
 pub fn prepare_sim(which: &SimRoom) -> Result<PreparedSim> {
     match which {
-        SimRoom::Rendered { scene, camera, seed } => {
+        SimRoom::Rendered {
+            scene,
+            camera,
+            seed,
+        } => {
             let room = Room::build(load_scene(scene, *camera)?)
                 .with_context(|| format!("building the room of {scene}"))?;
             Ok(PreparedSim::Rendered {
