@@ -26,6 +26,7 @@ use prost::Message;
 use registry::{Outbox, Registry};
 use roomlight_calib::charts::{COLUMNS, ChartCorners, ROWS, SampleConfig};
 use roomlight_core::{LinearRgb, Problem};
+use roomlight_proto::refusal::Refusal;
 use roomlight_proto::v1;
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -178,8 +179,14 @@ impl Shared {
             return false;
         }
         if tx.capacity() <= bodies.len() {
+            // The refusal's wire name, which the node agent's log shows.
+            let reason = Refusal::Lagging {
+                queue: tx.max_capacity(),
+            }
+            .row()
+            .key;
             let goodbye = v1::room_message::Body::Goodbye(v1::Goodbye {
-                reason: "lagging".into(),
+                reason: reason.into(),
             });
             let _ = tx.try_send(Ok(v1::RoomMessage {
                 body: Some(goodbye),
@@ -283,7 +290,7 @@ async fn run<C: Camera>(
     for tx in shared.registry.drain() {
         let _ = tx.try_send(Ok(v1::RoomMessage {
             body: Some(v1::room_message::Body::Goodbye(v1::Goodbye {
-                reason: "the camera agent is stopping".into(),
+                reason: Refusal::ShuttingDown.to_string(),
             })),
         }));
     }

@@ -7,6 +7,7 @@ use super::registry::{Peer, PeerGuard};
 use super::{Contribution, Shared};
 use prost::Message;
 use roomlight_proto::convert::from_sparse;
+use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::pin::Pin;
 use std::sync::Arc;
@@ -54,10 +55,10 @@ impl v1::room_server::Room for Service {
             inbound.next(),
         )
         .await
-        .map_err(|_| Status::deadline_exceeded("no Hello within the deadline"))?
-        .ok_or_else(|| Status::invalid_argument("the stream ended before Hello"))??;
+        .map_err(|_| Refusal::NoHello)?
+        .ok_or(Refusal::EndedBeforeHello)??;
         let Some(v1::node_message::Body::Hello(hello)) = first.body else {
-            return Err(Status::invalid_argument("the first message must be Hello"));
+            return Err(Refusal::FirstNotHello.into());
         };
         let nodes = check_hello(&shared, &hello)?;
         let calibrated = !shared.live().uncalibrated.contains(&hello.projector_id);
@@ -65,8 +66,10 @@ impl v1::room_server::Room for Service {
         // The greeting is queued before admission, so that it precedes anything the rounds send.
         let (tx, rx) = mpsc::channel(QUEUE + greeting.len());
         for m in greeting {
-            tx.try_send(m)
-                .map_err(|_| Status::internal("the greeting did not fit its queue"))?;
+            // The queue was made to hold the greeting: this cannot fail.
+            if tx.try_send(m).is_err() {
+                return Err(Refusal::LeftDuringHandshake.into());
+            }
         }
         let projector = hello.projector_id.clone();
         let peer = Peer::new(tx, &hello, shared.cancel.child_token());
@@ -77,10 +80,11 @@ impl v1::room_server::Room for Service {
             Ok(guard) => guard,
             Err(_) => {
                 tracing::warn!(%projector, "refused: already attached");
-                return Err(Status::already_exists(format!(
-                    "projector {projector:?} is already attached to room {:?}",
-                    shared.config.room
-                )));
+                return Err(Refusal::AlreadyAttached {
+                    projector,
+                    room: shared.config.room.clone(),
+                }
+                .into());
             }
         };
         tracing::info!(%projector, nodes = nodes.len(), "joined");
@@ -93,25 +97,25 @@ impl v1::room_server::Room for Service {
 /// Checks a Hello: protocol version, room, token, and that the projector is known (or can be
 /// calibrated over the wire, then marked uncalibrated). Its nodes (none yet for a projector to
 /// calibrate).
-fn check_hello(shared: &Shared, hello: &v1::Hello) -> Result<Vec<u32>, Status> {
+fn check_hello(shared: &Shared, hello: &v1::Hello) -> Result<Vec<u32>, Refusal> {
     let config = &shared.config;
     if hello.protocol_version != PROTOCOL_VERSION {
         tracing::warn!(projector = %hello.projector_id, version = hello.protocol_version, "refused: protocol version");
-        return Err(Status::failed_precondition(format!(
-            "protocol version {}, this camera agent speaks {PROTOCOL_VERSION}",
-            hello.protocol_version
-        )));
+        return Err(Refusal::ProtocolVersion {
+            got: hello.protocol_version,
+            speaks: PROTOCOL_VERSION,
+        });
     }
     if hello.room != config.room {
         tracing::warn!(projector = %hello.projector_id, room = %hello.room, "refused: another room");
-        return Err(Status::failed_precondition(format!(
-            "room {:?}, this is room {:?}",
-            hello.room, config.room
-        )));
+        return Err(Refusal::OtherRoom {
+            asked: hello.room.clone(),
+            room: config.room.clone(),
+        });
     }
     if !bool::from(hello.token.as_bytes().ct_eq(config.token.as_bytes())) {
         tracing::warn!(projector = %hello.projector_id, "refused: wrong room token");
-        return Err(Status::unauthenticated("wrong room token"));
+        return Err(Refusal::WrongToken);
     }
     let known = shared.live().owners.get(&hello.projector_id).cloned();
     match known {
@@ -120,10 +124,10 @@ fn check_hello(shared: &Shared, hello: &v1::Hello) -> Result<Vec<u32>, Status> {
         None if shared.survey.is_some() => {
             if hello.width == 0 || hello.height == 0 {
                 tracing::warn!(projector = %hello.projector_id, "refused: no resolution to calibrate");
-                return Err(Status::failed_precondition(format!(
-                    "projector {:?} is not calibrated in room {:?}, and its Hello gives no resolution to calibrate it with (a display that draws pixels does)",
-                    hello.projector_id, config.room
-                )));
+                return Err(Refusal::NoResolution {
+                    projector: hello.projector_id.clone(),
+                    room: config.room.clone(),
+                });
             }
             shared
                 .live_mut()
@@ -131,10 +135,10 @@ fn check_hello(shared: &Shared, hello: &v1::Hello) -> Result<Vec<u32>, Status> {
                 .insert(hello.projector_id.clone());
             Ok(Vec::new())
         }
-        None => Err(Status::not_found(format!(
-            "projector {:?} is not calibrated in room {:?}",
-            hello.projector_id, config.room
-        ))),
+        None => Err(Refusal::UnknownProjector {
+            projector: hello.projector_id.clone(),
+            room: config.room.clone(),
+        }),
     }
 }
 
