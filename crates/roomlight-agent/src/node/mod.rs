@@ -2,9 +2,9 @@
 //! receives only the errors on its nodes' supports, computes its own steps, drives its display,
 //! acknowledges each frame and reports its contribution changes for model rounds.
 //!
-//! - [`session`]: one connection to the camera agent, handshake to goodbye.
-//! - [`state`]: what the node remembers across sessions and restarts, and its state file.
-//! - [`backoff`]: how long it waits before reconnecting.
+//! - `session`: one connection to the camera agent, handshake to goodbye.
+//! - `state`: what the node remembers across sessions and restarts, and its state file.
+//! - `backoff`: how long it waits before reconnecting.
 //!
 //! This module strings them together: relight from the state file, then sessions until
 //! cancelled, reconnecting unless the camera agent's refusal is one retrying cannot fix. It
