@@ -132,3 +132,27 @@ async fn a_restarted_node_relights_from_its_state_file_before_it_reconnects() {
     assert!(err.to_string().contains("p0.state.json"), "{err}");
     sb.shutdown().await;
 }
+
+/// A node agent restarted without a state file (stopped cleanly, started again) rejoins from
+/// its default start, and the room converges back to the optimum.
+#[tokio::test(start_paused = true)]
+async fn a_restarted_node_agent_rejoins_and_the_room_converges_again() {
+    let mut sb = Sandbox::builder()
+        .model_rounds(5)
+        .exposure(EXPOSURE)
+        .start_camera()
+        .await;
+    sb.add_all_nodes();
+    let before = sb
+        .wait_for(LONG, |s| s.live_projectors == 3 && s.captures >= 8)
+        .await;
+    sb.restart_node("p1").await;
+    sb.wait_for(LONG, |s| {
+        s.live_projectors == 3 && s.captures >= before.captures + 8
+    })
+    .await;
+    let excess = sb.excess(&sb.problem);
+    assert!(excess < 1e-3, "after p1's restart the excess is {excess}");
+    assert!(sb.node_running("p1"));
+    sb.shutdown().await;
+}
