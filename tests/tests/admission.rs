@@ -15,11 +15,33 @@ const LONG: Duration = Duration::from_secs(30);
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_wrong_token_another_room_or_version_is_refused_with_a_clear_status() {
     let sb = Sandbox::builder().start_camera().await;
-    let version = roomlight_proto::PROTOCOL_VERSION;
-    for (room, token, version, code) in [
-        ("lab", "guess", version, tonic::Code::Unauthenticated),
-        ("kitchen", TOKEN, version, tonic::Code::FailedPrecondition),
-        ("lab", TOKEN, 99, tonic::Code::FailedPrecondition),
+    let speaks = roomlight_proto::PROTOCOL_VERSION;
+    let other_room = Refusal::OtherRoom {
+        asked: "kitchen".into(),
+        room: "lab".into(),
+    };
+    for (room, token, version, expected, code) in [
+        (
+            "lab",
+            "guess",
+            speaks,
+            Refusal::WrongToken,
+            tonic::Code::Unauthenticated,
+        ),
+        (
+            "kitchen",
+            TOKEN,
+            speaks,
+            other_room,
+            tonic::Code::FailedPrecondition,
+        ),
+        (
+            "lab",
+            TOKEN,
+            99,
+            Refusal::ProtocolVersion { got: 99, speaks },
+            tonic::Code::FailedPrecondition,
+        ),
     ] {
         let mut message = hello("p0");
         if let Some(v1::node_message::Body::Hello(h)) = &mut message.body {
@@ -28,11 +50,15 @@ async fn a_wrong_token_another_room_or_version_is_refused_with_a_clear_status() 
             h.protocol_version = version;
         }
         let status = sb.attach_once(message).await.expect_err("refused");
-        assert_eq!(status.code(), code, "{room}/{token}/{version}: {status}");
-        assert!(
-            Refusal::is_fatal_status(&status),
-            "a node agent stops on {status}"
+        // The node reads the very refusal the camera agent made, with its code and words.
+        assert_eq!(
+            Refusal::from_status(&status).as_ref(),
+            Some(&expected),
+            "{room}/{token}/{version}: {status}"
         );
+        assert_eq!(status.code(), code, "{status}");
+        assert_eq!(status.message(), expected.to_string());
+        assert!(expected.is_fatal(), "a node agent stops on {status}");
     }
     sb.shutdown().await;
 }
@@ -50,6 +76,11 @@ async fn a_node_agent_refused_for_its_token_stops_with_the_refusal() {
     let Err(AgentError::Status(status)) = ended else {
         panic!("expected the camera agent's refusal, got {ended:?}");
     };
+    assert_eq!(
+        Refusal::from_status(&status),
+        Some(Refusal::WrongToken),
+        "{status}"
+    );
     assert_eq!(status.code(), tonic::Code::Unauthenticated, "{status}");
     assert!(Refusal::is_fatal_status(&status), "{status}");
     sb.wait_for(LONG, |s| s.live_projectors == 1 && s.captures >= 2)
@@ -68,6 +99,11 @@ async fn a_duplicate_projector_is_refused_and_a_silent_one_leaves_within_two_sec
     })
     .await;
     let status = sb.attach_once(hello("p0")).await.expect_err("duplicate");
+    let duplicate = Refusal::AlreadyAttached {
+        projector: "p0".into(),
+        room: "lab".into(),
+    };
+    assert_eq!(Refusal::from_status(&status), Some(duplicate), "{status}");
     assert_eq!(status.code(), tonic::Code::AlreadyExists, "{status}");
     assert!(
         !Refusal::is_fatal_status(&status),
@@ -181,6 +217,15 @@ async fn a_projector_without_a_resolution_cannot_be_calibrated_over_the_wire() {
         .attach_once(hello("newcomer"))
         .await
         .expect_err("no resolution: refused");
+    let expected = Refusal::NoResolution {
+        projector: "newcomer".into(),
+        room: "lab".into(),
+    };
+    assert_eq!(
+        Refusal::from_status(&refused).as_ref(),
+        Some(&expected),
+        "{refused}"
+    );
     assert_eq!(refused.code(), tonic::Code::FailedPrecondition, "{refused}");
     assert!(
         refused.message().contains("newcomer") && refused.message().contains("resolution"),
