@@ -32,19 +32,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         return synthetic(args);
     }
     let t0 = Instant::now();
-    let mut scene = if args.quick {
-        roomlight_sim::scenes::small()?
-    } else {
-        roomlight_sim::scenes::lab()?
-    };
-    if args.quick {
-        // Enough camera pixels per chart patch.
-        scene.camera.resolution = [640, 480];
-    }
-    let name = scene.name.clone();
-    let room = Arc::new(
-        roomlight_sim::Room::build(scene).with_context(|| format!("building the {name} room"))?,
-    );
+    let (name, room) = build_room(args.quick)?;
     let mut calibration = vec![format!(
         "simulated room built in {:.1} s ({} projectors, {} charts, camera {}×{})",
         t0.elapsed().as_secs_f64(),
@@ -57,12 +45,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     let dir = &args.out;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut noise = roomlight_sim::CameraNoise::with_seed(&room, args.seed);
-    // Progress on stderr, only on a terminal (indicatif hides itself otherwise).
-    let bar = indicatif::ProgressBar::new(0).with_style(
-        indicatif::ProgressStyle::with_template("{msg:>16} [{bar:30}] {pos}/{len} {elapsed}")
-            .map_err(|e| anyhow::anyhow!("progress style: {e}"))?
-            .progress_chars("=> "),
-    );
+    let bar = progress_bar()?;
     let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| {
         bar.println(&line);
         if bar.is_hidden() {
@@ -70,15 +53,6 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         }
         calibration.push(line);
     })?;
-    let live = |max: u64| {
-        bar.reset();
-        bar.set_length(max);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} capture {pos}/{len} {msg}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
-        );
-        &bar
-    };
     let t = Instant::now();
     let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
     let transport = pipeline::Transport::new(basis, &cal.corners, pipeline::sample_config(&room))?;
@@ -86,19 +60,12 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         "simulated hardware: each node's light rendered once in {:.1} s",
         t.elapsed().as_secs_f64()
     );
-    // The agents on one target, with the live line while they run.
-    let run = |model: &pipeline::Model, truth: &pipeline::Truth, options: RunOptions| {
-        let result = pipeline::run_agents(
-            &room,
-            &cal,
-            model,
-            &transport,
-            truth,
-            options,
-            live(options.max_captures),
-        );
-        bar.finish_and_clear();
-        result
+    let lab = Lab {
+        room: &room,
+        cal: &cal,
+        transport: &transport,
+        bar: &bar,
+        options: args,
     };
     let mut presets = Vec::new();
     let mut rules = Vec::new();
@@ -107,72 +74,15 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         let model = pipeline::measure_target(&room, &cal, preset, &mut noise)?;
         captures += 1;
         let truth = pipeline::Truth::new(&room, &transport, &model, preset)?;
-        let options = RunOptions::default_rule(args.seed + preset as u64);
-        let result = run(&model, &truth, options)?;
-        let r = &result;
-        println!(
-            "{}: {} captures{}, mean ΔE00 {:.2} (max {:.2}), conventional start {:.2}, true optimum {:.2}; excess over G* {:.1e} (true {:.1e}), {:.1} s",
-            spec.name,
-            r.captures,
-            if r.settled {
-                " until settled"
-            } else {
-                " (cap)"
-            },
-            mean(&r.de00),
-            r.de00.iter().copied().fold(0.0, f64::max),
-            mean(&r.conventional_de00),
-            r.best_mean_de00,
-            r.final_excess,
-            r.true_excess,
-            r.seconds
-        );
+        let result = lab.agents(
+            &model,
+            &truth,
+            RunOptions::default_rule(args.seed + preset as u64),
+        )?;
+        print_preset(&spec.name, &result);
         let images = preset_images(&room, &cal, &model, &result, preset, &spec.name, dir)?;
         if preset == 0 {
-            // The rules of DESIGN §3.2–§3.4 on the same target, from the same start.
-            let compared = [
-                ("paper (fixed ε)", StepRule::paper(), 0),
-                ("safe step", StepRule::Safe { theta: 1.0 }, 0),
-                ("momentum", StepRule::Momentum { theta: 1.0 }, 0),
-                (
-                    "momentum + 5 model rounds",
-                    StepRule::Momentum { theta: 1.0 },
-                    5,
-                ),
-                (
-                    "safe step + 20 model rounds",
-                    StepRule::Safe { theta: 1.0 },
-                    20,
-                ),
-                (
-                    "momentum + 20 model rounds (default)",
-                    StepRule::Momentum { theta: 1.0 },
-                    20,
-                ),
-            ];
-            // The same capture budget for every rule, whether or not it would have settled.
-            let budget = if args.quick { 15 } else { 30 };
-            for (label, rule, model_rounds) in compared {
-                let options = RunOptions {
-                    rule,
-                    model_rounds,
-                    max_captures: budget,
-                    stop_when_settled: false,
-                    ..RunOptions::default_rule(args.seed)
-                };
-                let result = run(&model, &truth, options)?;
-                println!(
-                    "  rule {label}: {} captures, {:.2} s, true excess {:.1e}, mean ΔE00 {:.2}",
-                    result.captures,
-                    result.seconds,
-                    result.true_excess,
-                    mean(&result.de00)
-                );
-                rules.push(RuleOutcome {
-                    label: label.into(),
-                    result,
-                });
-            }
+            rules = lab.compare_rules(&model, &truth)?;
         }
         presets.push(PresetOutcome {
             name: spec.name.clone(),
@@ -186,93 +96,13 @@ pub fn run(args: &DemoOptions) -> Result<()> {
             images,
         });
     }
-    // A projector leaves, and another that the camera agent has never measured joins: it is
-    // calibrated hot, then the room converges without the leaver (first preset, default rule).
-    let hot_join = match presets.first() {
-        Some(first) => {
-            let (leave_at, join_at, after) = if args.quick { (3, 6, 8) } else { (5, 10, 12) };
-            match pipeline::Churn::pick(&room, &cal, leave_at, join_at, true) {
-                Ok(churn) => {
-                    let truth = pipeline::Truth::new(&room, &transport, &first.model, 0)?;
-                    let nodes = cal
-                        .regions
-                        .iter()
-                        .filter(|r| r.projector == churn.joining)
-                        .count() as u64;
-                    let options = RunOptions {
-                        max_captures: join_at + nodes + 1 + after,
-                        stop_when_settled: false,
-                        churn: Some(churn),
-                        ..RunOptions::default_rule(args.seed)
-                    };
-                    let result = run(&first.model, &truth, options)?;
-                    let name = |k: usize| room.projectors()[k].name.clone();
-                    println!(
-                        "{} leaves after {leave_at} captures, {} joins unmeasured after {join_at}: calibrated hot ({} projector, {} captures), then {} captures in all: excess {:.1e} over the optimum without the leaver (true {:.1e}), mean ΔE00 {:.2}",
-                        name(churn.leaving),
-                        name(churn.joining),
-                        result.calibrated_hot,
-                        nodes + 1,
-                        result.captures,
-                        result.final_excess,
-                        result.true_excess,
-                        mean(&result.de00)
-                    );
-                    Some(report::HotJoin {
-                        leaving: name(churn.leaving),
-                        joining: name(churn.joining),
-                        churn,
-                        calibration_captures: (nodes + 1) * result.calibrated_hot,
-                        result,
-                    })
-                }
-                Err(e) => {
-                    println!("no projector to join hot: {e:#}");
-                    None
-                }
-            }
-        }
-        None => None,
-    };
-    let pm = match presets.first() {
-        Some(first) => {
-            let t = Instant::now();
-            let pm = crate::pm::run(&room, &cal, &first.result.x, 0, args.seed, dir, |line| {
-                println!("{line}")
-            })?;
-            println!(
-                "projection mapping and contrast: {:.1} s",
-                t.elapsed().as_secs_f64()
-            );
-            Some(pm)
-        }
-        None => None,
-    };
-    let t = Instant::now();
-    let shadows = if room
-        .scene()
-        .projectors
-        .iter()
-        .any(|p| p.kind == roomlight_sim::scene::ProjectorKind::LargeAperture)
-    {
-        let s = crate::shadow::run(room.scene())?;
-        println!(
-            "shadow of a hand-sized box over the desk: penumbra {} mm; a standard projector needs {:.0}× the large aperture's peak radiance for the same desk irradiance ({:.1} s)",
-            s.kinds
-                .iter()
-                .map(|k| format!("{} {:.0}", k.kind, k.penumbra_mm))
-                .collect::<Vec<_>>()
-                .join(", "),
-            s.peak_radiance_ratio,
-            t.elapsed().as_secs_f64()
-        );
-        Some(s)
-    } else {
-        None
+    let (hot_join, pm) = match presets.first() {
+        Some(first) => (lab.hot_join(first)?, Some(lab.pm(first)?)),
+        None => (None, None),
     };
     let report = Report {
         pm,
-        shadows,
+        shadows: shadows(&room)?,
         hot_join,
         room: name,
         seed: args.seed,
@@ -290,6 +120,221 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// The small room (with enough camera pixels per chart patch) or the lab.
+fn build_room(quick: bool) -> Result<(String, Arc<roomlight_sim::Room>)> {
+    let mut scene = if quick {
+        roomlight_sim::scenes::small()?
+    } else {
+        roomlight_sim::scenes::lab()?
+    };
+    if quick {
+        scene.camera.resolution = [640, 480];
+    }
+    let name = scene.name.clone();
+    let room =
+        roomlight_sim::Room::build(scene).with_context(|| format!("building the {name} room"))?;
+    Ok((name, Arc::new(room)))
+}
+
+/// Progress on stderr, only on a terminal (indicatif hides itself otherwise).
+fn progress_bar() -> Result<indicatif::ProgressBar> {
+    Ok(indicatif::ProgressBar::new(0).with_style(
+        indicatif::ProgressStyle::with_template("{msg:>16} [{bar:30}] {pos}/{len} {elapsed}")
+            .map_err(|e| anyhow::anyhow!("progress style: {e}"))?
+            .progress_chars("=> "),
+    ))
+}
+
+fn print_preset(name: &str, r: &pipeline::RunResult) {
+    println!(
+        "{}: {} captures{}, mean ΔE00 {:.2} (max {:.2}), conventional start {:.2}, true optimum {:.2}; excess over G* {:.1e} (true {:.1e}), {:.1} s",
+        name,
+        r.captures,
+        if r.settled {
+            " until settled"
+        } else {
+            " (cap)"
+        },
+        mean(&r.de00),
+        r.de00.iter().copied().fold(0.0, f64::max),
+        mean(&r.conventional_de00),
+        r.best_mean_de00,
+        r.final_excess,
+        r.true_excess,
+        r.seconds
+    );
+}
+
+/// The calibrated simulated lab the demo's runs share.
+struct Lab<'a> {
+    room: &'a Arc<roomlight_sim::Room>,
+    cal: &'a pipeline::Calibrated,
+    transport: &'a pipeline::Transport,
+    bar: &'a indicatif::ProgressBar,
+    options: &'a DemoOptions,
+}
+
+impl Lab<'_> {
+    /// The agents on one target, with the live line while they run.
+    fn agents(
+        &self,
+        model: &pipeline::Model,
+        truth: &pipeline::Truth,
+        options: RunOptions,
+    ) -> Result<pipeline::RunResult> {
+        self.bar.reset();
+        self.bar.set_length(options.max_captures);
+        self.bar.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} capture {pos}/{len} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+        );
+        let result = pipeline::run_agents(
+            self.room,
+            self.cal,
+            model,
+            self.transport,
+            truth,
+            options,
+            self.bar,
+        );
+        self.bar.finish_and_clear();
+        result
+    }
+
+    /// The rules of DESIGN §3.2–§3.4 on the same target, from the same start, with the same
+    /// capture budget whether or not they would have settled.
+    fn compare_rules(
+        &self,
+        model: &pipeline::Model,
+        truth: &pipeline::Truth,
+    ) -> Result<Vec<RuleOutcome>> {
+        let momentum = StepRule::Momentum { theta: 1.0 };
+        let safe = StepRule::Safe { theta: 1.0 };
+        let compared = [
+            ("paper (fixed ε)", StepRule::paper(), 0),
+            ("safe step", safe, 0),
+            ("momentum", momentum, 0),
+            ("momentum + 5 model rounds", momentum, 5),
+            ("safe step + 20 model rounds", safe, 20),
+            ("momentum + 20 model rounds (default)", momentum, 20),
+        ];
+        let budget = if self.options.quick { 15 } else { 30 };
+        let mut rules = Vec::new();
+        for (label, rule, model_rounds) in compared {
+            let options = RunOptions {
+                rule,
+                model_rounds,
+                max_captures: budget,
+                stop_when_settled: false,
+                ..RunOptions::default_rule(self.options.seed)
+            };
+            let result = self.agents(model, truth, options)?;
+            println!(
+                "  rule {label}: {} captures, {:.2} s, true excess {:.1e}, mean ΔE00 {:.2}",
+                result.captures,
+                result.seconds,
+                result.true_excess,
+                mean(&result.de00)
+            );
+            rules.push(RuleOutcome {
+                label: label.into(),
+                result,
+            });
+        }
+        Ok(rules)
+    }
+
+    /// A projector leaves, and another that the camera agent has never measured joins: it is
+    /// calibrated hot, then the room converges without the leaver (first preset, default rule).
+    fn hot_join(&self, first: &PresetOutcome) -> Result<Option<report::HotJoin>> {
+        let (leave_at, join_at, after) = if self.options.quick {
+            (3, 6, 8)
+        } else {
+            (5, 10, 12)
+        };
+        let churn = match pipeline::Churn::pick(self.room, self.cal, leave_at, join_at, true) {
+            Ok(churn) => churn,
+            Err(e) => {
+                println!("no projector to join hot: {e:#}");
+                return Ok(None);
+            }
+        };
+        let truth = pipeline::Truth::new(self.room, self.transport, &first.model, 0)?;
+        let nodes = self
+            .cal
+            .regions
+            .iter()
+            .filter(|r| r.projector == churn.joining)
+            .count() as u64;
+        let options = RunOptions {
+            max_captures: join_at + nodes + 1 + after,
+            stop_when_settled: false,
+            churn: Some(churn),
+            ..RunOptions::default_rule(self.options.seed)
+        };
+        let result = self.agents(&first.model, &truth, options)?;
+        let name = |k: usize| self.room.projectors()[k].name.clone();
+        println!(
+            "{} leaves after {leave_at} captures, {} joins unmeasured after {join_at}: calibrated hot ({} projector, {} captures), then {} captures in all: excess {:.1e} over the optimum without the leaver (true {:.1e}), mean ΔE00 {:.2}",
+            name(churn.leaving),
+            name(churn.joining),
+            result.calibrated_hot,
+            nodes + 1,
+            result.captures,
+            result.final_excess,
+            result.true_excess,
+            mean(&result.de00)
+        );
+        Ok(Some(report::HotJoin {
+            leaving: name(churn.leaving),
+            joining: name(churn.joining),
+            churn,
+            calibration_captures: (nodes + 1) * result.calibrated_hot,
+            result,
+        }))
+    }
+
+    /// Projection mapping and contrast with the first preset's result.
+    fn pm(&self, first: &PresetOutcome) -> Result<crate::pm::PmResult> {
+        let t = Instant::now();
+        let pm = crate::pm::run(
+            self.room,
+            self.cal,
+            &first.result.x,
+            0,
+            self.options.seed,
+            &self.options.out,
+            |line| println!("{line}"),
+        )?;
+        println!(
+            "projection mapping and contrast: {:.1} s",
+            t.elapsed().as_secs_f64()
+        );
+        Ok(pm)
+    }
+}
+
+/// The large aperture's shadow against a standard projector's, when the room has one.
+fn shadows(room: &roomlight_sim::Room) -> Result<Option<crate::shadow::ShadowComparison>> {
+    let t = Instant::now();
+    let large = roomlight_sim::scene::ProjectorKind::LargeAperture;
+    if !room.scene().projectors.iter().any(|p| p.kind == large) {
+        return Ok(None);
+    }
+    let s = crate::shadow::run(room.scene())?;
+    println!(
+        "shadow of a hand-sized box over the desk: penumbra {} mm; a standard projector needs {:.0}× the large aperture's peak radiance for the same desk irradiance ({:.1} s)",
+        s.kinds
+            .iter()
+            .map(|k| format!("{} {:.0}", k.kind, k.penumbra_mm))
+            .collect::<Vec<_>>()
+            .join(", "),
+        s.peak_radiance_ratio,
+        t.elapsed().as_secs_f64()
+    );
+    Ok(Some(s))
 }
 
 /// Patches per colour chart.

@@ -47,6 +47,8 @@ fn quadrants(room: &Room) -> Vec<NodeRegion> {
     nodes
 }
 
+/// Precomputation, capture times (uniform frames, full images, through a node basis), and with
+/// `out` the LED presets and each projector alone as pictures.
 pub fn run(quick: bool, out: Option<&Path>) -> Result<()> {
     let scene = if quick {
         scenes::small()?
@@ -72,8 +74,43 @@ pub fn run(quick: bool, out: Option<&Path>) -> Result<()> {
     println!(
         "  capture {w}x{h} with inter-reflection (uniform frames, LEDs on): median {med:.1} ms (min {lo:.1}, max {hi:.1})"
     );
-    let images: Vec<Frame> = room
-        .projectors()
+    let images = checker_frames(&room);
+    let (med, lo, hi) = median_ms(
+        || room.render(&images, preset).map(|_| ()).map_err(Into::into),
+        7,
+    )?;
+    println!(
+        "  capture {w}x{h} with every projector showing a full image: median {med:.1} ms (min {lo:.1}, max {hi:.1})"
+    );
+    basis_timings(&room, preset)?;
+    // The reference size: the same room seen by a 640x480 camera.
+    if !quick {
+        let mut small_cam = scene;
+        small_cam.camera.resolution = [640, 480];
+        let (room640, secs, mb) = build(small_cam)?;
+        let (med, lo, hi) = median_ms(
+            || {
+                room640
+                    .render(&white, preset)
+                    .map(|_| ())
+                    .map_err(Into::into)
+            },
+            7,
+        )?;
+        println!(
+            "{name} at 640x480: precomputation {secs:.2} s, peak resident growth {}; capture with inter-reflection: median {med:.1} ms (min {lo:.1}, max {hi:.1})",
+            super::memory::mb(mb)
+        );
+    }
+    if let Some(dir) = out {
+        write_pictures(&room, dir)?;
+    }
+    Ok(())
+}
+
+/// Every projector showing a full-resolution checkerboard (16-pixel squares).
+fn checker_frames(room: &Room) -> Vec<Frame> {
+    room.projectors()
         .iter()
         .map(|p| {
             let (pw, ph) = (p.pinhole.width, p.pinhole.height);
@@ -91,17 +128,16 @@ pub fn run(quick: bool, out: Option<&Path>) -> Result<()> {
                     .collect(),
             })
         })
-        .collect();
-    let (med, lo, hi) = median_ms(
-        || room.render(&images, preset).map(|_| ()).map_err(Into::into),
-        7,
-    )?;
-    println!(
-        "  capture {w}x{h} with every projector showing a full image: median {med:.1} ms (min {lo:.1}, max {hi:.1})"
-    );
+        .collect()
+}
+
+/// The node basis of four quadrants per projector: its build, a capture and the chart patches
+/// through it.
+fn basis_timings(room: &Room, preset: Option<usize>) -> Result<()> {
+    let (w, h) = (room.camera().width, room.camera().height);
     let t0 = Instant::now();
-    let nodes = quadrants(&room);
-    let basis = NodeBasis::new(&room, &nodes, preset)?;
+    let nodes = quadrants(room);
+    let basis = NodeBasis::new(room, &nodes, preset)?;
     println!(
         "  node basis of {} nodes: built in {:.2} s",
         nodes.len(),
@@ -128,53 +164,38 @@ pub fn run(quick: bool, out: Option<&Path>) -> Result<()> {
         room.patches(),
         med
     );
-    // The reference size: the same room seen by a 640x480 camera.
-    if !quick {
-        let mut small_cam = scene;
-        small_cam.camera.resolution = [640, 480];
-        let (room640, secs, mb) = build(small_cam)?;
-        let (med, lo, hi) = median_ms(
-            || {
-                room640
-                    .render(&white, preset)
-                    .map(|_| ())
-                    .map_err(Into::into)
-            },
-            7,
+    Ok(())
+}
+
+/// The LED presets and each projector alone at full white, as sRGB PNGs in `dir`.
+fn write_pictures(room: &Room, dir: &Path) -> Result<()> {
+    let n = room.projectors().len();
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for (k, p) in room.scene().presets.iter().enumerate() {
+        let cap = room.render(&vec![Frame::Black; n], Some(k))?;
+        cap.save_png(
+            &dir.join(format!(
+                "led-{}.{}.png",
+                p.name,
+                PngEncoding::Srgb8.suffix()
+            )),
+            PngEncoding::Srgb8,
+            1.0,
         )?;
-        println!(
-            "{name} at 640x480: precomputation {secs:.2} s, peak resident growth {}; capture with inter-reflection: median {med:.1} ms (min {lo:.1}, max {hi:.1})",
-            super::memory::mb(mb)
-        );
     }
-    if let Some(dir) = out {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        for (k, p) in room.scene().presets.iter().enumerate() {
-            let cap = room.render(&vec![Frame::Black; n], Some(k))?;
-            cap.save_png(
-                &dir.join(format!(
-                    "led-{}.{}.png",
-                    p.name,
-                    PngEncoding::Srgb8.suffix()
-                )),
-                PngEncoding::Srgb8,
-                1.0,
-            )?;
-        }
-        for (k, p) in room.projectors().iter().enumerate() {
-            let mut frames = vec![Frame::Black; n];
-            frames[k] = Frame::Uniform([1.0; 3]);
-            room.render(&frames, None)?.save_png(
-                &dir.join(format!(
-                    "projector-{}.{}.png",
-                    p.name,
-                    PngEncoding::Srgb8.suffix()
-                )),
-                PngEncoding::Srgb8,
-                1.0,
-            )?;
-        }
-        println!("  pictures in {}", dir.display());
+    for (k, p) in room.projectors().iter().enumerate() {
+        let mut frames = vec![Frame::Black; n];
+        frames[k] = Frame::Uniform([1.0; 3]);
+        room.render(&frames, None)?.save_png(
+            &dir.join(format!(
+                "projector-{}.{}.png",
+                p.name,
+                PngEncoding::Srgb8.suffix()
+            )),
+            PngEncoding::Srgb8,
+            1.0,
+        )?;
     }
+    println!("  pictures in {}", dir.display());
     Ok(())
 }
