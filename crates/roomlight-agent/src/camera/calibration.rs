@@ -32,6 +32,7 @@ async fn show_pattern(
     let show = v1::room_message::Body::Show(v1::Show {
         seq,
         pattern: Some(pattern),
+        mask: Vec::new(),
     });
     if !shared.offer(projector, tx, vec![show]) {
         return false;

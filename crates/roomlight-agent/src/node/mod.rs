@@ -13,6 +13,7 @@
 mod backoff;
 mod session;
 mod state;
+mod wire;
 
 pub use state::SavedState;
 
