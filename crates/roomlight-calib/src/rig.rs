@@ -45,9 +45,14 @@ pub enum Frame {
     Uniform([f32; 3]),
     /// A structured-light pattern of the projector's own resolution.
     Structured { pattern: Pattern, coding: Coding },
-    /// A whole image of codes (a second pass's masked patterns); only for rigs that
-    /// [`Rig::shows_images`].
-    Image(Arc<LinearImage>),
+    /// A structured-light pattern shown only where `shown` (row-major projector pixels) is
+    /// true and black elsewhere: a second pass's patterns. Only for rigs that
+    /// [`Rig::shows_masks`].
+    Masked {
+        pattern: Pattern,
+        coding: Coding,
+        shown: Arc<[bool]>,
+    },
     /// Node values (linear light) drawn through the projector's [`Assignment`]; nodes not
     /// listed are black.
     Nodes(Vec<(u32, LinearRgb)>),
@@ -73,9 +78,13 @@ impl Frame {
                 let manifest = Manifest::with_coding(width, height, *coding)?;
                 Ok(manifest.pattern_image(*pattern).pixels)
             }
-            Self::Image(img) => {
-                img.expect_size(width, height, "frame image")?;
-                Ok(img.pixels.clone())
+            Self::Masked {
+                pattern,
+                coding,
+                shown,
+            } => {
+                let manifest = Manifest::with_coding(width, height, *coding)?;
+                Ok(manifest.pattern_image_where(*pattern, shown)?.pixels)
             }
             Self::Nodes(values) => Ok(match assignment {
                 Some(a) if a.width == width && a.height == height => a.draw(values),
@@ -180,8 +189,8 @@ pub trait Rig: Send {
     /// The camera's limits.
     fn camera(&self) -> CameraLimits;
 
-    /// Whether [`Frame::Image`] can be shown (a second structured-light pass needs it).
-    fn shows_images(&self) -> bool {
+    /// Whether [`Frame::Masked`] can be shown (a second structured-light pass needs it).
+    fn shows_masks(&self) -> bool {
         false
     }
 

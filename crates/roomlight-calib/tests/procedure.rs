@@ -99,8 +99,8 @@ impl Rig for SimRig<'_> {
     async fn show(&mut self, frames: &[(&str, Frame)]) -> Result<(), RigError> {
         for (id, frame) in frames {
             let k = self.index(id)?;
-            if matches!(frame, Frame::Image(_)) && !self.images {
-                return Err(RigError::Unsupported(id.to_string(), "images"));
+            if matches!(frame, Frame::Masked { .. }) && !self.images {
+                return Err(RigError::Unsupported(id.to_string(), "masked patterns"));
             }
             self.frames[k] = self.sim_frame(k, frame);
         }
@@ -131,7 +131,7 @@ impl Rig for SimRig<'_> {
         }
     }
 
-    fn shows_images(&self) -> bool {
+    fn shows_masks(&self) -> bool {
         self.images
     }
 }

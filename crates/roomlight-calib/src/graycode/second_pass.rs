@@ -346,6 +346,11 @@ impl SecondPassPlan {
         Some(Self { shown, share, todo })
     }
 
+    /// The projector pixels this pass shows (row-major): its patterns are black elsewhere.
+    pub fn shown(&self) -> &[bool] {
+        &self.shown
+    }
+
     /// The masked white, shown first at the normal exposure.
     pub fn white(&self, manifest: &Manifest) -> Result<LinearImage, CalibError> {
         self.pattern(manifest, Pattern::White)

@@ -3,6 +3,8 @@
 //! shown or photos come from.
 
 use super::*;
+use crate::graycode::Pattern;
+use std::sync::Arc;
 
 /// Runs the steps of calibration on a rig, counting captures and reporting progress.
 pub struct Procedure<'a, R: Rig> {
@@ -272,7 +274,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
     ) -> Result<Option<SecondPass>, ProcedureError> {
         let config = self.settings.decode;
         let plan = match SecondPassPlan::new(&config, corr) {
-            Some(plan) if p.kind == ProjectorKind::Standard && self.rig.shows_images() => plan,
+            Some(plan) if p.kind == ProjectorKind::Standard && self.rig.shows_masks() => plan,
             _ => return Ok(None),
         };
         self.report(Event::Stage {
@@ -283,8 +285,13 @@ impl<'a, R: Rig> Procedure<'a, R> {
             projector: p.id.clone(),
             source,
         };
-        let white = Frame::Image(plan.white(manifest).map_err(refused)?.into());
-        self.rig.show(&[(&p.id, white)]).await?;
+        let shown: Arc<[bool]> = plan.shown().into();
+        let masked = |pattern| Frame::Masked {
+            pattern,
+            coding: manifest.coding,
+            shown: Arc::clone(&shown),
+        };
+        self.rig.show(&[(&p.id, masked(Pattern::White))]).await?;
         let white = self.capture(Stage::SecondPass, 1.0).await?;
         let limits = self.rig.camera();
         let exposure = plan
@@ -292,8 +299,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
             .map_err(refused)?;
         let mut captures = Vec::with_capacity(manifest.patterns.len());
         for f in &manifest.patterns {
-            let frame = Frame::Image(plan.pattern(manifest, f.pattern).map_err(refused)?.into());
-            self.rig.show(&[(&p.id, frame)]).await?;
+            self.rig.show(&[(&p.id, masked(f.pattern))]).await?;
             captures.push(self.capture(Stage::SecondPass, exposure).await?);
         }
         self.rig.show(&[(&p.id, Frame::BLACK)]).await?;

@@ -125,7 +125,7 @@ impl Rig for SimRig<'_> {
         }
     }
 
-    fn shows_images(&self) -> bool {
+    fn shows_masks(&self) -> bool {
         true
     }
 }
