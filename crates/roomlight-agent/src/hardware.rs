@@ -1,15 +1,16 @@
-//! What agents drive: a `Display` per node agent and a `Camera` for the camera agent. The
-//! in-process `VirtualRoom` adapter wraps the core's plant so that the real agents run against a
-//! simulated room without a network between them and the "hardware".
+//! What agents drive: a `Display` per node agent and a `Camera` for the camera agent, and what
+//! travels to them (calibration patterns with their masks, assignments). The in-process
+//! `VirtualRoom` adapter wraps the core's plant so that the real agents run against a simulated
+//! room without a network between them and the "hardware". It must not know the wire or the
+//! agents' sessions.
 
 use roomlight_core::LinearRgb;
 use roomlight_core::closed_loop::Plant;
 use std::sync::{Arc, Mutex, PoisonError};
 
-/// A whole-frame calibration pattern (DESIGN §4), in projector codes: what the camera agent
-/// asks a node agent to show while it calibrates the projector over the wire.
+/// What a calibration pattern shows where it is shown, in projector codes.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Pattern {
+pub enum Fill {
     /// Every pixel at this code per channel, in [0, 1].
     Uniform([f32; 3]),
     /// A structured-light pattern of the projector's own resolution.
@@ -19,56 +20,97 @@ pub enum Pattern {
     },
 }
 
-/// How a projector draws its nodes, as the camera agent measured it: each node's feathered
-/// weights (row-major pixels, increasing, weights in (0, 1]) and the projector's response.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Assignment {
-    pub width: u32,
-    pub height: u32,
-    pub response: roomlight_calib::response::Response,
-    /// `(node id, [(pixel, weight)])`.
-    pub nodes: Vec<(u32, Vec<(u32, f32)>)>,
+/// A whole-frame calibration pattern (DESIGN §4): what the camera agent asks a node agent to
+/// show while it calibrates the projector over the wire. A second structured-light pass shows
+/// its patterns only where the first left camera pixels unknown (`mask`), so that the bright
+/// surfaces whose reflections hid their code stay black.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pattern {
+    pub fill: Fill,
+    /// Where the fill is shown (row-major projector pixels; black where false); `None`:
+    /// everywhere.
+    pub mask: Option<Arc<[bool]>>,
 }
 
-impl Assignment {
-    /// Refuses weights outside the frame, unsorted pixels, weights outside (0, 1] and a
-    /// response that is not finite and positive; `what` names the sender in the message.
-    pub fn validate(&self, what: &str) -> Result<(), crate::AgentError> {
-        let bad = |problem: String| Err(crate::AgentError::Protocol(format!("{what}: {problem}")));
-        let pixels = u64::from(self.width) * u64::from(self.height);
-        if pixels == 0 || pixels > 1 << 26 {
-            return bad(format!(
-                "a {}×{} projector; expected 1 to 2^26 pixels",
-                self.width, self.height
-            ));
-        }
-        if self
-            .response
-            .gamma
-            .iter()
-            .any(|g| !(g.is_finite() && *g > 0.0))
-        {
-            return bad(format!(
-                "response exponents {:?}; expected finite and positive",
-                self.response.gamma
-            ));
-        }
-        for (node, weights) in &self.nodes {
-            if weights.windows(2).any(|w| w[1].0 <= w[0].0) {
-                return bad(format!("node {node}: pixels not increasing"));
-            }
-            if weights.last().is_some_and(|(i, _)| u64::from(*i) >= pixels) {
-                return bad(format!(
-                    "node {node}: a pixel outside the {}×{} frame",
-                    self.width, self.height
-                ));
-            }
-            if weights.iter().any(|(_, w)| !(*w > 0.0 && *w <= 1.0)) {
-                return bad(format!("node {node}: a weight outside (0, 1]"));
-            }
-        }
-        Ok(())
+impl Pattern {
+    /// `fill` on every pixel.
+    pub fn everywhere(fill: Fill) -> Self {
+        Self { fill, mask: None }
     }
+
+    /// The codes of a `width`×`height` projector showing it, the mask applied (black where it
+    /// is false). Every display that draws pixels draws through this, so a masked pattern is
+    /// masked on all of them. Refused: a mask of another size, a structured pattern the
+    /// projector's size cannot code.
+    pub fn codes(&self, width: u32, height: u32) -> Result<Vec<[f32; 3]>, crate::AgentError> {
+        let n = width as usize * height as usize;
+        let refused = |e: String| crate::AgentError::Protocol(format!("pattern: {e}"));
+        let mut codes = match self.fill {
+            Fill::Uniform(code) => vec![code; n],
+            Fill::Structured { pattern, coding } => {
+                roomlight_calib::graycode::Manifest::with_coding(width, height, coding)
+                    .map_err(|e| refused(e.to_string()))?
+                    .pattern_image(pattern)
+                    .pixels
+            }
+        };
+        if let Some(mask) = &self.mask {
+            if mask.len() != n {
+                return Err(refused(format!(
+                    "a mask of {} pixels for a {width}×{height} projector",
+                    mask.len()
+                )));
+            }
+            for (c, &shown) in codes.iter_mut().zip(mask.iter()) {
+                if !shown {
+                    *c = [0.0; 3];
+                }
+            }
+        }
+        Ok(codes)
+    }
+}
+
+/// How a projector draws its nodes, as the camera agent measured it: the calibration rig's
+/// own type, so that what the procedure assigns is what a node agent draws.
+pub use roomlight_calib::rig::Assignment;
+
+/// Refuses weights outside the frame, unsorted pixels, weights outside (0, 1] and a response
+/// that is not finite and positive; `what` names the sender in the message.
+pub fn validate_assignment(a: &Assignment, what: &str) -> Result<(), crate::AgentError> {
+    let bad = |problem: String| Err(crate::AgentError::Protocol(format!("{what}: {problem}")));
+    let pixels = u64::from(a.width) * u64::from(a.height);
+    if pixels == 0 || pixels > 1 << 26 {
+        return bad(format!(
+            "a {}×{} projector; expected 1 to 2^26 pixels",
+            a.width, a.height
+        ));
+    }
+    if a.response
+        .gamma
+        .iter()
+        .any(|g| !(g.is_finite() && *g > 0.0))
+    {
+        return bad(format!(
+            "response exponents {:?}; expected finite and positive",
+            a.response.gamma
+        ));
+    }
+    for (node, weights) in &a.nodes {
+        if weights.windows(2).any(|w| w[1].0 <= w[0].0) {
+            return bad(format!("node {node}: pixels not increasing"));
+        }
+        if weights.last().is_some_and(|(i, _)| u64::from(*i) >= pixels) {
+            return bad(format!(
+                "node {node}: a pixel outside the {}×{} frame",
+                a.width, a.height
+            ));
+        }
+        if weights.iter().any(|(_, w)| !(*w > 0.0 && *w <= 1.0)) {
+            return bad(format!("node {node}: a weight outside (0, 1]"));
+        }
+    }
+    Ok(())
 }
 
 /// Shows node values (linear light) on a projector.
@@ -117,6 +159,28 @@ pub trait Camera: Send + 'static {
         std::future::ready(Err(crate::AgentError::Protocol(
             "this camera delivers chart patches only, not images".into(),
         )))
+    }
+
+    /// What calibration plans with: the level at which a pixel saturates and the longest
+    /// exposure [`Self::capture_image_exposed`] takes. By default one exposure and an unknown
+    /// saturation, so a second structured-light pass keeps the normal exposure.
+    fn limits(&self) -> roomlight_calib::rig::CameraLimits {
+        roomlight_calib::rig::CameraLimits {
+            saturation: f32::NAN,
+            longest_exposure: 1.0,
+        }
+    }
+
+    /// One whole linear image exposed `exposure` times as long as normal (at most the
+    /// [`Self::limits`]' longest), in the units of a normal one; by default the camera's one
+    /// exposure.
+    fn capture_image_exposed(
+        &mut self,
+        exposure: f32,
+    ) -> impl Future<Output = Result<roomlight_calib::image_io::LinearImage, crate::AgentError>> + Send
+    {
+        let _ = exposure;
+        self.capture_image()
     }
 }
 

@@ -349,27 +349,17 @@ impl FrameSpec {
     }
 }
 
-/// The 8-bit image of a whole-frame calibration pattern at `width`×`height`.
-fn pattern_image(pattern: Pattern, width: u32, height: u32) -> Vec<u8> {
+/// The 8-bit image of a whole-frame calibration pattern at `width`×`height`, black where its
+/// mask is false ([`Pattern::codes`], as every display that draws pixels).
+fn pattern_image(pattern: &Pattern, width: u32, height: u32) -> Vec<u8> {
     let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    match pattern {
-        Pattern::Uniform(code) => {
-            let px = code.map(byte);
-            (0..width * height).flat_map(|_| px).collect()
-        }
-        Pattern::Structured { pattern, coding } => {
-            match roomlight_calib::graycode::Manifest::with_coding(width, height, coding) {
-                Ok(m) => m
-                    .pattern_values(pattern)
-                    .into_iter()
-                    .flat_map(|v| [byte(v); 3])
-                    .collect(),
-                // Too large to code: dark (the camera agent's decode then finds nothing).
-                Err(e) => {
-                    tracing::warn!(error = %e, "cannot draw the pattern");
-                    vec![0; (width * height * 3) as usize]
-                }
-            }
+    match pattern.codes(width, height) {
+        Ok(codes) => codes.into_iter().flat_map(|c| c.map(byte)).collect(),
+        // Too large to code, or a mask of another size: dark (the camera agent's decode then
+        // finds nothing).
+        Err(e) => {
+            tracing::warn!(error = %e, "cannot draw the pattern");
+            vec![0; (width * height * 3) as usize]
         }
     }
 }
@@ -415,7 +405,7 @@ pub fn rendered_display(
                 }
             }
         }
-        let rgb8 = match (pattern, &spec) {
+        let rgb8 = match (&pattern, &spec) {
             (Some(p), _) => pattern_image(p, width, height),
             (None, Some(spec)) => spec.image(&values),
             (None, None) => vec![0; (width * height * 3) as usize],

@@ -9,7 +9,7 @@ use super::capture::Captures;
 use super::model::joining_start;
 use super::registry::Outbox;
 use super::{Shared, Survey};
-use crate::hardware::{Assignment, Camera, Pattern};
+use crate::hardware::{Assignment, Camera, Fill as Pattern};
 use roomlight_calib::graycode::{Coding, DecodeConfig, Manifest};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::response::{fit_response, footprint_ramp, ramp_codes};

@@ -277,7 +277,11 @@ impl<D: Display> Session<'_, D> {
     /// (values for nodes it does not own, or not finite, are refused), or a whole-frame
     /// pattern. One the display cannot show is not acknowledged.
     async fn show(&mut self, show: v1::Show) -> Result<(), AgentError> {
-        let values = match show.pattern.map(pattern_from_wire) {
+        let resolution = self.display.resolution();
+        let values = match show
+            .pattern
+            .map(|p| pattern_from_wire(p, &show.mask, resolution))
+        {
             Some(Ok(Wire::Nodes(values))) => values,
             Some(Ok(Wire::Frame(pattern))) => {
                 if !self.display.show_pattern(pattern) {

@@ -47,7 +47,7 @@ impl SavedState {
             return Err(named(&"a value is not finite"));
         }
         if let Some(a) = &state.assignment {
-            a.validate(&format!("state file {}", path.display()))?;
+            crate::hardware::validate_assignment(a, &format!("state file {}", path.display()))?;
         }
         // Deserialised columns are not checked: build them anew.
         for (node, column) in &mut state.attenuation {

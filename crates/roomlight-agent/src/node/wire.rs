@@ -1,12 +1,14 @@
 //! The node agent's side of the wire contract for what the camera agent asks it to show and
-//! how to draw: Show patterns and Assign weights, checked at the boundary (codes in [0, 1],
-//! known axes and codings, weights in (0, 1] inside the frame) before anything reaches the
-//! display. It knows nothing of sessions or streams.
+//! how to draw: Show patterns with their masks and Assign weights, checked at the boundary
+//! (codes in [0, 1], known axes and codings, a mask of the projector's size, weights in (0, 1]
+//! inside the frame) before anything reaches the display. It knows nothing of sessions or
+//! streams.
 
 use crate::AgentError;
-use crate::hardware::{Assignment, Pattern};
+use crate::hardware::{Assignment, Fill, Pattern, validate_assignment};
 use roomlight_proto::convert::from_rgb;
 use roomlight_proto::v1;
+use std::sync::Arc;
 
 /// A Show message's pattern: node values, or a whole frame.
 pub(super) enum Wire {
@@ -14,45 +16,95 @@ pub(super) enum Wire {
     Frame(Pattern),
 }
 
-pub(super) fn pattern_from_wire(p: v1::show::Pattern) -> Result<Wire, String> {
+/// A Show message's pattern with its `mask` (see [`mask_from_wire`]) for a projector of
+/// `resolution` (`None`: a display that draws no pixels, which takes no mask).
+pub(super) fn pattern_from_wire(
+    p: v1::show::Pattern,
+    mask: &[u8],
+    resolution: Option<(u32, u32)>,
+) -> Result<Wire, String> {
+    let fill = match p {
+        v1::show::Pattern::Nodes(values) if mask.is_empty() => return Ok(Wire::Nodes(values)),
+        v1::show::Pattern::Nodes(_) => {
+            return Err(
+                "a mask with node values: expected one only with a uniform or Gray pattern".into(),
+            );
+        }
+        v1::show::Pattern::Uniform(u) => uniform_from_wire(&u)?,
+        v1::show::Pattern::Gray(g) => gray_from_wire(&g)?,
+    };
+    Ok(Wire::Frame(Pattern {
+        fill,
+        mask: mask_from_wire(mask, resolution)?,
+    }))
+}
+
+/// A Show's mask: empty is everywhere; otherwise one bit per projector pixel, row-major, least
+/// significant bit first, exactly `ceil(width · height / 8)` bytes for this projector (a mask
+/// drawn for another resolution would show the pattern in the wrong places).
+pub(super) fn mask_from_wire(
+    mask: &[u8],
+    resolution: Option<(u32, u32)>,
+) -> Result<Option<Arc<[bool]>>, String> {
+    if mask.is_empty() {
+        return Ok(None);
+    }
+    let Some((width, height)) = resolution else {
+        return Err(format!(
+            "a mask of {} bytes for a display of unknown resolution",
+            mask.len()
+        ));
+    };
+    let pixels = width as usize * height as usize;
+    let expected = pixels.div_ceil(8);
+    if mask.len() != expected {
+        return Err(format!(
+            "a mask of {} bytes; expected {expected} (one bit per pixel of the {width}×{height} projector)",
+            mask.len()
+        ));
+    }
+    Ok(Some(
+        (0..pixels)
+            .map(|i| mask[i / 8] >> (i % 8) & 1 == 1)
+            .collect(),
+    ))
+}
+
+fn uniform_from_wire(u: &v1::Uniform) -> Result<Fill, String> {
+    let code = from_rgb("uniform code", u.code.as_ref()).map_err(|e| e.to_string())?;
+    if code.0.iter().any(|v| !(0.0..=1.0).contains(v)) {
+        return Err(format!("uniform code {code:?}: expected values in [0, 1]"));
+    }
+    Ok(Fill::Uniform(code.0.map(|v| v as f32)))
+}
+
+fn gray_from_wire(g: &v1::GrayBit) -> Result<Fill, String> {
     use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
-    Ok(match p {
-        v1::show::Pattern::Nodes(values) => Wire::Nodes(values),
-        v1::show::Pattern::Uniform(u) => {
-            let code = from_rgb("uniform code", u.code.as_ref()).map_err(|e| e.to_string())?;
-            if code.0.iter().any(|v| !(0.0..=1.0).contains(v)) {
-                return Err(format!("uniform code {code:?}: expected values in [0, 1]"));
-            }
-            Wire::Frame(Pattern::Uniform(code.0.map(|v| v as f32)))
+    let axis = match v1::Axis::try_from(g.axis) {
+        Ok(v1::Axis::Column) => Axis::Column,
+        Ok(v1::Axis::Row) => Axis::Row,
+        _ => return Err(format!("Gray bit axis {}: expected column or row", g.axis)),
+    };
+    let coding = match v1::Coding::try_from(g.coding) {
+        Ok(v1::Coding::Gray) => Coding::Gray,
+        Ok(v1::Coding::Xor04) => Coding::Xor04,
+        _ => {
+            return Err(format!(
+                "Gray bit coding {}: expected gray or xor04",
+                g.coding
+            ));
         }
-        v1::show::Pattern::Gray(g) => {
-            let axis = match v1::Axis::try_from(g.axis) {
-                Ok(v1::Axis::Column) => Axis::Column,
-                Ok(v1::Axis::Row) => Axis::Row,
-                _ => return Err(format!("Gray bit axis {}: expected column or row", g.axis)),
-            };
-            let coding = match v1::Coding::try_from(g.coding) {
-                Ok(v1::Coding::Gray) => Coding::Gray,
-                Ok(v1::Coding::Xor04) => Coding::Xor04,
-                _ => {
-                    return Err(format!(
-                        "Gray bit coding {}: expected gray or xor04",
-                        g.coding
-                    ));
-                }
-            };
-            if g.bit >= 32 {
-                return Err(format!("Gray bit {}: expected below 32", g.bit));
-            }
-            Wire::Frame(Pattern::Structured {
-                pattern: Gray::Bit {
-                    axis,
-                    bit: g.bit,
-                    inverse: g.inverse,
-                },
-                coding,
-            })
-        }
+    };
+    if g.bit >= 32 {
+        return Err(format!("Gray bit {}: expected below 32", g.bit));
+    }
+    Ok(Fill::Structured {
+        pattern: Gray::Bit {
+            axis,
+            bit: g.bit,
+            inverse: g.inverse,
+        },
+        coding,
     })
 }
 
@@ -96,7 +148,7 @@ pub(super) fn assignment_from_wire(a: &v1::Assign) -> Result<Assignment, AgentEr
         },
         nodes,
     };
-    assignment.validate("assignment")?;
+    validate_assignment(&assignment, "assignment")?;
     Ok(assignment)
 }
 
@@ -164,17 +216,21 @@ mod tests {
     #[test]
     fn show_patterns_over_the_wire_are_checked() {
         use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+        let read = |p| pattern_from_wire(p, &[], None);
         let uniform = |v: f64| {
             v1::show::Pattern::Uniform(v1::Uniform {
                 code: Some(to_rgb(LinearRgb::splat(v))),
             })
         };
         assert!(matches!(
-            pattern_from_wire(uniform(0.25)),
-            Ok(Wire::Frame(Pattern::Uniform([0.25, 0.25, 0.25])))
+            read(uniform(0.25)),
+            Ok(Wire::Frame(Pattern {
+                fill: Fill::Uniform([0.25, 0.25, 0.25]),
+                mask: None
+            }))
         ));
         for bad in [-0.1, 1.5, f64::NAN] {
-            assert!(pattern_from_wire(uniform(bad)).is_err(), "code {bad}");
+            assert!(read(uniform(bad)).is_err(), "code {bad}");
         }
         let gray = |axis: i32, bit: u32, coding: i32| {
             v1::show::Pattern::Gray(v1::GrayBit {
@@ -187,25 +243,112 @@ mod tests {
         let row = v1::Axis::Row as i32;
         let xor = v1::Coding::Xor04 as i32;
         assert!(matches!(
-            pattern_from_wire(gray(row, 3, xor)),
-            Ok(Wire::Frame(Pattern::Structured {
-                pattern: Gray::Bit {
-                    axis: Axis::Row,
-                    bit: 3,
-                    inverse: true
+            read(gray(row, 3, xor)),
+            Ok(Wire::Frame(Pattern {
+                fill: Fill::Structured {
+                    pattern: Gray::Bit {
+                        axis: Axis::Row,
+                        bit: 3,
+                        inverse: true
+                    },
+                    coding: Coding::Xor04
                 },
-                coding: Coding::Xor04
+                mask: None
             }))
         ));
+        assert!(read(gray(0, 3, xor)).is_err(), "unspecified axis");
+        assert!(read(gray(9, 3, xor)).is_err(), "unknown axis");
+        assert!(read(gray(row, 3, 0)).is_err(), "unspecified coding");
+        assert!(read(gray(row, 40, xor)).is_err(), "bit 40");
+    }
+
+    /// A mask is one bit per projector pixel, least significant first, and reaches the display
+    /// as sent: the pattern shows where its bit is 1 and black elsewhere. A mask of another
+    /// length, one for a display of unknown size, and one with node values are refused with a
+    /// message that says what was expected.
+    #[test]
+    fn a_masked_pattern_reaches_the_display_masked() {
+        use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+        // A 5×2 projector: 10 pixels, two bytes; pixels 0, 3 and 9 shown.
+        let mask = [0b0000_1001, 0b0000_0010];
+        let white = v1::show::Pattern::Uniform(v1::Uniform {
+            code: Some(to_rgb(LinearRgb::splat(1.0))),
+        });
+        let Ok(Wire::Frame(pattern)) = pattern_from_wire(white.clone(), &mask, Some((5, 2))) else {
+            panic!("a well-formed mask is taken");
+        };
+        // Codes compared exactly, as bits: white is 1.0 and black 0.0, nothing in between.
+        let bits = |codes: Vec<[f32; 3]>| -> Vec<[u32; 3]> {
+            codes.into_iter().map(|c| c.map(f32::to_bits)).collect()
+        };
+        let (white_px, black_px) = ([1.0f32; 3].map(f32::to_bits), [0.0f32; 3].map(f32::to_bits));
+        let codes = bits(pattern.codes(5, 2).expect("codes"));
+        let lit: Vec<usize> = (0..10).filter(|&i| codes[i] == white_px).collect();
+        assert_eq!(lit, vec![0, 3, 9]);
         assert!(
-            pattern_from_wire(gray(0, 3, xor)).is_err(),
-            "unspecified axis"
+            codes
+                .iter()
+                .enumerate()
+                .all(|(i, c)| lit.contains(&i) || *c == black_px),
+            "black where the mask is 0: {codes:?}"
         );
-        assert!(pattern_from_wire(gray(9, 3, xor)).is_err(), "unknown axis");
+        // A structured pattern keeps its stripes where shown and is black elsewhere.
+        let bit = v1::show::Pattern::Gray(v1::GrayBit {
+            axis: v1::Axis::Column as i32,
+            bit: 0,
+            inverse: false,
+            coding: v1::Coding::Gray as i32,
+        });
+        let Ok(Wire::Frame(masked)) = pattern_from_wire(bit.clone(), &mask, Some((5, 2))) else {
+            panic!("a masked Gray bit");
+        };
+        let Ok(Wire::Frame(whole)) = pattern_from_wire(bit, &[], Some((5, 2))) else {
+            panic!("a Gray bit");
+        };
+        assert_eq!(
+            whole.fill,
+            Fill::Structured {
+                pattern: Gray::Bit {
+                    axis: Axis::Column,
+                    bit: 0,
+                    inverse: false
+                },
+                coding: Coding::Gray
+            }
+        );
+        let (m, w) = (
+            bits(masked.codes(5, 2).expect("masked")),
+            bits(whole.codes(5, 2).expect("whole")),
+        );
+        for i in 0..10 {
+            let expected = if [0, 3, 9].contains(&i) {
+                w[i]
+            } else {
+                black_px
+            };
+            assert_eq!(m[i], expected, "pixel {i}");
+        }
+        // The display draws the mask for its own size only.
+        assert!(pattern.codes(4, 2).is_err(), "a 10-pixel mask on 8 pixels");
+        let refused = |mask: &[u8], resolution, says: &str| {
+            let e = match pattern_from_wire(white.clone(), mask, resolution) {
+                Err(e) => e,
+                Ok(_) => panic!("{mask:?} for {resolution:?} should be refused"),
+            };
+            assert!(e.contains(says), "{e:?} should say {says:?}");
+        };
+        refused(
+            &[0xff],
+            Some((5, 2)),
+            "expected 2 (one bit per pixel of the 5×2 projector)",
+        );
+        refused(&[0xff; 3], Some((5, 2)), "a mask of 3 bytes; expected 2");
+        refused(&mask, None, "unknown resolution");
+        let nodes = v1::show::Pattern::Nodes(v1::NodeValues::default());
         assert!(
-            pattern_from_wire(gray(row, 3, 0)).is_err(),
-            "unspecified coding"
+            pattern_from_wire(nodes, &mask, Some((5, 2)))
+                .is_err_and(|e| e.contains("with node values")),
+            "a mask with node values"
         );
-        assert!(pattern_from_wire(gray(row, 40, xor)).is_err(), "bit 40");
     }
 }
