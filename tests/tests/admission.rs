@@ -142,17 +142,22 @@ async fn a_duplicate_projector_is_refused_and_a_silent_one_leaves_within_two_sec
     sb.shutdown().await;
 }
 
-/// A contribution whose values are not finite.
-fn nan_contribution(round: u64, node: u32) -> v1::NodeMessage {
+/// A contribution whose values are not finite, for each of `nodes`.
+fn nan_contribution(round: u64, nodes: impl Iterator<Item = u32>) -> v1::NodeMessage {
     let bad = v1::SparseRgb {
         patches: vec![0],
         values: vec![f64::NAN, 0.0, 0.0],
     };
+    let nodes = nodes
+        .map(|node| v1::NodeRgb {
+            node,
+            values: Some(bad.clone()),
+        })
+        .collect();
     v1::NodeMessage {
         body: Some(v1::node_message::Body::Contribution(v1::Contribution {
             round,
-            node,
-            delta: Some(bad),
+            nodes,
         })),
     }
 }
@@ -170,10 +175,10 @@ async fn malformed_contributions_are_refused_without_disturbing_the_others() {
             let Some(v1::room_message::Body::Errors(e)) = m.body else {
                 continue;
             };
-            for node in [e.node, 0] {
-                if p2.tx.send(nan_contribution(e.round, node)).await.is_err() {
-                    return;
-                }
+            // Its own nodes and node 0, which p0 owns.
+            let nodes = e.nodes.iter().map(|n| n.node).chain([0]);
+            if p2.tx.send(nan_contribution(e.round, nodes)).await.is_err() {
+                return;
             }
             let shown = v1::NodeMessage {
                 body: Some(v1::node_message::Body::Shown(v1::Shown {

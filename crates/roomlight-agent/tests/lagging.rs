@@ -133,16 +133,16 @@ async fn a_node_that_never_reads_is_dropped_and_the_rounds_go_on_for_the_others(
     let p1_nodes = owners["p1"].clone();
     let answering = tokio::spawn(async move {
         let contributions = |round: u64| {
-            p1_nodes
+            let nodes = p1_nodes
                 .iter()
-                .map(|&node| {
-                    message(v1::node_message::Body::Contribution(v1::Contribution {
-                        round,
-                        node,
-                        delta: Some(v1::SparseRgb::default()),
-                    }))
+                .map(|&node| v1::NodeRgb {
+                    node,
+                    values: Some(v1::SparseRgb::default()),
                 })
-                .collect::<Vec<_>>()
+                .collect();
+            vec![message(v1::node_message::Body::Contribution(
+                v1::Contribution { round, nodes },
+            ))]
         };
         let mut heartbeat = tokio::time::interval(Duration::from_millis(200));
         let mut outgoing = contributions(1);
@@ -189,7 +189,7 @@ async fn a_node_that_never_reads_is_dropped_and_the_rounds_go_on_for_the_others(
         }
     })
     .await;
-    // It took part in the rounds until its queue was full (256 messages, 20 a round).
+    // It took part in the rounds until its queue was full (256 messages, one a round).
     assert!(
         errors >= 200,
         "only {errors} errors sent before it was dropped"

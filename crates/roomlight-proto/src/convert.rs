@@ -1,4 +1,9 @@
 //! Wire ↔ domain conversions, and the one mapping from protocol errors to gRPC statuses.
+//!
+//! Everything a peer sends is checked here before any domain type exists: lengths, sorted
+//! patch ids, finite values, and for the batched per-round messages (one `Errors` and one
+//! `Contribution` per node agent per round) the node ids, each at most once and owned by the
+//! sender. It knows nothing of agents, rounds or streams: callers say which nodes a peer owns.
 
 use crate::v1;
 use roomlight_core::{LinearRgb, PatchId};
@@ -40,10 +45,22 @@ pub enum ProtoError {
         len: usize,
         max: usize,
     },
+    /// An entry of a batched message names a node the sender does not own.
+    #[error("{field}: node {node} is not one of this projector's nodes")]
+    NotOwned { field: &'static str, node: u32 },
+    /// An entry of a batched message names a node an earlier entry named.
+    #[error("{field}: node {node} appears more than once")]
+    Duplicate { field: &'static str, node: u32 },
+    /// One node's entry of a batched message is malformed.
+    #[error("node {node}: {reason}")]
+    Node { node: u32, reason: Box<ProtoError> },
 }
 
 /// Largest sparse vector accepted (a node's support, or a room's patches).
 pub const MAX_SPARSE_ENTRIES: usize = 1_000_000;
+
+/// Most node entries one batched message may carry (a node agent drives one projector).
+pub const MAX_BATCH_NODES: usize = 65_536;
 
 impl From<ProtoError> for tonic::Status {
     fn from(e: ProtoError) -> Self {
@@ -64,6 +81,29 @@ pub fn from_sparse(
     field: &'static str,
     sparse: &v1::SparseRgb,
 ) -> Result<(Vec<PatchId>, Vec<LinearRgb>), ProtoError> {
+    check_sparse(field, sparse)?;
+    Ok((sparse.patches.clone(), rgb_values(&sparse.values)))
+}
+
+/// [`from_sparse`], taking the message apart instead of copying its patch ids.
+pub fn into_sparse(
+    field: &'static str,
+    sparse: v1::SparseRgb,
+) -> Result<(Vec<PatchId>, Vec<LinearRgb>), ProtoError> {
+    check_sparse(field, &sparse)?;
+    let values = rgb_values(&sparse.values);
+    Ok((sparse.patches, values))
+}
+
+fn rgb_values(packed: &[f64]) -> Vec<LinearRgb> {
+    packed
+        .chunks_exact(3)
+        .map(|c| LinearRgb([c[0], c[1], c[2]]))
+        .collect()
+}
+
+/// Three finite values per patch, strictly increasing patch ids, not too many.
+fn check_sparse(field: &'static str, sparse: &v1::SparseRgb) -> Result<(), ProtoError> {
     let n = sparse.patches.len();
     if n > MAX_SPARSE_ENTRIES {
         return Err(ProtoError::TooLarge {
@@ -98,12 +138,84 @@ pub fn from_sparse(
             next: w[1],
         });
     }
-    let values = sparse
-        .values
-        .chunks_exact(3)
-        .map(|c| LinearRgb([c[0], c[1], c[2]]))
-        .collect();
-    Ok((sparse.patches.clone(), values))
+    Ok(())
+}
+
+/// One node's entry of a batched message (its errors, or its contribution change), validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeVector {
+    pub node: u32,
+    pub patches: Vec<PatchId>,
+    pub values: Vec<LinearRgb>,
+}
+
+/// One node's entry, packed: `values` in the order of `patches`, the node's support.
+pub fn to_node_rgb(node: u32, patches: &[PatchId], values: &[LinearRgb]) -> v1::NodeRgb {
+    v1::NodeRgb {
+        node,
+        values: Some(to_sparse(patches, values)),
+    }
+}
+
+/// A batched message's entries, read: the well-formed ones, and each refused one with why.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Batch {
+    pub entries: Vec<NodeVector>,
+    /// Entries refused, each a [`ProtoError::Node`] naming the node and the reason.
+    pub refused: Vec<ProtoError>,
+}
+
+/// Reads the entries of a batched `Errors` or `Contribution` message (`field` names which).
+/// Each entry is checked on its own — a node `owns` accepts, named once, its values a valid
+/// sparse vector — so that one malformed entry is refused with its reason while the others
+/// count. A message of more than [`MAX_BATCH_NODES`] entries is refused whole.
+pub fn from_node_rgbs(
+    field: &'static str,
+    entries: Vec<v1::NodeRgb>,
+    mut owns: impl FnMut(u32) -> bool,
+) -> Result<Batch, ProtoError> {
+    if entries.len() > MAX_BATCH_NODES {
+        return Err(ProtoError::TooLarge {
+            field,
+            len: entries.len(),
+            max: MAX_BATCH_NODES,
+        });
+    }
+    let mut batch = Batch {
+        entries: Vec::with_capacity(entries.len()),
+        refused: Vec::new(),
+    };
+    // Only owned nodes enter `seen`: a scan costs at most the projector's node count per entry.
+    let mut seen: Vec<u32> = Vec::with_capacity(entries.len());
+    for entry in entries {
+        let node = entry.node;
+        let checked = if seen.contains(&node) {
+            Err(ProtoError::Duplicate { field, node })
+        } else if !owns(node) {
+            Err(ProtoError::NotOwned { field, node })
+        } else {
+            seen.push(node);
+            entry
+                .values
+                .ok_or(ProtoError::Missing {
+                    message: field,
+                    field: "values",
+                })
+                .and_then(|sparse| into_sparse(field, sparse))
+        };
+        match checked {
+            Ok((patches, values)) => batch.entries.push(NodeVector {
+                node,
+                patches,
+                values,
+            }),
+            Err(reason) => batch.refused.push(ProtoError::Node {
+                node,
+                reason: Box::new(reason),
+            }),
+        }
+    }
+    Ok(batch)
 }
 
 /// An RGB triple on the wire.

@@ -16,5 +16,6 @@ pub mod v1 {
 pub mod convert;
 pub mod refusal;
 
-/// The protocol version this build speaks.
-pub const PROTOCOL_VERSION: u32 = 1;
+/// The protocol version this build speaks. 2: `Errors` and `Contribution` carry every node of
+/// the node agent's projector, one message per node agent per round (1: one per node).
+pub const PROTOCOL_VERSION: u32 = 2;

@@ -26,6 +26,7 @@ use prost::Message;
 use registry::{Outbox, Registry};
 use roomlight_calib::charts::{COLUMNS, ChartCorners, ROWS, SampleConfig};
 use roomlight_core::{LinearRgb, Problem};
+use roomlight_proto::convert::NodeVector;
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::v1;
 use std::collections::{HashMap, HashSet};
@@ -132,12 +133,12 @@ pub struct RoomStatus {
     pub calibrated_hot: u64,
 }
 
-/// A node's contribution for a round, as its reader passed it on (ownership checked).
+/// A node agent's contributions for a round, as its reader passed them on: one per node it
+/// owns, each a valid sparse vector (checked at the boundary by `roomlight_proto::convert`).
 #[derive(Debug)]
 struct Contribution {
     round: u64,
-    node: u32,
-    delta: Vec<(u32, LinearRgb)>,
+    nodes: Vec<NodeVector>,
 }
 
 /// What the service, the readers and the round loop share.

@@ -286,14 +286,20 @@ impl PeerGuard {
         self.registry.notify();
     }
 
-    /// This stream's projector owns `node` (O(1): the controller's node → projector index).
-    pub(super) fn owns(&self, node: u32) -> bool {
+    /// Which of `nodes` this stream's projector owns (O(1) each: the controller's node →
+    /// projector index), under one lock (a batched message names all a projector's nodes).
+    pub(super) fn owned(&self, nodes: impl Iterator<Item = u32>) -> Vec<u32> {
         let peers = self.registry.lock();
-        peers.round.owner(node) == Some(self.projector.as_str())
-            && peers
-                .wire
-                .get(&self.projector)
-                .is_some_and(|p| p.connection == self.connection)
+        let current = peers
+            .wire
+            .get(&self.projector)
+            .is_some_and(|p| p.connection == self.connection);
+        if !current {
+            return Vec::new();
+        }
+        nodes
+            .filter(|&n| peers.round.owner(n) == Some(self.projector.as_str()))
+            .collect()
     }
 }
 
@@ -330,7 +336,7 @@ mod tests {
         assert!(registry.admit("p0", b, vec![0, 1], true).is_err());
         assert_eq!(guard.projector(), "p0");
         assert_eq!(registry.lock().len(), 1);
-        assert!(guard.owns(1) && !guard.owns(2));
+        assert_eq!(guard.owned([1, 2].into_iter()), [1]);
     }
 
     #[test]
@@ -358,7 +364,7 @@ mod tests {
             .expect("after the drain");
         drop(new);
         assert_eq!(registry.lock().len(), 1);
-        assert!(newer.owns(0));
+        assert_eq!(newer.owned([0].into_iter()), [0]);
         drop(newer);
         assert_eq!(registry.lock().len(), 0);
     }
@@ -400,7 +406,7 @@ mod tests {
         );
         assert!(registry.drop_peer("a", &tx));
         assert!(guard.cancelled().is_cancelled());
-        assert!(!guard.owns(4));
+        assert!(guard.owned([4].into_iter()).is_empty());
         let mut departed = registry.lock().take_departed();
         departed.sort_unstable();
         assert_eq!(departed, vec![4, 5]);

@@ -10,7 +10,6 @@ use roomlight_core::LinearRgb;
 use roomlight_core::aggregator::{ErrorAggregator, ErrorKind, RoundSummary};
 use roomlight_core::closed_loop::objective_noise;
 use roomlight_core::round::{Backoff, Collection, Received, Settle};
-use roomlight_proto::convert::to_sparse;
 use roomlight_proto::v1;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -236,20 +235,25 @@ impl<C: Camera> Rounds<C> {
                 () = changed => continue,
             };
             match received {
-                Ok(Some(c)) => match collection.receive(c.round, c.node) {
-                    Received::Counted => {
-                        if let Err(e) = self.aggregator.add_contribution(c.delta) {
-                            tracing::warn!(node = c.node, error = %e, "contribution refused");
+                Ok(Some(c)) => {
+                    for entry in c.nodes {
+                        match collection.receive(c.round, entry.node) {
+                            Received::Counted => {
+                                let delta = entry.patches.into_iter().zip(entry.values);
+                                if let Err(e) = self.aggregator.add_contribution(delta) {
+                                    tracing::warn!(node = entry.node, error = %e, "contribution refused");
+                                }
+                            }
+                            Received::OtherRound => tracing::debug!(
+                                node = entry.node,
+                                round = c.round,
+                                expected = collection.round(),
+                                "out-of-order contribution ignored"
+                            ),
+                            Received::NotAwaited => {}
                         }
                     }
-                    Received::OtherRound => tracing::debug!(
-                        node = c.node,
-                        round = c.round,
-                        expected = collection.round(),
-                        "out-of-order contribution ignored"
-                    ),
-                    Received::NotAwaited => {}
-                },
+                }
                 Ok(None) | Err(_) => {
                     tracing::warn!(
                         round = collection.round(),
@@ -263,8 +267,9 @@ impl<C: Camera> Rounds<C> {
     }
 }
 
-/// Sends every ready projector the errors of its nodes, without waiting for any (a peer whose
-/// queue is full is dropped: see `Shared::offer`); returns the nodes that were sent.
+/// Sends every ready projector the errors of its nodes, one message per projector, without
+/// waiting for any (a peer whose queue is full is dropped: see `Shared::offer`); returns the
+/// nodes that were sent.
 fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary) -> Vec<u32> {
     let kind = match summary.kind {
         ErrorKind::Measured => v1::ErrorKind::Measured,
@@ -276,30 +281,33 @@ fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary) -> V
     }
     let mut sent = Vec::new();
     for (projector, tx, nodes) in ready {
-        let bodies: Vec<v1::room_message::Body> = {
+        let entries: Vec<v1::NodeRgb> = {
             let live = shared.live();
             nodes
                 .iter()
                 .filter_map(|&n| {
                     let column = live.problem.columns().get(n as usize)?;
-                    let e: Vec<LinearRgb> = column
-                        .support()
-                        .iter()
-                        .map(|&i| errors[i as usize])
-                        .collect();
-                    Some(v1::room_message::Body::Errors(v1::Errors {
-                        round: summary.round,
-                        kind: kind as i32,
-                        objective: summary.objective,
-                        restart: summary.restart,
+                    let support = column.support();
+                    let values = support.iter().flat_map(|&i| errors[i as usize].0).collect();
+                    Some(v1::NodeRgb {
                         node: n,
-                        errors: Some(to_sparse(column.support(), &e)),
-                    }))
+                        values: Some(v1::SparseRgb {
+                            patches: support.to_vec(),
+                            values,
+                        }),
+                    })
                 })
                 .collect()
         };
+        let body = v1::room_message::Body::Errors(v1::Errors {
+            round: summary.round,
+            kind: kind as i32,
+            objective: summary.objective,
+            restart: summary.restart,
+            nodes: entries,
+        });
         // A failed offer means the node left or lags: it is not waited for.
-        if shared.offer(&projector, &tx, bodies) {
+        if shared.offer(&projector, &tx, vec![body]) {
             sent.extend_from_slice(&nodes);
         }
     }

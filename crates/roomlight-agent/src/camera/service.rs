@@ -6,7 +6,7 @@
 use super::registry::{Peer, PeerGuard};
 use super::{Contribution, Shared};
 use prost::Message;
-use roomlight_proto::convert::from_sparse;
+use roomlight_proto::convert::from_node_rgbs;
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::pin::Pin;
@@ -20,8 +20,8 @@ use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
 /// Messages a peer's queue holds beyond its handshake: a node agent that falls this far behind
-/// is dropped as lagging (the rounds never wait for one node). Rounds send one message per node,
-/// a bring-up one per node too, so a healthy node is never near it.
+/// is dropped as lagging (the rounds never wait for one node). Rounds send one message per node
+/// agent, a bring-up one per node, so a healthy node is never near it.
 const QUEUE: usize = 256;
 
 /// The gRPC service.
@@ -218,28 +218,26 @@ async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming
                 guard.shown(s.seq, s.pattern);
             }
             Some(v1::node_message::Body::Contribution(c)) => {
-                if !guard.owns(c.node) {
-                    tracing::warn!(%projector, node = c.node, "contribution for a node it does not own: ignored");
+                let owned = guard.owned(c.nodes.iter().map(|e| e.node));
+                let batch = match from_node_rgbs("contribution", c.nodes, |n| owned.contains(&n)) {
+                    Ok(batch) => batch,
+                    Err(e) => {
+                        tracing::warn!(%projector, error = %e, "malformed contribution: ignored");
+                        continue;
+                    }
+                };
+                for e in &batch.refused {
+                    tracing::warn!(%projector, error = %e, "contribution refused");
+                }
+                if batch.entries.is_empty() {
                     continue;
                 }
-                let Some(delta) = c.delta.as_ref() else {
-                    continue;
+                let contribution = Contribution {
+                    round: c.round,
+                    nodes: batch.entries,
                 };
-                match from_sparse("contribution", delta) {
-                    Ok((patches, values)) => {
-                        let delta = patches.into_iter().zip(values).collect();
-                        let contribution = Contribution {
-                            round: c.round,
-                            node: c.node,
-                            delta,
-                        };
-                        if shared.contributions.send(contribution).await.is_err() {
-                            break;
-                        }
-                    }
-                    Err(e) => {
-                        tracing::warn!(%projector, error = %e, "malformed contribution: ignored")
-                    }
+                if shared.contributions.send(contribution).await.is_err() {
+                    break;
                 }
             }
             Some(v1::node_message::Body::Goodbye(g)) => {

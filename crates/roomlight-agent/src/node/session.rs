@@ -12,7 +12,7 @@ use super::wire::{Wire, assignment_from_wire, pattern_from_wire};
 use crate::AgentError;
 use crate::hardware::Display;
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState};
-use roomlight_proto::convert::{from_rgb, from_sparse, to_rgb, to_sparse};
+use roomlight_proto::convert::{from_node_rgbs, from_rgb, from_sparse, to_rgb, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::collections::HashMap;
 use std::time::Duration;
@@ -72,7 +72,6 @@ pub(super) async fn run(
         tx,
         assigned: Vec::new(),
         nodes: HashMap::new(),
-        applied: HashMap::new(),
         started: false,
     };
     let mut ticker = tokio::time::interval(FIRST_HEARTBEAT);
@@ -98,7 +97,7 @@ pub(super) async fn run(
             Some(Body::Welcome(w)) => ticker = tokio::time::interval(session.welcome(&w)),
             Some(Body::Assign(a)) => session.assign(&a)?,
             Some(Body::Attenuation(a)) => session.attenuation(&a).await?,
-            Some(Body::Errors(e)) => session.errors(&e).await?,
+            Some(Body::Errors(e)) => session.errors(e).await?,
             Some(Body::Show(show)) => session.show(show).await?,
             Some(Body::Goodbye(g)) => {
                 tracing::info!(reason = %g.reason, "the camera agent said goodbye");
@@ -151,8 +150,6 @@ struct Session<'a, D: Display> {
     assigned: Vec<u32>,
     /// The running state of each node whose attenuation arrived.
     nodes: HashMap<u32, NodeState>,
-    /// Round → how many of this projector's nodes have applied its errors.
-    applied: HashMap<u64, usize>,
     /// Whether the start (frame 0) has been acknowledged.
     started: bool,
 }
@@ -231,46 +228,42 @@ impl<D: Display> Session<'_, D> {
         Ok(())
     }
 
-    /// One node's errors of a round: its step, shown and reported as a contribution; once all
-    /// this projector's nodes have stepped, the round's frame is acknowledged.
-    async fn errors(&mut self, e: &v1::Errors) -> Result<(), AgentError> {
-        let Some(state) = self.nodes.get_mut(&e.node) else {
-            tracing::warn!(
-                node = e.node,
-                "errors for a node this projector does not own: ignored"
-            );
-            return Ok(());
-        };
-        let Some(sparse) = e.errors.as_ref() else {
-            return Ok(());
-        };
-        let errors = match from_sparse("errors", sparse) {
-            Ok((_, v)) => v,
+    /// A round's errors for this projector's nodes: each node steps and shows its new value,
+    /// the contributions go back in one message, and the round's frame is acknowledged. An
+    /// entry for a node it does not own, or malformed, is refused (logged) and that node holds;
+    /// valid errors a node cannot use (not on its support) leave it where it is, reporting a
+    /// zero change.
+    async fn errors(&mut self, e: v1::Errors) -> Result<(), AgentError> {
+        let nodes = &self.nodes;
+        let batch = match from_node_rgbs("errors", e.nodes, |n| nodes.contains_key(&n)) {
+            Ok(batch) => batch,
             Err(err) => {
-                tracing::warn!(node = e.node, error = %err, "malformed errors: ignored");
+                tracing::warn!(round = e.round, error = %err, "malformed errors: ignored");
                 return Ok(());
             }
         };
-        // Invalid errors leave the node where it is (and it still acknowledges the round).
-        let delta = state.update(&errors, e.restart).unwrap_or(LinearRgb::ZERO);
-        self.display.show(e.node, state.shown());
-        self.memory.values.insert(e.node, state.shown());
-        let (patches, values): (Vec<u32>, Vec<LinearRgb>) = state.contribution(delta).unzip();
+        for err in &batch.refused {
+            tracing::warn!(round = e.round, error = %err, "errors refused: the node holds");
+        }
+        let mut contributions = Vec::with_capacity(batch.entries.len());
+        for entry in batch.entries {
+            let Some(state) = self.nodes.get_mut(&entry.node) else {
+                continue;
+            };
+            let delta = state
+                .update(&entry.values, e.restart)
+                .unwrap_or(LinearRgb::ZERO);
+            self.display.show(entry.node, state.shown());
+            self.memory.values.insert(entry.node, state.shown());
+            contributions.push(contribution(entry.node, state, delta));
+        }
         let contribution = v1::Contribution {
             round: e.round,
-            node: e.node,
-            delta: Some(to_sparse(&patches, &values)),
+            nodes: contributions,
         };
         send(&self.tx, v1::node_message::Body::Contribution(contribution)).await?;
-        let done = self.applied.entry(e.round).or_insert(0);
-        *done += 1;
-        if *done == self.nodes.len() {
-            // This round is complete; rounds before it will never be.
-            self.applied.retain(|r, _| *r > e.round);
-            self.memory.maybe_flush();
-            acknowledge(self.display, &self.tx, e.round, false).await?;
-        }
-        Ok(())
+        self.memory.maybe_flush();
+        acknowledge(self.display, &self.tx, e.round, false).await
     }
 
     /// A calibration pattern: node values shown as they are, without touching the node states
@@ -318,6 +311,22 @@ impl<D: Display> Session<'_, D> {
             }
         }
         acknowledge(self.display, &self.tx, show.seq, true).await
+    }
+}
+
+/// One node's contribution change `δ_n = p_n Δx_n` on its support, packed for the wire.
+fn contribution(node: u32, state: &NodeState, delta: LinearRgb) -> v1::NodeRgb {
+    let column = state.column();
+    v1::NodeRgb {
+        node,
+        values: Some(v1::SparseRgb {
+            patches: column.support().to_vec(),
+            values: column
+                .values()
+                .iter()
+                .flat_map(|p| p.hadamard(delta).0)
+                .collect(),
+        }),
     }
 }
 
