@@ -1,7 +1,7 @@
 //! Geometry: the room's surfaces as parametric faces (for albedo and radiosity elements) and as
 //! parry3d colliders in a BVH (for ray casting and visibility).
 
-use crate::scene::{Scene, SceneError, ShapeKind};
+use crate::scene::{ObjectSpec, RoomSpec, Scene, SceneError, ShapeKind};
 use parry3d::bounding_volume::Aabb;
 use parry3d::math::{Pose, Rot3, Vector};
 use parry3d::partitioning::{Bvh, BvhBuildStrategy};
@@ -304,31 +304,37 @@ fn rgb(a: [f64; 3]) -> LinearRgb {
     LinearRgb(a)
 }
 
-impl Geometry {
-    /// Builds faces, elements and colliders from a scene (already field-validated).
-    pub fn build(scene: &Scene) -> Result<Self, SceneError> {
-        let size = mm(scene.room.size_mm);
-        let el = (scene.room.element_mm / 1000.0) as f32;
-        let mut faces: Vec<Face> = Vec::new();
-        let mut colliders: Vec<Collider> = Vec::new();
-        let add_face = |faces: &mut Vec<Face>,
-                        geom: FaceGeom,
-                        albedo: LinearRgb,
-                        object: Option<usize>,
-                        target: bool| {
-            faces.push(Face {
-                geom,
-                albedo,
-                object,
-                target,
-                grid: (1, 1),
-                first_element: 0,
-            });
-            faces.len() - 1
-        };
-        // The room: six inward faces, and six slabs outside them for ray casting.
+/// The faces and colliders of a scene as they are added: a face's index is its place here,
+/// and each collider names the faces it bounds.
+#[derive(Default)]
+struct Shapes {
+    faces: Vec<Face>,
+    colliders: Vec<Collider>,
+}
+
+impl Shapes {
+    /// Adds a face (its element grid is made later) and returns its index.
+    fn face(
+        &mut self,
+        geom: FaceGeom,
+        albedo: LinearRgb,
+        object: Option<usize>,
+        target: bool,
+    ) -> usize {
+        self.faces.push(Face {
+            geom,
+            albedo,
+            object,
+            target,
+            grid: (1, 1),
+            first_element: 0,
+        });
+        self.faces.len() - 1
+    }
+
+    /// The room: six inward faces, and six slabs outside them for ray casting.
+    fn room_box(&mut self, room: &RoomSpec, size: V3) {
         let (w, d, h) = (size.x, size.y, size.z);
-        let room = scene.room.clone();
         let walls = [
             (
                 V3::new(0.0, 0.0, 0.0),
@@ -375,8 +381,7 @@ impl Geometry {
         ];
         let slab = 0.05;
         for (origin, u, v, normal, albedo) in walls {
-            let f = add_face(
-                &mut faces,
+            let f = self.face(
                 FaceGeom::Rect {
                     origin,
                     u,
@@ -389,154 +394,180 @@ impl Geometry {
             );
             let center = origin + (u + v) * 0.5 - normal * slab;
             let half = (u.abs() + v.abs()) * 0.5 + V3::splat(slab);
-            colliders.push(Collider {
+            self.colliders.push(Collider {
                 shape: ColliderShape::Cuboid(Cuboid::new(half)),
                 pose: Pose::from_translation(center),
                 faces: vec![f],
             });
         }
-        for (index, o) in scene.objects.iter().enumerate() {
-            let c = mm(o.center_mm);
-            let albedo = rgb(o.albedo);
-            let obj = Some(index);
-            match o.shape {
-                ShapeKind::Box | ShapeKind::Plane => {
-                    let mut s = mm(o.size_mm.unwrap_or([0.0; 3]));
-                    // A plane is a board 2 mm thick.
-                    s = s.max(V3::splat(0.002));
-                    let yaw = (o.yaw_deg as f32).to_radians();
-                    let rot = Rot3::from_rotation_z(yaw);
-                    let axes = [rot * V3::X, rot * V3::Y, V3::Z];
-                    let half = [s.x * 0.5, s.y * 0.5, s.z * 0.5];
-                    let mut ids = Vec::new();
-                    for a in 0..3 {
-                        let (b, cc) = ((a + 1) % 3, (a + 2) % 3);
-                        for sign in [1.0f32, -1.0] {
-                            let normal = axes[a] * sign;
-                            // Keep u × v along the outward normal.
-                            let (u, v) = if sign > 0.0 {
-                                (axes[b] * s[b], axes[cc] * s[cc])
-                            } else {
-                                (axes[cc] * s[cc], axes[b] * s[b])
-                            };
-                            let origin = c + normal * half[a] - (u + v) * 0.5;
-                            ids.push(add_face(
-                                &mut faces,
-                                FaceGeom::Rect {
-                                    origin,
-                                    u,
-                                    v,
-                                    normal,
-                                },
-                                albedo,
-                                obj,
-                                o.target,
-                            ));
-                        }
-                    }
-                    colliders.push(Collider {
-                        shape: ColliderShape::Cuboid(Cuboid::new(s * 0.5)),
-                        pose: Pose::from_parts(c, rot),
-                        faces: ids,
-                    });
-                }
-                ShapeKind::Sphere => {
-                    let r = (o.radius_mm.unwrap_or(0.0) / 1000.0) as f32;
-                    let f = add_face(
-                        &mut faces,
-                        FaceGeom::Sphere {
-                            center: c,
-                            radius: r,
-                        },
-                        albedo,
-                        obj,
-                        o.target,
-                    );
-                    colliders.push(Collider {
-                        shape: ColliderShape::Ball(Ball::new(r)),
-                        pose: Pose::from_translation(c),
-                        faces: vec![f],
-                    });
-                }
-                ShapeKind::Cylinder => {
-                    let r = (o.radius_mm.unwrap_or(0.0) / 1000.0) as f32;
-                    let height = (o.height_mm.unwrap_or(0.0) / 1000.0) as f32;
-                    let base = c - V3::Z * (0.5 * height);
-                    let side = add_face(
-                        &mut faces,
-                        FaceGeom::CylinderSide {
-                            base,
-                            radius: r,
-                            height,
-                        },
-                        albedo,
-                        obj,
-                        o.target,
-                    );
-                    let top = add_face(
-                        &mut faces,
-                        FaceGeom::Disk {
-                            center: base + V3::Z * height,
-                            normal: V3::Z,
-                            e1: V3::X,
-                            e2: V3::Y,
-                            radius: r,
-                        },
-                        albedo,
-                        obj,
-                        o.target,
-                    );
-                    let bottom = add_face(
-                        &mut faces,
-                        FaceGeom::Disk {
-                            center: base,
-                            normal: -V3::Z,
-                            e1: V3::Y,
-                            e2: V3::X,
-                            radius: r,
-                        },
-                        albedo,
-                        obj,
-                        o.target,
-                    );
-                    colliders.push(Collider {
-                        shape: ColliderShape::Cylinder(Cylinder::new(0.5 * height, r)),
-                        pose: Pose::from_parts(
-                            c,
-                            Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2),
-                        ),
-                        faces: vec![side, top, bottom],
-                    });
-                }
-            }
-        }
-        // Element grids.
-        let mut elements = Vec::new();
-        for (fi, face) in faces.iter_mut().enumerate() {
-            let (ls, lt) = face.geom.extents();
-            let min_s = match face.geom {
-                FaceGeom::Rect { .. } => 1,
-                _ => 6,
-            };
-            let ns = ((ls / el).ceil() as usize).clamp(min_s, 512);
-            let nt = ((lt / el).ceil() as usize).clamp(1, 512);
-            face.grid = (ns, nt);
-            face.first_element = elements.len();
-            for j in 0..nt {
-                for i in 0..ns {
-                    let (s0, s1) = (i as f32 / ns as f32, (i + 1) as f32 / ns as f32);
-                    let (t0, t1) = (j as f32 / nt as f32, (j + 1) as f32 / nt as f32);
-                    let (center, normal) = face.geom.point(0.5 * (s0 + s1), 0.5 * (t0 + t1));
-                    elements.push(Element {
-                        center,
+    }
+
+    /// A box, or a plane as a board 2 mm thick: six faces around one cuboid collider.
+    fn cuboid(&mut self, o: &ObjectSpec, index: usize) {
+        let c = mm(o.center_mm);
+        let albedo = rgb(o.albedo);
+        let obj = Some(index);
+        let mut s = mm(o.size_mm.unwrap_or([0.0; 3]));
+        // A plane is a board 2 mm thick.
+        s = s.max(V3::splat(0.002));
+        let yaw = (o.yaw_deg as f32).to_radians();
+        let rot = Rot3::from_rotation_z(yaw);
+        let axes = [rot * V3::X, rot * V3::Y, V3::Z];
+        let half = [s.x * 0.5, s.y * 0.5, s.z * 0.5];
+        let mut ids = Vec::new();
+        for a in 0..3 {
+            let (b, cc) = ((a + 1) % 3, (a + 2) % 3);
+            for sign in [1.0f32, -1.0] {
+                let normal = axes[a] * sign;
+                // Keep u × v along the outward normal.
+                let (u, v) = if sign > 0.0 {
+                    (axes[b] * s[b], axes[cc] * s[cc])
+                } else {
+                    (axes[cc] * s[cc], axes[b] * s[b])
+                };
+                let origin = c + normal * half[a] - (u + v) * 0.5;
+                ids.push(self.face(
+                    FaceGeom::Rect {
+                        origin,
+                        u,
+                        v,
                         normal,
-                        area: face.geom.area(s0, s1, t0, t1),
-                        face: fi,
-                        albedo: face.albedo,
-                    });
-                }
+                    },
+                    albedo,
+                    obj,
+                    o.target,
+                ));
             }
         }
+        self.colliders.push(Collider {
+            shape: ColliderShape::Cuboid(Cuboid::new(s * 0.5)),
+            pose: Pose::from_parts(c, rot),
+            faces: ids,
+        });
+    }
+
+    /// A sphere: one face, one ball.
+    fn sphere(&mut self, o: &ObjectSpec, index: usize) {
+        let c = mm(o.center_mm);
+        let albedo = rgb(o.albedo);
+        let obj = Some(index);
+        let r = (o.radius_mm.unwrap_or(0.0) / 1000.0) as f32;
+        let f = self.face(
+            FaceGeom::Sphere {
+                center: c,
+                radius: r,
+            },
+            albedo,
+            obj,
+            o.target,
+        );
+        self.colliders.push(Collider {
+            shape: ColliderShape::Ball(Ball::new(r)),
+            pose: Pose::from_translation(c),
+            faces: vec![f],
+        });
+    }
+
+    /// An upright cylinder: its side, top and bottom around one cylinder collider.
+    fn cylinder(&mut self, o: &ObjectSpec, index: usize) {
+        let c = mm(o.center_mm);
+        let albedo = rgb(o.albedo);
+        let obj = Some(index);
+        let r = (o.radius_mm.unwrap_or(0.0) / 1000.0) as f32;
+        let height = (o.height_mm.unwrap_or(0.0) / 1000.0) as f32;
+        let base = c - V3::Z * (0.5 * height);
+        let side = self.face(
+            FaceGeom::CylinderSide {
+                base,
+                radius: r,
+                height,
+            },
+            albedo,
+            obj,
+            o.target,
+        );
+        let top = self.face(
+            FaceGeom::Disk {
+                center: base + V3::Z * height,
+                normal: V3::Z,
+                e1: V3::X,
+                e2: V3::Y,
+                radius: r,
+            },
+            albedo,
+            obj,
+            o.target,
+        );
+        let bottom = self.face(
+            FaceGeom::Disk {
+                center: base,
+                normal: -V3::Z,
+                e1: V3::Y,
+                e2: V3::X,
+                radius: r,
+            },
+            albedo,
+            obj,
+            o.target,
+        );
+        self.colliders.push(Collider {
+            shape: ColliderShape::Cylinder(Cylinder::new(0.5 * height, r)),
+            pose: Pose::from_parts(c, Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2)),
+            faces: vec![side, top, bottom],
+        });
+    }
+}
+
+/// Cuts every face into elements of about `el` metres (curved faces at least six around) and
+/// records each face's grid; returns the elements, face by face.
+fn element_grids(faces: &mut [Face], el: f32) -> Vec<Element> {
+    let mut elements = Vec::new();
+    for (fi, face) in faces.iter_mut().enumerate() {
+        let (ls, lt) = face.geom.extents();
+        let min_s = match face.geom {
+            FaceGeom::Rect { .. } => 1,
+            _ => 6,
+        };
+        let ns = ((ls / el).ceil() as usize).clamp(min_s, 512);
+        let nt = ((lt / el).ceil() as usize).clamp(1, 512);
+        face.grid = (ns, nt);
+        face.first_element = elements.len();
+        for j in 0..nt {
+            for i in 0..ns {
+                let (s0, s1) = (i as f32 / ns as f32, (i + 1) as f32 / ns as f32);
+                let (t0, t1) = (j as f32 / nt as f32, (j + 1) as f32 / nt as f32);
+                let (center, normal) = face.geom.point(0.5 * (s0 + s1), 0.5 * (t0 + t1));
+                elements.push(Element {
+                    center,
+                    normal,
+                    area: face.geom.area(s0, s1, t0, t1),
+                    face: fi,
+                    albedo: face.albedo,
+                });
+            }
+        }
+    }
+    elements
+}
+
+impl Geometry {
+    /// Builds faces, elements and colliders from a scene (already field-validated).
+    pub fn build(scene: &Scene) -> Result<Self, SceneError> {
+        let size = mm(scene.room.size_mm);
+        let mut shapes = Shapes::default();
+        shapes.room_box(&scene.room, size);
+        for (index, o) in scene.objects.iter().enumerate() {
+            match o.shape {
+                ShapeKind::Box | ShapeKind::Plane => shapes.cuboid(o, index),
+                ShapeKind::Sphere => shapes.sphere(o, index),
+                ShapeKind::Cylinder => shapes.cylinder(o, index),
+            }
+        }
+        let Shapes {
+            mut faces,
+            colliders,
+        } = shapes;
+        let elements = element_grids(&mut faces, (scene.room.element_mm / 1000.0) as f32);
         let aabbs: Vec<Aabb> = colliders
             .iter()
             .map(|c| c.shape().compute_aabb(&c.pose))

@@ -292,10 +292,43 @@ impl Scene {
         }
     }
 
-    /// The checks that need no geometry (geometry checks happen when the room is built).
+    /// The checks that need no geometry (geometry checks happen when the room is built): each
+    /// element in file order, names unique per kind, the first problem reported.
     pub fn validate_fields(&self) -> Result<(), SceneError> {
-        let finite3 = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
-        let albedo_ok = |a: &[f64; 3]| a.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x));
+        self.check_room()?;
+        let mut names = std::collections::HashSet::new();
+        let mut unique = |kind: &str, name: &str| -> Result<(), SceneError> {
+            if names.insert(format!("{kind}:{name}")) {
+                Ok(())
+            } else {
+                Err(self.invalid(format!("{kind} {name}"), "name", "is used twice"))
+            }
+        };
+        for o in &self.objects {
+            unique("object", &o.name)?;
+            self.check_object(o)?;
+        }
+        for c in &self.charts {
+            unique("chart", &c.name)?;
+            self.check_chart(c)?;
+        }
+        for p in &self.projectors {
+            unique("projector", &p.name)?;
+            self.check_projector(p)?;
+        }
+        for l in &self.lights {
+            unique("light", &l.name)?;
+            self.check_light(l)?;
+        }
+        for p in &self.presets {
+            unique("preset", &p.name)?;
+            self.check_preset(p)?;
+        }
+        self.check_camera()
+    }
+
+    /// The room's box, albedos and element size.
+    fn check_room(&self) -> Result<(), SceneError> {
         let r = &self.room;
         if !finite3(&r.size_mm) || r.size_mm.iter().any(|&v| v <= 0.0) {
             return Err(self.invalid(
@@ -324,222 +357,219 @@ impl Scene {
                 format!("is {}, expected at least 20 mm", r.element_mm),
             ));
         }
-        let mut names = std::collections::HashSet::new();
-        let mut unique = |kind: &str, name: &str| -> Result<(), SceneError> {
-            if names.insert(format!("{kind}:{name}")) {
-                Ok(())
-            } else {
-                Err(self.invalid(format!("{kind} {name}"), "name", "is used twice"))
-            }
-        };
-        for o in &self.objects {
-            unique("object", &o.name)?;
-            let el = format!("object {}", o.name);
-            if !finite3(&o.center_mm) {
-                return Err(self.invalid(el, "center_mm", "must be finite"));
-            }
-            if !albedo_ok(&o.albedo) {
-                return Err(self.invalid(
-                    el,
-                    "albedo",
-                    format!("is {:?}, expected three values in [0, 1]", o.albedo),
-                ));
-            }
-            match o.shape {
-                ShapeKind::Box => match o.size_mm {
-                    Some(s) if finite3(&s) && s.iter().all(|&v| v > 0.0) => {}
-                    other => {
-                        return Err(self.invalid(
-                            el,
-                            "size_mm",
-                            format!("is {other:?}, a box needs three lengths > 0"),
-                        ));
-                    }
-                },
-                ShapeKind::Plane => match o.size_mm {
-                    Some(s)
-                        if finite3(&s)
-                            && s.iter().filter(|&&v| v == 0.0).count() == 1
-                            && s.iter().all(|&v| v >= 0.0) => {}
-                    other => {
-                        return Err(self.invalid(el, "size_mm", format!("is {other:?}, a plane needs exactly one zero (its normal axis) and two lengths > 0")));
-                    }
-                },
-                ShapeKind::Sphere => {
-                    if !o.radius_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
-                        return Err(self.invalid(
-                            el,
-                            "radius_mm",
-                            format!("is {:?}, a sphere needs a radius > 0", o.radius_mm),
-                        ));
-                    }
-                }
-                ShapeKind::Cylinder => {
-                    if !o.radius_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
-                        return Err(self.invalid(
-                            el,
-                            "radius_mm",
-                            format!("is {:?}, a cylinder needs a radius > 0", o.radius_mm),
-                        ));
-                    }
-                    if !o.height_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
-                        return Err(self.invalid(
-                            el,
-                            "height_mm",
-                            format!("is {:?}, a cylinder needs a height > 0", o.height_mm),
-                        ));
-                    }
-                }
-            }
+        Ok(())
+    }
+
+    /// An object: centre, albedo and the size its shape needs.
+    fn check_object(&self, o: &ObjectSpec) -> Result<(), SceneError> {
+        let el = format!("object {}", o.name);
+        if !finite3(&o.center_mm) {
+            return Err(self.invalid(el, "center_mm", "must be finite"));
         }
-        for c in &self.charts {
-            unique("chart", &c.name)?;
-            let el = format!("chart {}", c.name);
-            if !(c.width_mm.is_finite() && c.width_mm > 0.0) {
-                return Err(self.invalid(
-                    el,
-                    "width_mm",
-                    format!("is {}, expected > 0", c.width_mm),
-                ));
-            }
-            let n = norm(c.normal);
-            let u = norm(c.up);
-            if !(n > 0.0 && u > 0.0 && finite3(&c.center_mm)) {
-                return Err(self.invalid(el, "normal/up", "must be finite, nonzero vectors"));
-            }
-            if dot(c.normal, c.up).abs() / (n * u) > 1e-3 {
-                return Err(self.invalid(
-                    el,
-                    "up",
-                    format!(
-                        "{:?} is not perpendicular to the normal {:?}",
-                        c.up, c.normal
-                    ),
-                ));
-            }
+        if !albedo_ok(&o.albedo) {
+            return Err(self.invalid(
+                el,
+                "albedo",
+                format!("is {:?}, expected three values in [0, 1]", o.albedo),
+            ));
         }
-        for p in &self.projectors {
-            unique("projector", &p.name)?;
-            let el = format!("projector {}", p.name);
-            if !(p.fov_deg.is_finite() && p.fov_deg > 1.0 && p.fov_deg < 170.0) {
-                return Err(self.invalid(
-                    el,
-                    "fov_deg",
-                    format!("is {}, expected between 1 and 170", p.fov_deg),
-                ));
-            }
-            if p.resolution.iter().any(|&v| v == 0 || v > 8192) {
-                return Err(self.invalid(
-                    el,
-                    "resolution",
-                    format!("is {:?}, expected 1 to 8192 pixels", p.resolution),
-                ));
-            }
-            if !(p.black_level.is_finite() && (0.0..0.5).contains(&p.black_level)) {
-                return Err(self.invalid(
-                    el,
-                    "black_level",
-                    format!("is {}, expected in [0, 0.5)", p.black_level),
-                ));
-            }
-            if !finite3(&p.peak)
-                || p.peak.iter().any(|&v| v < 0.0)
-                || p.peak.iter().all(|&v| v == 0.0)
-            {
-                return Err(self.invalid(
-                    el,
-                    "peak",
-                    format!("is {:?}, expected nonnegative values, not all zero", p.peak),
-                ));
-            }
-            if !finite3(&p.gamma) || p.gamma.iter().any(|&g| !(0.2..=5.0).contains(&g)) {
-                return Err(self.invalid(
-                    el,
-                    "gamma",
-                    format!("is {:?}, expected values in [0.2, 5]", p.gamma),
-                ));
-            }
-            if let Some(m) = p.mixing
-                && m.iter().flatten().any(|v| !v.is_finite() || *v < 0.0)
-            {
-                return Err(self.invalid(el, "mixing", "must hold finite values >= 0"));
-            }
-            let axis = sub(p.look_at_mm, p.position_mm);
-            if norm(axis) == 0.0 || !finite3(&p.position_mm) || !finite3(&p.look_at_mm) {
-                return Err(self.invalid(el, "look_at_mm", "must differ from position_mm"));
-            }
-            if norm(cross(axis, p.up)) <= 1e-6 * norm(axis) * norm(p.up) {
-                return Err(self.invalid(el, "up", "must not be parallel to the optical axis"));
-            }
-            if p.kind == ProjectorKind::LargeAperture {
-                if !p.aperture_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
+        match o.shape {
+            ShapeKind::Box => match o.size_mm {
+                Some(s) if finite3(&s) && s.iter().all(|&v| v > 0.0) => {}
+                other => {
                     return Err(self.invalid(
                         el,
-                        "aperture_mm",
-                        "a large-aperture projector needs a lens diameter > 0",
+                        "size_mm",
+                        format!("is {other:?}, a box needs three lengths > 0"),
                     ));
                 }
-                if !p.focus_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
+            },
+            ShapeKind::Plane => match o.size_mm {
+                Some(s)
+                    if finite3(&s)
+                        && s.iter().filter(|&&v| v == 0.0).count() == 1
+                        && s.iter().all(|&v| v >= 0.0) => {}
+                other => {
+                    return Err(self.invalid(el, "size_mm", format!("is {other:?}, a plane needs exactly one zero (its normal axis) and two lengths > 0")));
+                }
+            },
+            ShapeKind::Sphere => {
+                if !o.radius_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
                     return Err(self.invalid(
                         el,
-                        "focus_mm",
-                        "a large-aperture projector needs a focus distance > 0",
+                        "radius_mm",
+                        format!("is {:?}, a sphere needs a radius > 0", o.radius_mm),
                     ));
                 }
-                if p.lens_samples.is_some_and(|n| !(1..=4096).contains(&n)) {
-                    return Err(self.invalid(el, "lens_samples", "expected 1 to 4096"));
-                }
             }
-        }
-        for l in &self.lights {
-            unique("light", &l.name)?;
-            let el = format!("light {}", l.name);
-            if l.size_mm.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-                return Err(self.invalid(
-                    el,
-                    "size_mm",
-                    format!("is {:?}, a light needs a width and height > 0", l.size_mm),
-                ));
-            }
-            if !(l.cct_k.is_finite() && (1667.0..=25000.0).contains(&l.cct_k)) {
-                return Err(self.invalid(
-                    el,
-                    "cct_k",
-                    format!("is {}, expected 1667 to 25000 K", l.cct_k),
-                ));
-            }
-            if !(l.intensity.is_finite() && l.intensity > 0.0) {
-                return Err(self.invalid(
-                    el,
-                    "intensity",
-                    format!("is {}, expected > 0", l.intensity),
-                ));
-            }
-            if norm(l.normal) == 0.0 || !finite3(&l.normal) {
-                return Err(self.invalid(el, "normal", "must be a finite, nonzero vector"));
-            }
-        }
-        for p in &self.presets {
-            unique("preset", &p.name)?;
-            for name in &p.lights {
-                if !self.lights.iter().any(|l| &l.name == name) {
+            ShapeKind::Cylinder => {
+                if !o.radius_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
                     return Err(self.invalid(
-                        format!("preset {}", p.name),
-                        "lights",
-                        format!("names {name:?}, which is no light of this scene"),
+                        el,
+                        "radius_mm",
+                        format!("is {:?}, a cylinder needs a radius > 0", o.radius_mm),
+                    ));
+                }
+                if !o.height_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
+                    return Err(self.invalid(
+                        el,
+                        "height_mm",
+                        format!("is {:?}, a cylinder needs a height > 0", o.height_mm),
                     ));
                 }
             }
-            if p.cct_k
-                .is_some_and(|k| !(k.is_finite() && (1667.0..=25000.0).contains(&k)))
-            {
+        }
+        Ok(())
+    }
+
+    /// A chart: width, and a normal and up that are nonzero and perpendicular.
+    fn check_chart(&self, c: &ChartSpec) -> Result<(), SceneError> {
+        let el = format!("chart {}", c.name);
+        if !(c.width_mm.is_finite() && c.width_mm > 0.0) {
+            return Err(self.invalid(el, "width_mm", format!("is {}, expected > 0", c.width_mm)));
+        }
+        let n = norm(c.normal);
+        let u = norm(c.up);
+        if !(n > 0.0 && u > 0.0 && finite3(&c.center_mm)) {
+            return Err(self.invalid(el, "normal/up", "must be finite, nonzero vectors"));
+        }
+        if dot(c.normal, c.up).abs() / (n * u) > 1e-3 {
+            return Err(self.invalid(
+                el,
+                "up",
+                format!(
+                    "{:?} is not perpendicular to the normal {:?}",
+                    c.up, c.normal
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// A projector: optics, response, pose, and a large aperture's lens.
+    fn check_projector(&self, p: &ProjectorSpec) -> Result<(), SceneError> {
+        let el = format!("projector {}", p.name);
+        if !(p.fov_deg.is_finite() && p.fov_deg > 1.0 && p.fov_deg < 170.0) {
+            return Err(self.invalid(
+                el,
+                "fov_deg",
+                format!("is {}, expected between 1 and 170", p.fov_deg),
+            ));
+        }
+        if p.resolution.iter().any(|&v| v == 0 || v > 8192) {
+            return Err(self.invalid(
+                el,
+                "resolution",
+                format!("is {:?}, expected 1 to 8192 pixels", p.resolution),
+            ));
+        }
+        if !(p.black_level.is_finite() && (0.0..0.5).contains(&p.black_level)) {
+            return Err(self.invalid(
+                el,
+                "black_level",
+                format!("is {}, expected in [0, 0.5)", p.black_level),
+            ));
+        }
+        if !finite3(&p.peak) || p.peak.iter().any(|&v| v < 0.0) || p.peak.iter().all(|&v| v == 0.0)
+        {
+            return Err(self.invalid(
+                el,
+                "peak",
+                format!("is {:?}, expected nonnegative values, not all zero", p.peak),
+            ));
+        }
+        if !finite3(&p.gamma) || p.gamma.iter().any(|&g| !(0.2..=5.0).contains(&g)) {
+            return Err(self.invalid(
+                el,
+                "gamma",
+                format!("is {:?}, expected values in [0.2, 5]", p.gamma),
+            ));
+        }
+        if let Some(m) = p.mixing
+            && m.iter().flatten().any(|v| !v.is_finite() || *v < 0.0)
+        {
+            return Err(self.invalid(el, "mixing", "must hold finite values >= 0"));
+        }
+        let axis = sub(p.look_at_mm, p.position_mm);
+        if norm(axis) == 0.0 || !finite3(&p.position_mm) || !finite3(&p.look_at_mm) {
+            return Err(self.invalid(el, "look_at_mm", "must differ from position_mm"));
+        }
+        if norm(cross(axis, p.up)) <= 1e-6 * norm(axis) * norm(p.up) {
+            return Err(self.invalid(el, "up", "must not be parallel to the optical axis"));
+        }
+        if p.kind == ProjectorKind::LargeAperture {
+            if !p.aperture_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
+                return Err(self.invalid(
+                    el,
+                    "aperture_mm",
+                    "a large-aperture projector needs a lens diameter > 0",
+                ));
+            }
+            if !p.focus_mm.is_some_and(|v| v.is_finite() && v > 0.0) {
+                return Err(self.invalid(
+                    el,
+                    "focus_mm",
+                    "a large-aperture projector needs a focus distance > 0",
+                ));
+            }
+            if p.lens_samples.is_some_and(|n| !(1..=4096).contains(&n)) {
+                return Err(self.invalid(el, "lens_samples", "expected 1 to 4096"));
+            }
+        }
+        Ok(())
+    }
+
+    /// An LED panel: size, colour temperature, intensity, normal.
+    fn check_light(&self, l: &LightSpec) -> Result<(), SceneError> {
+        let el = format!("light {}", l.name);
+        if l.size_mm.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(self.invalid(
+                el,
+                "size_mm",
+                format!("is {:?}, a light needs a width and height > 0", l.size_mm),
+            ));
+        }
+        if !(l.cct_k.is_finite() && (1667.0..=25000.0).contains(&l.cct_k)) {
+            return Err(self.invalid(
+                el,
+                "cct_k",
+                format!("is {}, expected 1667 to 25000 K", l.cct_k),
+            ));
+        }
+        if !(l.intensity.is_finite() && l.intensity > 0.0) {
+            return Err(self.invalid(el, "intensity", format!("is {}, expected > 0", l.intensity)));
+        }
+        if norm(l.normal) == 0.0 || !finite3(&l.normal) {
+            return Err(self.invalid(el, "normal", "must be a finite, nonzero vector"));
+        }
+        Ok(())
+    }
+
+    /// A preset: lights that exist, a colour temperature in range.
+    fn check_preset(&self, p: &PresetSpec) -> Result<(), SceneError> {
+        for name in &p.lights {
+            if !self.lights.iter().any(|l| &l.name == name) {
                 return Err(self.invalid(
                     format!("preset {}", p.name),
-                    "cct_k",
-                    "expected 1667 to 25000 K",
+                    "lights",
+                    format!("names {name:?}, which is no light of this scene"),
                 ));
             }
         }
+        if p.cct_k
+            .is_some_and(|k| !(k.is_finite() && (1667.0..=25000.0).contains(&k)))
+        {
+            return Err(self.invalid(
+                format!("preset {}", p.name),
+                "cct_k",
+                "expected 1667 to 25000 K",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The camera: field of view, resolution, exposure, noise, and an axis not parallel to up.
+    fn check_camera(&self) -> Result<(), SceneError> {
         let c = &self.camera;
         if !(c.fov_deg.is_finite() && c.fov_deg > 10.0 && c.fov_deg <= 200.0) {
             return Err(self.invalid(
@@ -575,6 +605,16 @@ impl Scene {
         }
         Ok(())
     }
+}
+
+/// Three finite values.
+fn finite3(v: &[f64; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// Three finite values in [0, 1].
+fn albedo_ok(a: &[f64; 3]) -> bool {
+    a.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x))
 }
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

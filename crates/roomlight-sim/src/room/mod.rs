@@ -6,12 +6,12 @@ use crate::geometry::{EPS, Geometry, V3};
 use crate::optics::{Fisheye, Light, Projector};
 use crate::radiosity::Radiosity;
 use crate::scene::{Scene, SceneError};
-use parry3d::query::Ray;
 use roomlight_core::LinearRgb;
 
 mod basis;
 mod capture;
 mod noise;
+mod probes;
 mod summed_area;
 
 pub use basis::{NodeBasis, NodeRegion};
@@ -145,44 +145,7 @@ impl Room {
             .room
             .interreflection
             .then(|| Radiosity::build(&geometry, true));
-        // Camera pixels.
-        let (w, h) = (camera.width, camera.height);
-        let mut pixels = Vec::with_capacity((w * h) as usize);
-        let mut camera_samples: Vec<Sample> = Vec::new();
-        let mut camera_albedo = Vec::with_capacity((w * h) as usize);
-        let mut camera_interp = Vec::with_capacity((w * h) as usize);
-        for v in 0..h {
-            for u in 0..w {
-                let index = v * w + u;
-                let hit = camera
-                    .ray(u as f32 + 0.5, v as f32 + 0.5)
-                    .and_then(|d| geometry.cast(&Ray::new(camera.position, d), 100.0));
-                match hit {
-                    Some(hit) => {
-                        let (chart, albedo) = geometry.albedo_at(hit.face, hit.point);
-                        pixels.push(PixelInfo {
-                            point: Some(hit.point.to_array()),
-                            face: Some(hit.face),
-                            target: geometry.faces[hit.face].target,
-                            chart,
-                        });
-                        camera_albedo.push(albedo);
-                        camera_interp.push(geometry.element_weights(hit.face, hit.point));
-                        camera_samples.push((index, hit.point, hit.normal, 1.0, None));
-                    }
-                    None => {
-                        pixels.push(PixelInfo {
-                            point: None,
-                            face: None,
-                            target: false,
-                            chart: None,
-                        });
-                        camera_albedo.push(LinearRgb::ZERO);
-                        camera_interp.push([(0, 0.0); 4]);
-                    }
-                }
-            }
-        }
+        let (pixels, camera_probes) = probes::camera_view(&camera, &geometry);
         let mut room = Self {
             scene,
             geometry,
@@ -195,140 +158,10 @@ impl Room {
             element_probes: Probes::default(),
             patch_probes: Probes::default(),
         };
-        room.camera_probes = room.probes(camera_albedo, camera_interp, &camera_samples);
-        // Elements: 3×3 samples each.
-        let mut samples = Vec::new();
-        for (e, el) in room.geometry.elements.iter().enumerate() {
-            let face = &room.geometry.faces[el.face];
-            let (ns, nt) = face.grid;
-            let (i, j) = ((e - face.first_element) % ns, (e - face.first_element) / ns);
-            for b in 0..3 {
-                for a in 0..3 {
-                    let s = (i as f32 + (a as f32 + 0.5) / 3.0) / ns as f32;
-                    let t = (j as f32 + (b as f32 + 0.5) / 3.0) / nt as f32;
-                    let (p, n) = face.geom.point(s, t);
-                    let (ds, dt) = (0.5 / (3.0 * ns as f32), 0.5 / (3.0 * nt as f32));
-                    let cell = [(-ds, -dt), (ds, -dt), (ds, dt), (-ds, dt)]
-                        .map(|(a, b)| face.geom.point(s + a, t + b).0);
-                    samples.push((e as u32, p, n, 1.0 / 9.0, Some(cell)));
-                }
-            }
-        }
-        let albedo: Vec<LinearRgb> = room.geometry.elements.iter().map(|e| e.albedo).collect();
-        let interp = vec![[(0, 0.0); 4]; albedo.len()];
-        room.element_probes = room.probes(albedo, interp, &samples);
-        // Chart patches: 4×4 samples over the inner half of each patch.
-        let mut samples = Vec::new();
-        let mut albedo = Vec::new();
-        let mut interp = Vec::new();
-        for (m, chart) in room.geometry.charts.iter().enumerate() {
-            for k in 0..24 {
-                let center = chart.patch_center(k);
-                let face = room
-                    .geometry
-                    .cast(&Ray::new(center + chart.normal * 0.02, -chart.normal), 0.05)
-                    .map_or(0, |h| h.face);
-                let half = 0.25 * chart.patch_side();
-                // A 4×4 grid of cell centres over the inner half of the patch (the area a
-                // camera's sample box averages), one probe each.
-                for b in [-0.75f32, -0.25, 0.25, 0.75] {
-                    for a in [-0.75f32, -0.25, 0.25, 0.75] {
-                        let id =
-                            ((m * 24 + k) * PATCH_SAMPLES + samples.len() % PATCH_SAMPLES) as u32;
-                        let p = center + chart.right * (a * half) + chart.up * (b * half);
-                        albedo.push(roomlight_core::colorchecker::reflectance(k));
-                        interp.push(room.geometry.element_weights(face, p));
-                        samples.push((id, p, chart.normal, 1.0, None));
-                    }
-                }
-            }
-        }
-        room.patch_probes = room.probes(albedo, interp, &samples);
+        room.camera_probes = room.probes(camera_probes);
+        room.element_probes = room.probes(probes::element_samples(&room.geometry));
+        room.patch_probes = room.probes(probes::patch_samples(&room.geometry));
         Ok(room)
-    }
-
-    /// Transport from every projector and light to a set of probes.
-    fn probes(
-        &self,
-        albedo: Vec<LinearRgb>,
-        interp: Vec<[(u32, f32); 4]>,
-        samples: &[Sample],
-    ) -> Probes {
-        let count = albedo.len();
-        let mut projectors = Vec::with_capacity(self.projectors.len());
-        for projector in &self.projectors {
-            let mut map = ProjectorMap {
-                entries: Vec::new(),
-                boxes: Vec::new(),
-                white: vec![0.0; count],
-            };
-            let pin = &projector.pinhole;
-            for &(probe, p, n, weight, cell) in samples {
-                let lifted = p + n * EPS;
-                // Half the extent, in projector pixels, of the cell's image around the sample's.
-                let half = cell.and_then(|corners| {
-                    let (u, v) = pin.project(p)?;
-                    let (mut hx, mut hy) = (0.0f32, 0.0f32);
-                    for c in corners {
-                        let (cu, cv) = pin.project(c)?;
-                        (hx, hy) = (hx.max((cu - u).abs()), hy.max((cv - v).abs()));
-                    }
-                    Some((hx, hy))
-                });
-                projector.footprint(p, n, |lens, px, factor| {
-                    if !self.geometry.visible(lens, lifted) {
-                        return;
-                    }
-                    map.white[probe as usize] += factor * weight;
-                    match half {
-                        Some((hx, hy)) => {
-                            let (x, y) =
-                                ((px % pin.width) as f32 + 0.5, (px / pin.width) as f32 + 0.5);
-                            let clip = |v: f32, max: u32| (v.round().max(0.0) as u32).min(max);
-                            let mut b = [
-                                clip(x - hx, pin.width),
-                                clip(y - hy, pin.height),
-                                clip(x + hx, pin.width),
-                                clip(y + hy, pin.height),
-                            ];
-                            // At least the sample's own pixel.
-                            if b[2] <= b[0] || b[3] <= b[1] {
-                                b = [
-                                    px % pin.width,
-                                    px / pin.width,
-                                    px % pin.width + 1,
-                                    px / pin.width + 1,
-                                ];
-                            }
-                            map.boxes.push((probe, b, factor * weight));
-                        }
-                        None => map.entries.push((probe, px, factor * weight)),
-                    }
-                });
-            }
-            projectors.push(map);
-        }
-        let mut lights = Vec::with_capacity(self.lights.len());
-        for light in &self.lights {
-            let mut factor = vec![0.0f32; count];
-            for &(probe, p, n, weight, _) in samples {
-                let lifted = p + n * EPS;
-                let mut sum = 0.0;
-                light.samples_to(p, n, |q, f| {
-                    if self.geometry.visible(q + light.normal * EPS, lifted) {
-                        sum += f;
-                    }
-                });
-                factor[probe as usize] += sum * weight;
-            }
-            lights.push(factor);
-        }
-        Probes {
-            albedo,
-            interp,
-            projectors,
-            lights,
-        }
     }
 
     /// The scene this room was built from.
