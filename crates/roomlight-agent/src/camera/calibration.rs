@@ -1,617 +1,388 @@
-//! Calibration over the wire: a projector the model does not know is shown structured light and
-//! a response ramp through its node agent, decoded, segmented and assigned its nodes; a projector
-//! whose attenuation is unknown (hot) is measured node by node while the others keep their
-//! values. The interface is narrow on purpose (the round loop calls [`calibrate_hot`] and the
-//! service [`assign_message`]): the one calibration procedure of roomlight-calib is to replace
-//! what is inside.
+//! Calibration over the wire: the camera agent drives the one calibration procedure
+//! ([`roomlight_calib::procedure`]) on its peers through the [`WireRig`]. Projectors waiting for
+//! their nodes while the room is still dark are brought up together (footprints, those that do
+//! not overlap coded at the same time, second passes, responses, nodes feathered together,
+//! Hadamard attenuation); a projector joining a lit room is calibrated alone while the others
+//! keep their values (structured light against inverses, its nodes beside what the others'
+//! weights leave, its attenuation measured hot). A projector whose nodes the model knows but
+//! whose attenuation it does not is measured hot: through the charts of whole images with a
+//! survey, through the camera's patches without one.
+//!
+//! It owns turning the procedure's results into the live model (node ids, columns over the
+//! model's patches, starts) and the registry (nodes, calibrated); it must not know the order
+//! of captures (the procedure's) or how a frame reaches a display (the rig's). The round loop
+//! calls [`calibrate`]; the service sends [`assign_message`]s.
 
 use super::capture::Captures;
 use super::model::joining_start;
-use super::registry::Outbox;
+use super::rig::WireRig;
 use super::{Shared, Survey};
-use crate::hardware::{Assignment, Camera, Fill as Pattern};
-use roomlight_calib::graycode::{Coding, DecodeConfig, Manifest};
-use roomlight_calib::image_io::LinearImage;
-use roomlight_calib::response::{fit_response, footprint_ramp, ramp_codes};
+use crate::hardware::Camera;
+use roomlight_calib::attenuation::Attenuation;
+use roomlight_calib::procedure::{
+    Event, Hot, Placed, Procedure, ProcedureError, Settings, Setup, place,
+};
+use roomlight_calib::rig::{Frame, Rig, RigError};
 use roomlight_core::conventional::conventional_value;
-use roomlight_core::{AttenuationColumn, LinearRgb, Problem};
-use roomlight_proto::convert::to_rgb;
-use roomlight_proto::v1;
-use std::collections::HashSet;
-use std::sync::atomic::Ordering;
+use roomlight_core::{AttenuationColumn, LinearRgb, ModelError, Problem};
 
-/// Sends `projector` a Show pattern and waits until it has it on its display; false when it
-/// left or did not show it within the deadline (logged).
-async fn show_pattern(
-    shared: &Shared,
-    projector: &str,
-    tx: &Outbox,
-    pattern: v1::show::Pattern,
-) -> bool {
-    let seq = shared.pattern_seq.fetch_add(1, Ordering::Relaxed) + 1;
-    let show = v1::room_message::Body::Show(v1::Show {
-        seq,
-        pattern: Some(pattern),
-        mask: Vec::new(),
-    });
-    if !shared.offer(projector, tx, vec![show]) {
-        return false;
-    }
-    let shown = shared
-        .registry
-        .wait_for(shared.config.deadline, |r| {
-            r.peer(projector)
-                .is_some_and(|p| p.pattern_shown.is_some_and(|s| s >= seq))
-        })
-        .await;
-    if !shown {
-        tracing::warn!(%projector, seq, "pattern not shown within the deadline");
-    }
-    shown
+pub(super) use super::rig::assign_message;
+
+/// Hadamard columns keep the entries above this many standard deviations of their own noise
+/// (DESIGN §2), as the in-process pipeline does.
+const MULTIPLEXED_SIGMAS: f64 = 3.0;
+
+/// Each node's column over the model's patches, and which model patches every capture could
+/// measure.
+type Measured = (Vec<(u32, AttenuationColumn)>, Vec<bool>);
+
+/// What one calibration measured, ready for the live model.
+struct Outcome {
+    /// Projectors segmented now (none when only attenuation was measured).
+    placed: Vec<Placed>,
+    /// The projectors calibrated, with their nodes.
+    projectors: Vec<(String, Vec<u32>)>,
+    /// Each node's column over the model's patches.
+    columns: Vec<(u32, AttenuationColumn)>,
+    /// Which model patches every capture could measure.
+    measurable: Vec<bool>,
+    captures: usize,
 }
 
-/// Shows `lit` at white and the projector's other nodes at black (all black for `None`), waits
-/// for the projector to acknowledge the pattern, and captures (see [`Captures::measured`]).
-async fn show_and_capture(
-    shared: &Shared,
-    eye: &mut Captures<impl Camera>,
-    projector: &str,
-    (tx, nodes): (&Outbox, &[u32]),
-    lit: Option<u32>,
-) -> Option<(Vec<LinearRgb>, Vec<bool>)> {
-    let values = nodes
-        .iter()
-        .map(|&n| v1::NodeState {
-            node: n,
-            x: Some(to_rgb(if lit == Some(n) {
-                LinearRgb::ONE
-            } else {
-                LinearRgb::ZERO
-            })),
-            attenuation: None,
-        })
-        .collect();
-    let pattern = v1::show::Pattern::Nodes(v1::NodeValues { values });
-    if !show_pattern(shared, projector, tx, pattern).await {
-        return None;
-    }
-    eye.measured(shared).await
-}
-
-/// Shows a whole-frame pattern on `projector`, waits for it, and captures a whole image (the
-/// camera's stale frames discarded first, every frame counted).
-async fn show_and_capture_image(
-    shared: &Shared,
-    eye: &mut Captures<impl Camera>,
-    projector: &str,
-    tx: &Outbox,
-    pattern: Pattern,
-) -> Option<LinearImage> {
-    if !show_pattern(shared, projector, tx, wire_pattern(pattern)).await {
-        return None;
-    }
-    eye.image(shared).await
-}
-
-/// A whole-frame pattern as a Show pattern (white and black as uniform codes).
-fn wire_pattern(pattern: Pattern) -> v1::show::Pattern {
-    use roomlight_calib::graycode::{Axis, Pattern as Gray};
-    let uniform = |v: f64| {
-        v1::show::Pattern::Uniform(v1::Uniform {
-            code: Some(to_rgb(LinearRgb::splat(v))),
-        })
-    };
-    match pattern {
-        Pattern::Uniform(code) => v1::show::Pattern::Uniform(v1::Uniform {
-            code: Some(to_rgb(LinearRgb(code.map(f64::from)))),
-        }),
-        Pattern::Structured {
-            pattern: Gray::White,
-            ..
-        } => uniform(1.0),
-        Pattern::Structured {
-            pattern: Gray::Black,
-            ..
-        } => uniform(0.0),
-        Pattern::Structured {
-            pattern: Gray::Bit { axis, bit, inverse },
-            coding,
-        } => v1::show::Pattern::Gray(v1::GrayBit {
-            axis: match axis {
-                Axis::Column => v1::Axis::Column,
-                Axis::Row => v1::Axis::Row,
-            } as i32,
-            bit,
-            inverse,
-            coding: match coding {
-                Coding::Gray => v1::Coding::Gray,
-                Coding::Xor04 => v1::Coding::Xor04,
-            } as i32,
-        }),
-    }
-}
-
-/// An assignment as the Assign message that carries it.
-pub(super) fn assign_message(a: &Assignment) -> v1::Assign {
-    v1::Assign {
-        nodes: a
-            .nodes
-            .iter()
-            .map(|(n, w)| v1::NodeAssignment {
-                node: *n,
-                chart: *n,
-                pixels: w.iter().map(|p| p.0).collect(),
-                weights: w.iter().map(|p| p.1).collect(),
-            })
-            .collect(),
-        width: a.width,
-        height: a.height,
-        gamma: a.response.gamma.to_vec(),
-    }
-}
-
-/// Levels of the response ramp shown over the wire (DESIGN §4: at least 9).
-const RAMP_LEVELS: usize = 9;
-
-/// A projector decoded over the wire and its response fitted, not yet segmented.
-struct Decoded {
-    projector: String,
-    tx: Outbox,
-    width: u32,
-    height: u32,
-    large: bool,
-    corr: roomlight_calib::graycode::Correspondence,
-    response: roomlight_calib::response::Response,
-}
-
-/// Calibrates a projector the model does not know, over the wire (DESIGN §4.2–4.4, §4.7): its
-/// node agent shows structured light and a response ramp while the other projectors keep their
-/// values (the decode compares each pattern with its inverse and the response fit subtracts the
-/// ramp's first level, so their light cancels); the camera agent decodes and segments it
-/// (off the runtime's threads), appends its nodes to the model with empty columns, records
-/// each node's chart for its conventional start, and sends it the nodes' weights and the
-/// response. At bring-up (no projector lit yet) every other projector waiting for its nodes is
-/// decoded too and all are segmented together, feathered against each other; a projector that
-/// joins a lit room takes what the others' weights leave ([`assign_decoded`]). False when the
-/// projector left, a pattern was not shown, the camera failed, or the decode or the response
-/// fit was refused (logged; it is tried again).
-async fn segment_over_wire(
-    shared: &Shared,
-    eye: &mut Captures<impl Camera>,
-    projector: &str,
-) -> bool {
-    let Some(first) = decode_over_wire(shared, eye, projector).await else {
-        return false;
-    };
-    let mut batch = vec![first];
-    let others: Vec<String> = {
-        let reg = shared.registry.lock();
-        let room = reg.projectors();
-        if room.dark() {
-            room.iter()
-                .filter(|(id, p)| *id != projector && !p.calibrated() && p.nodes().is_empty())
-                .map(|(id, _)| id.clone())
-                .collect()
-        } else {
-            Vec::new()
-        }
-    };
-    for other in others {
-        if let Some(d) = decode_over_wire(shared, eye, &other).await {
-            batch.push(d);
-        }
-    }
-    assign_decoded(shared, batch)
-        .await
-        .iter()
-        .any(|p| p == projector)
-}
-
-/// Shows a projector's structured light and response ramp, decodes the one and fits the other
-/// (off the runtime's threads). `None` when it left, a pattern was not shown, the camera failed
-/// or the decode or fit was refused (logged).
-async fn decode_over_wire(
-    shared: &Shared,
-    eye: &mut Captures<impl Camera>,
-    projector: &str,
-) -> Option<Decoded> {
-    let survey = shared.survey.clone()?;
-    let (tx, width, height, kind) = shared
-        .registry
-        .lock()
-        .peer(projector)
-        .map(|p| (p.tx.clone(), p.width, p.height, p.kind))?;
-    // A large aperture's defocus blurs XOR-04's fine stripes: plain Gray code, one node.
-    let large = kind == v1::ProjectorKind::LargeAperture;
-    let coding = if large { Coding::Gray } else { Coding::Xor04 };
-    let (manifest, codes) = match (
-        Manifest::with_coding(width, height, coding),
-        ramp_codes(RAMP_LEVELS),
-    ) {
-        (Ok(m), Ok(c)) => (m, c),
-        (Err(e), _) | (_, Err(e)) => {
-            tracing::error!(%projector, error = %e, "cannot calibrate over the wire");
-            return None;
-        }
-    };
-    tracing::info!(%projector, width, height, patterns = manifest.patterns.len(), "structured light over the wire");
-    let mut images = Vec::with_capacity(manifest.patterns.len());
-    for file in &manifest.patterns {
-        let pattern = Pattern::Structured {
-            pattern: file.pattern,
-            coding,
-        };
-        images.push(show_and_capture_image(shared, eye, projector, &tx, pattern).await?);
-    }
-    let mut ramp = Vec::with_capacity(codes.len());
-    for &code in &codes {
-        let pattern = Pattern::Uniform([code as f32; 3]);
-        ramp.push(show_and_capture_image(shared, eye, projector, &tx, pattern).await?);
-    }
-    // Dark again until its attenuation is measured: at bring-up others are decoded and measured
-    // after it, and its last ramp level would light their captures.
-    if !show_pattern(
-        shared,
-        projector,
-        &tx,
-        wire_pattern(Pattern::Uniform([0.0; 3])),
-    )
-    .await
-    {
-        return None;
-    }
-    let worked = tokio::task::spawn_blocking(move || {
-        decode_and_fit(&manifest, &images, &ramp, &codes, &survey)
-    })
-    .await;
-    match worked {
-        Ok(Ok((corr, response))) => Some(Decoded {
-            projector: projector.to_string(),
-            tx,
-            width,
-            height,
-            large,
-            corr,
-            response,
-        }),
-        Ok(Err(e)) => {
-            tracing::error!(%projector, error = %e, "calibration over the wire refused");
-            None
-        }
-        Err(e) => {
-            tracing::error!(%projector, error = %e, "calibration over the wire failed");
-            None
-        }
-    }
-}
-
-/// Decodes a projector's structured light and fits its response to the ramp (blocking work).
-fn decode_and_fit(
-    manifest: &Manifest,
-    images: &[LinearImage],
-    ramp: &[LinearImage],
-    codes: &[f64],
-    survey: &Survey,
-) -> Result<
-    (
-        roomlight_calib::graycode::Correspondence,
-        roomlight_calib::response::Response,
-    ),
-    String,
-> {
-    let corr = roomlight_calib::graycode::decode(manifest, &DecodeConfig::default(), |f| {
-        let k = manifest
-            .patterns
-            .iter()
-            .position(|p| p.file == f.file)
-            .unwrap_or(0);
-        Ok(&images[k])
-    })
-    .map_err(|e| format!("decode: {e}"))?;
-    if corr.map.len() != survey.target_mask.len() {
-        return Err(format!(
-            "the camera's images have {} pixels, the survey's target mask {}",
-            corr.map.len(),
-            survey.target_mask.len()
-        ));
-    }
-    let (measured, noise) = footprint_ramp(ramp, &corr);
-    let response = fit_response(codes, &measured, &noise).map_err(|e| format!("response: {e}"))?;
-    Ok((corr, response))
-}
-
-/// Segments decoded projectors (off the runtime's threads) and assigns them their nodes: the
-/// standard ones that light a chart together, feathered against each other, beside the
-/// projectors segmented before (which keep their weights: the new ones share what those leave,
-/// [`roomlight_calib::nodes::segment_beside`]); a large aperture, or a projector that lights no
-/// chart, is one node over its frame but the target. Their nodes join the model with empty
-/// columns. Returns the projectors whose assignment was sent.
-async fn assign_decoded(shared: &Shared, batch: Vec<Decoded>) -> Vec<String> {
-    let Some(survey) = shared.survey.clone() else {
-        return Vec::new();
-    };
-    // What the attached projectors segmented before give each camera pixel (those decoded now
-    // are segmented anew, whatever they had). One that is not attached now does not hold its
-    // share: a projector that replaces a dead one takes its place (should the old one come
-    // back, the model holds both where they overlap).
-    let attached: HashSet<String> = shared
-        .registry
-        .lock()
-        .projectors()
-        .iter()
-        .map(|(id, _)| id.clone())
-        .collect();
-    let claimed: Option<Vec<f32>> = {
-        let live = shared.live();
-        let mut sum: Option<Vec<f32>> = None;
-        for (id, claim) in &live.claims {
-            if !attached.contains(id)
-                || batch.iter().any(|d| &d.projector == id)
-                || claim.len() != survey.target_mask.len()
-            {
-                continue;
-            }
-            roomlight_calib::nodes::add_claim(
-                sum.get_or_insert_with(|| vec![0.0; claim.len()]),
-                claim,
-            );
-        }
-        sum
-    };
-    let segmented =
-        tokio::task::spawn_blocking(move || segment_batch(batch, &survey, claimed.as_deref()))
-            .await;
-    let segmented = match segmented {
-        Ok(s) => s,
-        Err(e) => {
-            tracing::error!(error = %e, "segmentation over the wire failed");
-            return Vec::new();
-        }
-    };
-    let mut assigned = Vec::with_capacity(segmented.len());
-    for (d, nodes, claim, decoded) in segmented {
-        let projector = d.projector.as_str();
-        let Some(assignment) = install_assignment(shared, &d, nodes, claim) else {
-            continue;
-        };
-        let ids: Vec<u32> = assignment.nodes.iter().map(|(n, _)| *n).collect();
-        shared.registry.lock().set_nodes(projector, ids.clone());
-        let assign = v1::room_message::Body::Assign(assign_message(&assignment));
-        if !shared.offer(projector, &d.tx, vec![assign]) {
-            continue;
-        }
-        tracing::info!(%projector, nodes = ids.len(), decoded = format!("{:.1}%", 100.0 * decoded), gamma = ?assignment.response.gamma, "segmented over the wire");
-        assigned.push(d.projector);
-    }
-    assigned
-}
-
-/// A segmented projector: its nodes' weights over the camera pixels with their charts, its claim
-/// on the camera pixels (charted projectors), and the share of its frame decoded.
-type Segmented = (
-    Decoded,
-    Vec<(Vec<f32>, Option<usize>)>,
-    Option<Vec<f32>>,
-    f64,
-);
-
-/// Segments a batch of decoded projectors (blocking work): the standard ones that light a chart
-/// together beside what `claimed` holds, the others one node over their frame.
-fn segment_batch(batch: Vec<Decoded>, survey: &Survey, claimed: Option<&[f32]>) -> Vec<Segmented> {
-    let config = roomlight_calib::nodes::NodeConfig::default();
-    let charted: Vec<bool> = batch
-        .iter()
-        .map(|d| {
-            !d.large
-                && roomlight_calib::nodes::charts_lit(&d.corr, &survey.corners, &config)
-                    .is_ok_and(|c| !c.is_empty())
-        })
-        .collect();
-    let together: Vec<roomlight_calib::graycode::Correspondence> = batch
-        .iter()
-        .zip(&charted)
-        .filter(|(_, c)| **c)
-        .map(|(d, _)| d.corr.clone())
-        .collect();
-    let seg = roomlight_calib::nodes::segment_beside(
-        &together,
-        &survey.corners,
-        Some(&survey.target_mask),
-        &config,
-        claimed,
-    );
-    let mut seg = match seg {
-        Ok(seg) => Some(seg),
-        Err(e) => {
-            tracing::error!(error = %e, "segmentation over the wire refused");
-            None
-        }
-    };
-    let mut out = Vec::with_capacity(batch.len());
-    let mut k = 0;
-    for (d, charted) in batch.into_iter().zip(charted) {
-        let decoded = d.corr.decoded_share();
-        let whole =
-            || roomlight_calib::nodes::whole_frame(&d.corr, &survey.corners, &survey.target_mask);
-        let (nodes, claim) = if charted {
-            let Some(seg) = seg.as_mut() else {
-                continue;
-            };
-            let nodes: Vec<(Vec<f32>, Option<usize>)> = seg
-                .nodes
-                .iter_mut()
-                .filter(|n| n.projector == k)
-                .map(|n| (std::mem::take(&mut n.weights), Some(n.chart)))
-                .collect();
-            let claim = std::mem::take(&mut seg.claims[k]);
-            k += 1;
-            (nodes, Some(claim))
-        } else {
-            tracing::info!(projector = %d.projector, large = d.large, "one node over its frame");
-            (vec![whole()], None)
-        };
-        out.push((d, nodes, claim, decoded));
-    }
-    out
-}
-
-/// Appends a segmented projector's nodes to the live model with empty columns and records its
-/// assignment, charts and claim. `None` when the model refused them (logged).
-fn install_assignment(
-    shared: &Shared,
-    d: &Decoded,
-    nodes: Vec<(Vec<f32>, Option<usize>)>,
-    claim: Option<Vec<f32>>,
-) -> Option<Assignment> {
-    let projector = d.projector.as_str();
-    let mut live = shared.live_mut();
-    let first = live.problem.nodes() as u32;
-    let ids: Vec<u32> = (first..).take(nodes.len()).collect();
-    let mut columns = live.problem.columns().to_vec();
-    columns.extend(nodes.iter().map(|_| AttenuationColumn::default()));
-    let problem = match Problem::new(
-        columns,
-        live.problem.black().to_vec(),
-        live.problem.target().to_vec(),
-        live.problem.noise().to_vec(),
-    ) {
-        Ok(p) => p,
-        Err(e) => {
-            tracing::error!(%projector, error = %e, "calibration over the wire refused");
-            return None;
-        }
-    };
-    live.problem = problem;
-    live.start.extend(nodes.iter().map(|_| None));
-    for (&n, (_, chart)) in ids.iter().zip(&nodes) {
-        if let Some(c) = chart {
-            live.charts.insert(n, *c);
-        }
-    }
-    let assignment = Assignment {
-        width: d.width,
-        height: d.height,
-        response: d.response.clone(),
-        nodes: ids
-            .iter()
-            .zip(&nodes)
-            .map(|(&n, (w, _))| {
-                let sparse = w
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, w)| **w > 0.0)
-                    .map(|(i, w)| (i as u32, w.min(1.0)))
-                    .collect();
-                (n, sparse)
-            })
-            .collect(),
-    };
-    live.owners.insert(projector.to_string(), ids.clone());
-    live.assignments
-        .insert(projector.to_string(), assignment.clone());
-    match claim {
-        Some(claim) => live.claims.insert(projector.to_string(), claim),
-        None => live.claims.remove(projector),
-    };
-    Some(assignment)
-}
-
-/// Measures a hot projector's attenuation (DESIGN §4): its nodes all at black, then each alone
-/// at white, one capture each, while every other projector keeps its values (no errors are
-/// sent meanwhile). `p = max(y_white − y_black, 0)`, entries at or below √2 σ (one standard
-/// deviation of a difference of two captures) dropped: about the level the Hadamard path's 3σ
-/// cut reaches with its lower variance. At 3√2 σ the calibrated lab's model dropped enough
-/// faint light that the room measured 6% below the model's optimum (1.4% at √2 σ). Also
-/// patches a capture could not measure leave the model (see [`Captures::measured`]). Then the
-/// projector gets its attenuation and every
-/// attached projector its `s` anew (the new light changes it). False when the projector left,
-/// did not show a pattern in time, or the camera failed: it stays uncalibrated and is tried
-/// again.
-pub(super) async fn calibrate_hot(
+/// Calibrates `projector` and, at bring-up (the room still dark), every other projector waiting
+/// for its nodes with it; then their nodes join the model and the rounds. `errors`: the room's
+/// current errors without them (once a round measured them), where a projector joining a lit
+/// room starts. Returns the projectors calibrated; none when it failed (logged: the round loop
+/// tries again later).
+pub(super) async fn calibrate(
     shared: &Shared,
     eye: &mut Captures<impl Camera>,
     projector: &str,
     errors: Option<&[LinearRgb]>,
-) -> bool {
-    let needs_nodes = shared
-        .registry
-        .lock()
-        .projectors()
-        .get(projector)
-        .is_some_and(|p| p.nodes().is_empty());
-    if needs_nodes && !segment_over_wire(shared, eye, projector).await {
-        return false;
-    }
-    let Some((tx, nodes)) = shared.registry.lock().outbox(projector) else {
-        return false;
+) -> Vec<String> {
+    let Some((_, nodes)) = shared.registry.lock().outbox(projector) else {
+        return Vec::new();
     };
-    tracing::info!(%projector, nodes = nodes.len(), "hot calibration");
-    let Some((measured, measurable)) = measure_columns(shared, eye, projector, &tx, &nodes).await
-    else {
-        return false;
-    };
-    if !install_columns(shared, projector, &nodes, measured, &measurable, errors) {
-        return false;
-    }
-    // Bring-up: while the room is still dark (no projector has shown a round's frame) and
-    // others wait for their calibration, this one stays dark too, so that theirs is measured
-    // in the dark as well (the light of lit projectors adds camera noise and costs decoded
-    // pixels); all are lit once the last is measured.
-    let dark = {
-        let mut reg = shared.registry.lock();
-        let room = reg.projectors();
-        let dark = room.dark()
-            && room
-                .iter()
-                .any(|(id, p)| id != projector && !p.calibrated());
-        reg.mark_calibrated(projector);
-        dark
-    };
-    if dark {
-        let values = nodes
-            .iter()
-            .map(|&n| v1::NodeState {
-                node: n,
-                x: Some(to_rgb(LinearRgb::ZERO)),
-                attenuation: None,
-            })
-            .collect();
-        let black = v1::show::Pattern::Nodes(v1::NodeValues { values });
-        if !show_pattern(shared, projector, &tx, black).await {
-            shared.light_all();
+    let measured = match &shared.survey {
+        Some(survey) if nodes.is_empty() => {
+            let mut batch = batch(shared, projector).await;
+            let mut measured = over_the_wire(shared, eye, survey, batch.clone()).await;
+            // One projector that fails (left, shows nothing, refused) must not hold the others'
+            // bring-up back: once more without it, or alone when the cause is not one of them.
+            if let (Err(e), true) = (&measured, batch.len() > 1) {
+                tracing::warn!(error = %e, ?batch, "bring-up failed: once more without the cause");
+                match e.projector() {
+                    Some(culprit) if culprit != projector => batch.retain(|id| id != culprit),
+                    _ => batch.truncate(1),
+                }
+                measured = over_the_wire(shared, eye, survey, batch).await;
+            }
+            measured
         }
-    } else {
-        // Its attenuation to the new projector, `s` anew to everyone; then it joins the rounds.
-        shared.light_all();
-    }
-    tracing::info!(%projector, dark, "hot calibration done");
-    shared.save_model();
-    shared.registry.notify();
-    true
+        Some(survey) => hot_images(shared, eye, survey, projector, nodes).await,
+        None => hot_patches(shared, eye, projector, nodes).await,
+    };
+    let outcome = match measured {
+        Ok(outcome) => outcome,
+        Err(e) => {
+            tracing::error!(%projector, error = %e, "calibration over the wire failed");
+            return Vec::new();
+        }
+    };
+    tracing::info!(projectors = ?outcome.projectors.iter().map(|p| &p.0).collect::<Vec<_>>(), captures = outcome.captures, "calibrated over the wire");
+    let Some(calibrated) = install(shared, outcome, errors) else {
+        return Vec::new();
+    };
+    light(shared, &calibrated);
+    calibrated.into_iter().map(|(id, _)| id).collect()
 }
 
-/// Each of a hot projector's nodes' columns: all its nodes at black, then each alone at white,
-/// one capture each; with which patches every capture could measure. `None` when it left, did
-/// not show a pattern in time, the camera failed or a column was refused (logged).
-async fn measure_columns(
+/// Who is calibrated with `projector`: in a dark room, once joins have paused for a heartbeat
+/// (projectors switched on together are coded together), every projector waiting for its
+/// nodes, `projector` first and the others by id; in a lit room it alone.
+async fn batch(shared: &Shared, projector: &str) -> Vec<String> {
+    let waiting = |shared: &Shared| {
+        let registry = shared.registry.lock();
+        let room = registry.projectors();
+        room.dark().then(|| {
+            let mut ids: Vec<String> = room
+                .iter()
+                .filter(|(id, p)| *id != projector && !p.calibrated() && p.nodes().is_empty())
+                .map(|(id, _)| id.clone())
+                .collect();
+            ids.sort();
+            ids
+        })
+    };
+    if waiting(shared).is_some() {
+        // Bounded: a stream of joins cannot hold the bring-up back for more than ten periods.
+        for _ in 0..10 {
+            let changed = shared.registry.changed();
+            if tokio::time::timeout(shared.config.heartbeat, changed)
+                .await
+                .is_err()
+            {
+                break;
+            }
+        }
+    }
+    let mut batch = vec![projector.to_string()];
+    batch.extend(waiting(shared).unwrap_or_default());
+    batch
+}
+
+/// The procedure's view of the survey.
+fn setup(survey: &Survey) -> Setup {
+    Setup {
+        corners: survey.corners.clone(),
+        sample: survey.sample,
+        target_mask: survey.target_mask.clone(),
+    }
+}
+
+/// Reports the procedure's progress in the log.
+fn log_event(event: Event) {
+    match event {
+        Event::Stage { stage, captures } => tracing::info!(?stage, captures, "calibration step"),
+        Event::Captured { .. } => {}
+        Event::Grouped { groups } => tracing::info!(?groups, "coded at the same time"),
+        Event::Decoded { projector, share } => {
+            tracing::info!(%projector, decoded = format!("{:.1}%", 100.0 * share), "structured light decoded")
+        }
+        Event::SecondPass { projector, pass } => tracing::info!(%projector, ?pass, "second pass"),
+        Event::Response { projector, gamma } => tracing::info!(%projector, ?gamma, "response"),
+        Event::WholeFrame { projector, chart } => {
+            tracing::info!(%projector, ?chart, "one node over its frame")
+        }
+    }
+}
+
+/// Brings up `batch` (a dark room) or calibrates it joining a lit room, through the procedure's
+/// steps: black offset, whites, structured light, responses, nodes beside the attached
+/// projectors' claims, then their attenuation (Hadamard against the dark capture; hot in a lit
+/// room, the others keeping their values).
+async fn over_the_wire(
+    shared: &Shared,
+    eye: &mut Captures<impl Camera>,
+    survey: &Survey,
+    batch: Vec<String>,
+) -> Result<Outcome, Failed> {
+    let setup = setup(survey);
+    let lit = !shared.registry.lock().projectors().dark();
+    let claimed = claims_beside(shared, survey, &batch);
+    let first = shared.live().problem.nodes() as u32;
+    let settings = Settings::default();
+    let mut rig = WireRig::new(shared, eye, batch);
+    let mut procedure = Procedure::new(&mut rig, settings, log_event);
+    let live = procedure.rig().projectors();
+    if live.is_empty() {
+        return Err(Failed::Nothing("left before its calibration".into()));
+    }
+    let dark = procedure.dark(&live).await?;
+    let whites = procedure.whites(&live).await?;
+    let decoded = procedure.structured_light(&live, &dark, &whites).await?;
+    let measured = procedure.responses(decoded, &live, &dark, &whites).await?;
+    drop(whites);
+    let (to_place, nodes) = (setup.clone(), settings.nodes);
+    let placed = procedure
+        .rig()
+        .offload(move || {
+            place(
+                &to_place,
+                &measured,
+                claimed.as_deref(),
+                first,
+                &nodes,
+                &mut log_event,
+            )
+        })
+        .await??;
+    if placed.is_empty() {
+        return Err(Failed::Nothing("no projector could be placed".into()));
+    }
+    procedure.assign(&placed).await?;
+    let excluded = shared.live().excluded.clone();
+    let (columns, measurable) = if lit {
+        let mut hot = Vec::with_capacity(placed.len());
+        for p in &placed {
+            hot.push(procedure.hot(&setup, &p.projector.id, &p.ids()).await?);
+        }
+        hot_columns(survey, &excluded, &hot)?
+    } else {
+        let columns = procedure.attenuation(&setup, &placed, Some(&dark)).await?;
+        multiplexed_columns(survey, &excluded, &columns.ids, &columns.attenuation)?
+    };
+    Ok(Outcome {
+        projectors: placed
+            .iter()
+            .map(|p| (p.projector.id.clone(), p.ids()))
+            .collect(),
+        placed,
+        columns,
+        measurable,
+        captures: procedure.captures(),
+    })
+}
+
+/// What the attached projectors segmented before give each camera pixel (those in `batch` are
+/// segmented anew, whatever they had). One that is not attached now does not hold its share: a
+/// projector that replaces a dead one takes its place (should the old one come back, the
+/// model holds both where they overlap).
+fn claims_beside(shared: &Shared, survey: &Survey, batch: &[String]) -> Option<Vec<f32>> {
+    let registry = shared.registry.lock();
+    let live = shared.live();
+    let mut sum: Option<Vec<f32>> = None;
+    for (id, claim) in &live.claims {
+        if registry.peer(id).is_none()
+            || batch.contains(id)
+            || claim.len() != survey.target_mask.len()
+        {
+            continue;
+        }
+        roomlight_calib::nodes::add_claim(sum.get_or_insert_with(|| vec![0.0; claim.len()]), claim);
+    }
+    sum
+}
+
+/// Hot calibration of a projector whose nodes the model knows, through the charts of whole
+/// images ([`Procedure::hot`]).
+async fn hot_images(
+    shared: &Shared,
+    eye: &mut Captures<impl Camera>,
+    survey: &Survey,
+    projector: &str,
+    nodes: Vec<u32>,
+) -> Result<Outcome, Failed> {
+    let excluded = shared.live().excluded.clone();
+    let mut rig = WireRig::new(shared, eye, vec![projector.to_string()]);
+    let mut procedure = Procedure::new(&mut rig, Settings::default(), log_event);
+    let hot = procedure.hot(&setup(survey), projector, &nodes).await?;
+    let (columns, measurable) = hot_columns(survey, &excluded, std::slice::from_ref(&hot))?;
+    Ok(Outcome {
+        placed: Vec::new(),
+        projectors: vec![(projector.to_string(), nodes)],
+        columns,
+        measurable,
+        captures: procedure.captures(),
+    })
+}
+
+/// A column over the model's patches from one over the charts' patches (model patch `k` is
+/// chart patch `survey.patches[k]`): negatives clipped to 0, entries at or below `threshold`
+/// dropped, and none on a patch some capture could not measure or the model left out.
+fn model_column(
+    survey: &Survey,
+    excluded: &[bool],
+    p: &[LinearRgb],
+    threshold: &[LinearRgb],
+    usable: &[bool],
+) -> Result<AttenuationColumn, ModelError> {
+    let at = |v: &[LinearRgb], i: usize| v.get(i).copied().unwrap_or(LinearRgb::ZERO);
+    let dense: Vec<LinearRgb> = survey
+        .patches
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| {
+            let kept = usable.get(i) == Some(&true) && excluded.get(k) != Some(&true);
+            if kept {
+                at(p, i).map(|x| x.max(0.0))
+            } else {
+                LinearRgb::ZERO
+            }
+        })
+        .collect();
+    let threshold: Vec<LinearRgb> = survey.patches.iter().map(|&i| at(threshold, i)).collect();
+    AttenuationColumn::from_dense_with_cutoff(&dense, &threshold)
+}
+
+/// Which model patches the chart patches `usable` cover.
+fn model_measurable(survey: &Survey, usable: &[bool]) -> Vec<bool> {
+    survey
+        .patches
+        .iter()
+        .map(|&i| usable.get(i) == Some(&true))
+        .collect()
+}
+
+/// Columns of hot measurements: entries above one standard deviation of the difference (√2 σ
+/// of one capture: about where the Hadamard path's 3σ cut lands with its lower variance; at
+/// 3√2 σ the lab's model dropped enough faint light that the room measured 6% below its
+/// optimum).
+fn hot_columns(survey: &Survey, excluded: &[bool], hot: &[Hot]) -> Result<Measured, ModelError> {
+    let Some(first) = hot.first() else {
+        return Ok((Vec::new(), vec![true; survey.patches.len()]));
+    };
+    let mut usable = vec![true; first.measurable.len()];
+    for h in hot {
+        for (u, m) in usable.iter_mut().zip(&h.measurable) {
+            *u &= *m;
+        }
+    }
+    let mut columns = Vec::new();
+    for h in hot {
+        for ((node, p), sigma) in h.columns.iter().zip(&h.sigma) {
+            columns.push((*node, model_column(survey, excluded, p, sigma, &usable)?));
+        }
+    }
+    Ok((columns, model_measurable(survey, &usable)))
+}
+
+/// Columns of a multiplexed measurement, entries above [`MULTIPLEXED_SIGMAS`].
+fn multiplexed_columns(
+    survey: &Survey,
+    excluded: &[bool],
+    ids: &[u32],
+    attenuation: &Attenuation,
+) -> Result<Measured, ModelError> {
+    let mut columns = Vec::with_capacity(ids.len());
+    for ((&node, p), sigma) in ids.iter().zip(&attenuation.dense).zip(&attenuation.sigma) {
+        let threshold: Vec<LinearRgb> = sigma.iter().map(|s| *s * MULTIPLEXED_SIGMAS).collect();
+        let column = model_column(survey, excluded, p, &threshold, &attenuation.usable)?;
+        columns.push((node, column));
+    }
+    Ok((columns, model_measurable(survey, &attenuation.usable)))
+}
+
+/// Hot calibration through the camera's patches (no survey, so no whole images to read charts
+/// in): the projector's nodes all black, then each alone at white, one capture each, while the
+/// others keep their values; `p = max(y_white − y_black, 0)` with the entries at or below √2 σ
+/// of the model's patch noise dropped (see [`hot_columns`]). The same captures as
+/// [`Procedure::hot`], which reads them from images.
+async fn hot_patches(
     shared: &Shared,
     eye: &mut Captures<impl Camera>,
     projector: &str,
-    tx: &Outbox,
-    nodes: &[u32],
-) -> Option<(Vec<(u32, AttenuationColumn)>, Vec<bool>)> {
-    let (black, mut measurable) =
-        show_and_capture(shared, eye, projector, (tx, nodes), None).await?;
+    nodes: Vec<u32>,
+) -> Result<Outcome, Failed> {
+    let frame = |on: Option<u32>| {
+        let values = nodes
+            .iter()
+            .map(|&n| {
+                let x = if on == Some(n) {
+                    LinearRgb::ONE
+                } else {
+                    LinearRgb::ZERO
+                };
+                (n, x)
+            })
+            .collect();
+        [(projector, Frame::Nodes(values))]
+    };
     let threshold: Vec<LinearRgb> = shared
         .live()
         .problem
         .noise()
         .iter()
-        .map(|s| *s * (1.0 * std::f64::consts::SQRT_2))
+        .map(|s| *s * std::f64::consts::SQRT_2)
         .collect();
-    let mut measured = Vec::with_capacity(nodes.len());
-    for &n in nodes {
-        let (white, ok) = show_and_capture(shared, eye, projector, (tx, nodes), Some(n)).await?;
+    let camera = || RigError::Camera("the capture failed (logged)".into());
+    let mut rig = WireRig::new(shared, eye, vec![projector.to_string()]);
+    rig.show(&frame(None)).await?;
+    let (black, mut measurable) = rig.measured().await.ok_or_else(camera)?;
+    let mut columns = Vec::with_capacity(nodes.len());
+    for &n in &nodes {
+        rig.show(&frame(Some(n))).await?;
+        let (white, ok) = rig.measured().await.ok_or_else(camera)?;
         for (m, o) in measurable.iter_mut().zip(ok) {
             *m &= o;
         }
@@ -620,49 +391,150 @@ async fn measure_columns(
             .zip(&black)
             .map(|(w, b)| (*w - *b).map(|v| v.max(0.0)))
             .collect();
-        match AttenuationColumn::from_dense_with_cutoff(&dense, &threshold) {
-            Ok(column) => measured.push((n, column)),
-            Err(e) => {
-                tracing::error!(%projector, node = n, error = %e, "hot calibration refused");
-                return None;
-            }
-        }
+        let column = AttenuationColumn::from_dense_with_cutoff(&dense, &threshold)?;
+        columns.push((n, column));
     }
-    Some((measured, measurable))
+    rig.show(&frame(None)).await?;
+    Ok(Outcome {
+        placed: Vec::new(),
+        projectors: vec![(projector.to_string(), nodes.clone())],
+        columns,
+        measurable,
+        captures: nodes.len() + 1,
+    })
 }
 
-/// Puts a hot projector's measured columns into the live model: patches its light makes
-/// unmeasurable leave the model for good (every column loses them, their target becomes their
-/// black level and their errors are zero, so the model and the measured G agree and no node
-/// acts on them); its nodes get their start; it is no longer uncalibrated. False when the model
-/// refused the columns (logged).
-fn install_columns(
+/// Why a calibration failed.
+#[derive(Debug, thiserror::Error)]
+enum Failed {
+    #[error(transparent)]
+    Procedure(#[from] ProcedureError),
+    #[error(transparent)]
+    Rig(#[from] RigError),
+    #[error(transparent)]
+    Calib(#[from] roomlight_calib::CalibError),
+    #[error("attenuation: {0}")]
+    Model(#[from] ModelError),
+    /// Nothing to calibrate, or the model's nodes changed while the procedure ran.
+    #[error("{0}")]
+    Nothing(String),
+}
+
+/// The projector a rig's failure names, if any.
+fn rig_projector(e: &RigError) -> Option<&str> {
+    match e {
+        RigError::Gone(id) | RigError::NotShown(id) | RigError::Unsupported(id, _) => Some(id),
+        _ => None,
+    }
+}
+
+impl Failed {
+    /// The projector that caused it, when one did.
+    fn projector(&self) -> Option<&str> {
+        match self {
+            Self::Rig(e) | Self::Procedure(ProcedureError::Rig(e)) => rig_projector(e),
+            Self::Procedure(ProcedureError::Projector { projector, .. }) => Some(projector),
+            _ => None,
+        }
+    }
+}
+
+/// Puts what a calibration measured into the live model: the nodes of projectors segmented now
+/// (appended with their assignments, charts and claims), every measured column, patches some
+/// capture could not measure left out for good (every column loses them, their target becomes
+/// their black level, so the model and the measured `G` agree), the nodes' starts (the
+/// conventional value of their chart; joining a lit room, the best fill of the room's current
+/// `errors`). The projectors calibrated with their nodes; `None` when the model refused
+/// (logged).
+fn install(
     shared: &Shared,
-    projector: &str,
-    nodes: &[u32],
-    measured: Vec<(u32, AttenuationColumn)>,
-    measurable: &[bool],
+    outcome: Outcome,
     errors: Option<&[LinearRgb]>,
-) -> bool {
+) -> Option<Vec<(String, Vec<u32>)>> {
     let mut guard = shared.live_mut();
     let live = &mut *guard;
+    if let Err(e) = append_nodes(live, &outcome.placed) {
+        tracing::error!(error = %e, "calibration over the wire refused");
+        return None;
+    }
     let mut columns = live.problem.columns().to_vec();
-    for (n, column) in measured {
+    for (n, column) in outcome.columns {
         if let Some(slot) = columns.get_mut(n as usize) {
             *slot = column;
         }
     }
-    let newly = live.newly_unmeasurable(measurable);
+    let newly = live.newly_unmeasurable(&outcome.measurable);
     if !newly.is_empty() {
-        tracing::info!(%projector, patches = ?newly, "patches not measurable under its light: left out");
+        tracing::info!(patches = ?newly, "patches not measurable under the new light: left out");
     }
     if let Err(e) = live.leave_out_with(&newly, columns) {
-        tracing::error!(%projector, error = %e, "hot calibration refused");
-        return false;
+        tracing::error!(error = %e, "calibration over the wire refused");
+        return None;
     }
+    let nodes: Vec<u32> = outcome
+        .projectors
+        .iter()
+        .flat_map(|(_, n)| n.iter().copied())
+        .collect();
+    starts(shared.survey.as_ref(), live, &nodes, errors);
+    for (id, _) in &outcome.projectors {
+        live.uncalibrated.remove(id);
+    }
+    Some(outcome.projectors)
+}
+
+/// Appends the nodes of projectors segmented now (ids from the model's node count on, as the
+/// procedure numbered them) with empty columns, and records their assignments, charts and
+/// claims.
+fn append_nodes(live: &mut super::model::Live, placed: &[Placed]) -> Result<(), Failed> {
+    let Some(first) = placed.iter().flat_map(|p| &p.nodes).map(|n| n.id).next() else {
+        return Ok(());
+    };
+    if first as usize != live.problem.nodes() {
+        return Err(Failed::Nothing(format!(
+            "nodes numbered from {first}, the model has {}",
+            live.problem.nodes()
+        )));
+    }
+    let count: usize = placed.iter().map(|p| p.nodes.len()).sum();
+    let mut columns = live.problem.columns().to_vec();
+    columns.resize(columns.len() + count, AttenuationColumn::default());
+    live.problem = Problem::new(
+        columns,
+        live.problem.black().to_vec(),
+        live.problem.target().to_vec(),
+        live.problem.noise().to_vec(),
+    )?;
+    live.start.resize(live.start.len() + count, None);
+    for p in placed {
+        let id = p.projector.id.clone();
+        for n in &p.nodes {
+            if let Some(chart) = n.chart {
+                live.charts.insert(n.id, chart);
+            }
+        }
+        live.owners.insert(id.clone(), p.ids());
+        live.assignments.insert(id.clone(), p.assignment());
+        match &p.claim {
+            Some(claim) => live.claims.insert(id, claim.clone()),
+            None => live.claims.remove(&id),
+        };
+    }
+    Ok(())
+}
+
+/// Nodes segmented over the wire start from the conventional value of their chart; joining a
+/// lit room (`errors`), where they best fill what the room lacks now (the bounded least-squares
+/// fit of their columns to the current errors, the others held), not where they would light
+/// their charts alone: the others then adjust in the rounds.
+fn starts(
+    survey: Option<&Survey>,
+    live: &mut super::model::Live,
+    nodes: &[u32],
+    errors: Option<&[LinearRgb]>,
+) {
     let problem = &live.problem;
-    // Nodes segmented over the wire start from the conventional value of their chart.
-    if let Some(survey) = &shared.survey {
+    if let Some(survey) = survey {
         for &n in nodes {
             let (Some(&chart), Some(column)) =
                 (live.charts.get(&n), problem.columns().get(n as usize))
@@ -681,9 +553,6 @@ fn install_columns(
             }
         }
     }
-    // Joining a lit room: the new nodes start where they best fill what the room lacks now
-    // (the bounded least-squares fit of their columns to the current errors, the others held),
-    // not where they would light their charts alone; the others then adjust in the rounds.
     if let Some(e) = errors.filter(|e| e.len() == problem.patches()) {
         match joining_start(problem, nodes, e) {
             Ok(x) => {
@@ -693,11 +562,30 @@ fn install_columns(
                     }
                 }
             }
-            Err(err) => {
-                tracing::warn!(%projector, error = %err, "no joining start: the conventional one")
-            }
+            Err(err) => tracing::warn!(error = %err, "no joining start: the conventional one"),
         }
     }
-    live.uncalibrated.remove(projector);
-    true
+}
+
+/// The calibrated projectors take part in the rounds. Bring-up: while the room is still dark
+/// and others wait for their calibration, they stay dark (the procedure left their nodes
+/// black), so that the others are measured in the dark as well (lit projectors add camera noise
+/// and cost decoded pixels); all light up once the last is measured. Otherwise every
+/// calibrated projector gets its attenuation and `s` anew (the new light changes it).
+fn light(shared: &Shared, calibrated: &[(String, Vec<u32>)]) {
+    let dark = {
+        let mut registry = shared.registry.lock();
+        for (id, nodes) in calibrated {
+            registry.set_nodes(id, nodes.clone());
+            registry.mark_calibrated(id);
+        }
+        let room = registry.projectors();
+        room.dark() && room.any_uncalibrated()
+    };
+    if !dark {
+        shared.light_all();
+    }
+    tracing::info!(projectors = calibrated.len(), dark, "calibration done");
+    shared.save_model();
+    shared.registry.notify();
 }

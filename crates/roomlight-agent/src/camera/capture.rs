@@ -91,6 +91,24 @@ impl<C: Camera> Captures<C> {
             .await
     }
 
+    /// One whole image exposed `exposure` times as long as normal (in the units of a normal
+    /// one), the camera's stale frames discarded first (every frame counted).
+    pub(super) async fn image_exposed(
+        &mut self,
+        shared: &Shared,
+        exposure: f32,
+    ) -> Option<LinearImage> {
+        self.latest(shared, async move |c: &mut C| {
+            c.capture_image_exposed(exposure).await
+        })
+        .await
+    }
+
+    /// The camera's limits, for calibration.
+    pub(super) fn limits(&self) -> roomlight_calib::rig::CameraLimits {
+        self.camera.limits()
+    }
+
     /// The last of `stale_frames + 1` captures taken with `take` (every one counted); `None`
     /// when one failed (logged).
     async fn latest<T>(

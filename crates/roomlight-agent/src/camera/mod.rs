@@ -10,13 +10,15 @@
 //! - `registry`: the live peers (admission, readiness, removal by a guard's `Drop`);
 //! - `rounds`: the round loop;
 //! - `capture`: captures the nodes can act on (stale frames discarded, charts sampled);
-//! - `calibration`: a projector decoded, segmented and measured over the wire;
+//! - `calibration`: the calibration procedure driven over the wire (bring-up, joins, hot);
+//! - `rig`: the procedure's rig over the peers (Show and Assign messages, the camera);
 //! - `model`: the live model (attenuation, `s`, starts, patches left out) and its file.
 
 mod calibration;
 mod capture;
 mod model;
 mod registry;
+mod rig;
 mod rounds;
 mod service;
 
