@@ -1,0 +1,546 @@
+//! The calibration procedure on a Rig backed by the simulated room, against the simulator's
+//! truth: correspondences, simultaneous coding of disjoint projectors, the second pass,
+//! partition of unity, attenuation, and a projector joining a lit room hot.
+
+mod common;
+
+use common::{chart_corners, small_scene, to_image};
+use roomlight_calib::charts::SampleConfig;
+use roomlight_calib::graycode::Correspondence;
+use roomlight_calib::image_io::LinearImage;
+use roomlight_calib::nodes::{Partition, add_claim, dilate, partition_of_unity};
+use roomlight_calib::procedure::{Event, Placed, Procedure, Settings, Setup, Stage};
+use roomlight_calib::rig::{
+    Assignment, CameraLimits, Frame, Projector, ProjectorKind, ProjectorRole, Rig, RigError,
+    block_on,
+};
+use roomlight_core::LinearRgb;
+use roomlight_sim::{CameraNoise, ProjectorImage, Room, scenes};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+/// The simulated room as a rig: frames rendered with the simulator's hidden responses,
+/// captures exposed through its noisy camera. Only `live` projectors can be shown on.
+struct SimRig<'r> {
+    room: &'r Room,
+    live: Vec<usize>,
+    frames: Vec<roomlight_sim::Frame>,
+    assignments: HashMap<usize, Assignment>,
+    noise: CameraNoise,
+    captures: usize,
+    images: bool,
+}
+
+impl<'r> SimRig<'r> {
+    fn new(room: &'r Room, live: &[&str], seed: u64) -> Self {
+        Self {
+            room,
+            live: live
+                .iter()
+                .map(|id| room.projector(id).expect("projector"))
+                .collect(),
+            frames: vec![roomlight_sim::Frame::Black; room.projectors().len()],
+            assignments: HashMap::new(),
+            noise: CameraNoise::with_seed(room, seed),
+            captures: 0,
+            images: true,
+        }
+    }
+
+    fn index(&self, id: &str) -> Result<usize, RigError> {
+        self.room
+            .projector(id)
+            .ok()
+            .filter(|k| self.live.contains(k))
+            .ok_or_else(|| RigError::Gone(id.to_string()))
+    }
+
+    /// What projector `k` shows `frame` as, in the simulator's terms.
+    fn sim_frame(&self, k: usize, frame: &Frame) -> roomlight_sim::Frame {
+        let p = &self.room.projectors()[k].pinhole;
+        match frame {
+            Frame::Uniform(code) => roomlight_sim::Frame::Uniform(*code),
+            other => roomlight_sim::Frame::Image(ProjectorImage {
+                width: p.width,
+                height: p.height,
+                pixels: other
+                    .codes(p.width, p.height, self.assignments.get(&k))
+                    .expect("frame codes"),
+            }),
+        }
+    }
+}
+
+impl Rig for SimRig<'_> {
+    fn projectors(&self) -> Vec<Projector> {
+        self.live
+            .iter()
+            .map(|&k| {
+                let p = &self.room.projectors()[k];
+                Projector {
+                    id: p.name.clone(),
+                    width: p.pinhole.width,
+                    height: p.pinhole.height,
+                    kind: match p.kind {
+                        roomlight_sim::scene::ProjectorKind::LargeAperture => {
+                            ProjectorKind::LargeAperture
+                        }
+                        roomlight_sim::scene::ProjectorKind::Standard => ProjectorKind::Standard,
+                    },
+                    role: match self.room.scene().projectors[k].role {
+                        roomlight_sim::scene::ProjectorRole::Luminaire => ProjectorRole::Luminaire,
+                        roomlight_sim::scene::ProjectorRole::Texture => ProjectorRole::Texture,
+                    },
+                }
+            })
+            .collect()
+    }
+
+    async fn show(&mut self, frames: &[(&str, Frame)]) -> Result<(), RigError> {
+        for (id, frame) in frames {
+            let k = self.index(id)?;
+            if matches!(frame, Frame::Masked { .. }) && !self.images {
+                return Err(RigError::Unsupported(id.to_string(), "masked patterns"));
+            }
+            self.frames[k] = self.sim_frame(k, frame);
+        }
+        Ok(())
+    }
+
+    async fn assign(&mut self, projector: &str, assignment: &Assignment) -> Result<(), RigError> {
+        let k = self.index(projector)?;
+        self.assignments.insert(k, assignment.clone());
+        Ok(())
+    }
+
+    async fn capture(&mut self, exposure: f32) -> Result<LinearImage, RigError> {
+        let capture = self
+            .room
+            .render(&self.frames, None)
+            .map_err(|e| RigError::Camera(e.to_string()))?;
+        self.captures += 1;
+        Ok(to_image(
+            &self.noise.expose_longer(&capture, f64::from(exposure)),
+        ))
+    }
+
+    fn camera(&self) -> CameraLimits {
+        CameraLimits {
+            saturation: self.room.scene().camera.saturation as f32,
+            longest_exposure: 16.0,
+        }
+    }
+
+    fn shows_masks(&self) -> bool {
+        self.images
+    }
+}
+
+fn setup(room: &Room) -> Setup {
+    Setup {
+        corners: chart_corners(room),
+        sample: SampleConfig::default(),
+        target_mask: room.pixels().iter().map(|p| p.target).collect(),
+    }
+}
+
+/// Every event the procedure reported.
+fn recorder() -> (Arc<Mutex<Vec<Event>>>, impl FnMut(Event) + Send + 'static) {
+    let events = Arc::new(Mutex::new(Vec::new()));
+    let sink = events.clone();
+    (events, move |e| sink.lock().expect("events").push(e))
+}
+
+fn captured_in(events: &[Event], stage: Stage) -> usize {
+    events
+        .iter()
+        .filter(|e| **e == Event::Captured { stage })
+        .count()
+}
+
+/// (share of reached pixels decoded within ±1, share of decoded pixels off by more than 2,
+/// pixels reached), against the simulator's true correspondence.
+fn accuracy(room: &Room, k: usize, decoded: &Correspondence) -> (f64, f64, usize) {
+    let truth = room.true_correspondence(k);
+    let pw = room.projectors()[k].pinhole.width;
+    let off = |t: u32, (x, y): (u32, u32)| {
+        (i64::from(x) - i64::from(t % pw))
+            .abs()
+            .max((i64::from(y) - i64::from(t / pw)).abs())
+    };
+    let (mut reached, mut close, mut n, mut far) = (0usize, 0usize, 0usize, 0usize);
+    for (t, d) in truth.iter().zip(&decoded.map) {
+        if let Some(t) = t {
+            reached += 1;
+            close += usize::from(d.is_some_and(|d| off(*t, d) <= 1));
+        }
+        if let Some(d) = d {
+            n += 1;
+            far += usize::from(t.is_none_or(|t| off(t, *d) > 2));
+        }
+    }
+    (
+        close as f64 / reached.max(1) as f64,
+        far as f64 / n.max(1) as f64,
+        reached,
+    )
+}
+
+fn assert_accurate(room: &Room, id: &str, corr: &Correspondence) {
+    let k = room.projector(id).expect("projector");
+    let (close, far, reached) = accuracy(room, k, corr);
+    println!(
+        "{id}: {reached} pixels reached, {:.2}% within ±1, {:.3}% off by > 2",
+        100.0 * close,
+        100.0 * far
+    );
+    // The bar the graycode tests hold the same projectors to when decoded alone.
+    assert!(reached > 1000, "{id} reaches {reached} pixels");
+    assert!(close >= 0.98, "{id}: {:.2}% within ±1", 100.0 * close);
+    assert!(far <= 0.001, "{id}: {:.3}% off by more than 2", 100.0 * far);
+}
+
+/// The partition of unity of placed standard luminaires through the true correspondence,
+/// away from the target (its margin is black), as the nodes tests measure it.
+fn partition(room: &Room, placed: &[&Placed]) -> Partition {
+    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
+    let truth: Vec<Vec<Option<u32>>> = placed
+        .iter()
+        .map(|p| room.true_correspondence(room.projector(&p.projector.id).expect("projector")))
+        .collect();
+    let weights: Vec<Vec<f32>> = placed
+        .iter()
+        .map(|p| {
+            let mut sum = vec![0.0f32; (p.projector.width * p.projector.height) as usize];
+            for n in &p.nodes {
+                sum.iter_mut().zip(&n.weights).for_each(|(s, w)| *s += w);
+            }
+            sum
+        })
+        .collect();
+    let dark: Vec<Vec<bool>> = placed.iter().map(|p| p.excluded.clone()).collect();
+    partition_of_unity(&truth, &weights, &dark, &dilate(&mask, w, h, 8))
+}
+
+/// The simulator's noiseless patch values with every projector showing `frames` (by id;
+/// the others black) drawn as the rig draws them.
+fn truth_values(rig: &SimRig, frames: &[(&str, Frame)]) -> (Vec<LinearRgb>, Vec<LinearRgb>) {
+    let mut all = vec![roomlight_sim::Frame::Black; rig.room.projectors().len()];
+    for (id, f) in frames {
+        let k = rig.room.projector(id).expect("projector");
+        all[k] = rig.sim_frame(k, f);
+    }
+    rig.room.patch_values_and_spread(&all, None).expect("truth")
+}
+
+/// Compares measured columns with the truth (noiseless, node alone at white minus all black,
+/// on patches the light is uniform over): within 2% beyond 3σ where the truth is above 20σ,
+/// as the attenuation tests hold both schemes to. Returns the entries checked.
+fn check_columns(
+    measured: &[Vec<LinearRgb>],
+    sigma: &[Vec<LinearRgb>],
+    usable: &[bool],
+    truth: &[(Vec<LinearRgb>, Vec<bool>)],
+) -> usize {
+    let mut checked = 0;
+    for ((m, s), (t, uniform)) in measured.iter().zip(sigma).zip(truth) {
+        for i in 0..t.len() {
+            for c in 0..3 {
+                if usable[i] && uniform[i] && t[i][c] > 20.0 * s[i][c] {
+                    let excess = ((m[i][c] - t[i][c]).abs() - 3.0 * s[i][c]).max(0.0);
+                    assert!(
+                        excess < 0.02 * t[i][c],
+                        "patch {i}: {} vs {} (σ {})",
+                        m[i][c],
+                        t[i][c],
+                        s[i][c]
+                    );
+                    checked += 1;
+                }
+            }
+        }
+    }
+    checked
+}
+
+/// Node values of `placed` as frames: node ids in `on` at white, the others at `rest`.
+fn frames_of<'p>(placed: &'p [Placed], on: &[u32], rest: LinearRgb) -> Vec<(&'p str, Frame)> {
+    placed
+        .iter()
+        .map(|p| {
+            let values = p
+                .nodes
+                .iter()
+                .map(|n| {
+                    (
+                        n.id,
+                        if on.contains(&n.id) {
+                            LinearRgb::ONE
+                        } else {
+                            rest
+                        },
+                    )
+                })
+                .collect();
+            (p.projector.id.as_str(), Frame::Nodes(values))
+        })
+        .collect()
+}
+
+#[test]
+fn bring_up_decodes_segments_and_measures_the_small_room() {
+    let room = Room::build(small_scene()).expect("room");
+    let setup = setup(&room);
+    let mut rig = SimRig::new(&room, &["left", "right", "area", "texture"], 21);
+    let (events, progress) = recorder();
+    let up = block_on(Procedure::new(&mut rig, Settings::default(), progress).bring_up(&setup))
+        .expect("bring-up");
+    let events = events.lock().expect("events").clone();
+    assert_eq!(up.captures, rig.captures);
+    assert_eq!(
+        events
+            .iter()
+            .filter(|e| matches!(e, Event::Captured { .. }))
+            .count(),
+        up.captures
+    );
+    println!("bring-up: {} captures", up.captures);
+    // The texture projector is kept dark, not calibrated.
+    let ids: Vec<&str> = up
+        .measured
+        .iter()
+        .map(|m| m.projector.id.as_str())
+        .collect();
+    assert_eq!(ids, ["left", "right", "area"]);
+    for m in up
+        .measured
+        .iter()
+        .filter(|m| m.projector.kind == ProjectorKind::Standard)
+    {
+        assert_accurate(&room, &m.projector.id, &m.corr);
+    }
+    // The hidden gamma of "right" is [2.0, 2.2, 2.4].
+    let gamma = up.measured[1].response.gamma;
+    for (c, truth) in [2.0, 2.2, 2.4].into_iter().enumerate() {
+        assert!((gamma[c] / truth - 1.0).abs() < 0.03, "γ {gamma:?}");
+    }
+    // Segmented together: the bar the nodes tests set (measured 98.76% within 1e-3).
+    let standard: Vec<&Placed> = up.placed.iter().take(2).collect();
+    let joint = partition(&room, &standard);
+    println!("segmented together: {joint}");
+    assert!(joint.points > 1000 && joint.overlap > 200, "{joint}");
+    assert!(
+        joint.within_1e3 > 0.98 && joint.within_0_05 > 0.99,
+        "{joint}"
+    );
+    // The area light is one node over its frame.
+    assert_eq!(up.placed[2].nodes.len(), 1);
+    // Attenuation against the simulator's transport, through the nodes as the rig draws them.
+    let black = truth_values(&rig, &frames_of(&up.placed, &[], LinearRgb::ZERO)).0;
+    let truth: Vec<(Vec<LinearRgb>, Vec<bool>)> = up
+        .columns
+        .ids
+        .iter()
+        .map(|&n| {
+            let (y, spread) = truth_values(&rig, &frames_of(&up.placed, &[n], LinearRgb::ZERO));
+            (
+                y.iter().zip(&black).map(|(a, b)| *a - *b).collect(),
+                spread.iter().map(|s| s.max_abs() < 0.05).collect(),
+            )
+        })
+        .collect();
+    let att = &up.columns.attenuation;
+    let checked = check_columns(&att.dense, &att.sigma, &att.usable, &truth);
+    println!("attenuation: {checked} entries checked against the truth");
+    assert!(checked > 100, "only {checked} entries above the noise");
+    // The target stays dark: luminaire light on it is at most 1% of the table's beside it.
+    for p in &standard {
+        let k = room.projector(&p.projector.id).expect("projector");
+        let all_on: Vec<u32> = p.ids();
+        let frame = rig.sim_frame(
+            k,
+            &frames_of(std::slice::from_ref(*p), &all_on, LinearRgb::ZERO)[0].1,
+        );
+        let on_target = room.target_irradiance(k, &frame).expect("target")[1];
+        let table = room
+            .direct_irradiance_at(k, &frame, [0.75, 0.62, 0.32], [0.0, 0.0, 1.0])
+            .expect("table")[1];
+        assert!(
+            on_target <= 0.01 * table,
+            "{}: {on_target} vs {table}",
+            p.projector.id
+        );
+    }
+}
+
+/// The small room with its two standard luminaires turned apart, one onto each chart, so that
+/// their footprints do not overlap.
+fn apart_scene() -> roomlight_sim::Scene {
+    let mut scene = small_scene();
+    scene.projectors.truncate(2);
+    scene.objects.retain(|o| !o.target);
+    let left = &mut scene.projectors[0];
+    left.look_at_mm = [400.0, 600.0, 0.0];
+    left.fov_deg = 40.0;
+    let right = &mut scene.projectors[1];
+    right.position_mm = [1500.0, 300.0, 1100.0];
+    right.look_at_mm = [1100.0, 1200.0, 700.0];
+    right.fov_deg = 35.0;
+    scene
+}
+
+#[test]
+fn projectors_whose_footprints_do_not_overlap_are_coded_in_one_pass() {
+    let room = Room::build(apart_scene()).expect("room");
+    let mut rig = SimRig::new(&room, &["left", "right"], 31);
+    let (events, progress) = recorder();
+    let mut procedure = Procedure::new(&mut rig, Settings::default(), progress);
+    let live = procedure.rig().projectors();
+    let decoded = block_on(async {
+        let dark = procedure.dark(&live).await?;
+        let whites = procedure.whites(&live).await?;
+        procedure.structured_light(&live, &dark, &whites).await
+    })
+    .expect("structured light");
+    let events = events.lock().expect("events").clone();
+    assert!(
+        events.contains(&Event::Grouped {
+            groups: vec![vec!["left".into(), "right".into()]]
+        }),
+        "{events:?}"
+    );
+    for d in &decoded {
+        assert_accurate(&room, &d.projector.id, &d.corr);
+    }
+    // One pattern set for both instead of one each.
+    let coded = captured_in(&events, Stage::StructuredLight);
+    let alone: usize = live
+        .iter()
+        .map(|p| {
+            roomlight_calib::graycode::Manifest::with_coding(
+                p.width,
+                p.height,
+                roomlight_calib::procedure::coding(p),
+            )
+            .expect("manifest")
+            .patterns
+            .len()
+        })
+        .sum();
+    println!("structured light: {coded} captures together, {alone} one at a time");
+    assert_eq!(2 * coded, alone);
+}
+
+#[test]
+fn a_second_pass_decodes_the_labs_grazing_face() {
+    // The lab at a small camera resolution with only floor-right live: the floor's reflected
+    // light hides the grazing face's code from the first pass (graycode tests: 93.70% within
+    // ±1 alone, 99.61% after the second pass).
+    let mut scene = scenes::lab().expect("lab");
+    scene.camera.resolution = [320, 240];
+    let room = Room::build(scene).expect("room");
+    let mut rig = SimRig::new(&room, &["floor-right"], 7);
+    let (events, progress) = recorder();
+    let mut procedure = Procedure::new(&mut rig, Settings::default(), progress);
+    let live = procedure.rig().projectors();
+    let decoded = block_on(async {
+        let dark = procedure.dark(&live).await?;
+        let whites = procedure.whites(&live).await?;
+        procedure.structured_light(&live, &dark, &whites).await
+    })
+    .expect("structured light");
+    drop(procedure);
+    let pass = decoded[0].second.expect("a second pass");
+    assert!(pass.taken > 0, "{pass:?}");
+    assert_eq!(
+        captured_in(&events.lock().expect("events"), Stage::SecondPass),
+        pass.captures
+    );
+    assert_accurate(&room, "floor-right", &decoded[0].corr);
+    // A rig that cannot show images skips it.
+    rig.images = false;
+    let mut procedure = Procedure::new(&mut rig, Settings::default(), |_| {});
+    let mut corr = decoded[0].corr.clone();
+    corr.map.iter_mut().enumerate().for_each(|(i, m)| {
+        if i % 3 == 0 {
+            *m = None;
+        }
+    });
+    let manifest = roomlight_calib::graycode::Manifest::with_coding(
+        live[0].width,
+        live[0].height,
+        roomlight_calib::graycode::Coding::Xor04,
+    )
+    .expect("manifest");
+    let skipped = block_on(procedure.second_pass(&live[0], &manifest, &mut corr)).expect("skip");
+    assert_eq!(skipped, None);
+    assert_eq!(procedure.captures(), 0);
+}
+
+#[test]
+fn a_projector_joins_hot_beside_a_lit_one() {
+    let room = Room::build(small_scene()).expect("room");
+    let setup = setup(&room);
+    let mut rig = SimRig::new(&room, &["left"], 41);
+    let up = block_on(Procedure::new(&mut rig, Settings::default(), |_| {}).bring_up(&setup))
+        .expect("bring-up");
+    // "left" lit at mid grey, then "right" switched on and calibrated hot.
+    let lit = frames_of(&up.placed, &[], LinearRgb::splat(0.5));
+    block_on(rig.show(&lit)).expect("lit");
+    rig.live.push(room.projector("right").expect("right"));
+    let claimed = up.placed[0].claim.clone().expect("a charted projector");
+    let first = up.placed[0].nodes.len() as u32;
+    let (events, progress) = recorder();
+    let joined = block_on(
+        Procedure::new(&mut rig, Settings::default(), progress).join(
+            &setup,
+            "right",
+            Some(&claimed),
+            first,
+        ),
+    )
+    .expect("join");
+    assert_accurate(&room, "right", &joined.measured.corr);
+    assert_eq!(joined.placed.nodes[0].id, first);
+    // No footprint grouping for one projector: its white is the top of its ramp.
+    let events = events.lock().expect("events").clone();
+    assert_eq!(joined.captures, rig.captures - up.captures);
+    assert_eq!(
+        captured_in(&events, Stage::Hot),
+        joined.placed.nodes.len() + 1
+    );
+    // One after the other: the bar the nodes tests set.
+    let both = partition(&room, &[&up.placed[0], &joined.placed]);
+    println!("segmented one after the other: {both}");
+    assert!(both.within_1e3 > 0.95 && both.within_0_05 > 0.99, "{both}");
+    let mut sum = claimed.clone();
+    add_claim(&mut sum, joined.placed.claim.as_deref().expect("claim"));
+    // Its columns against the truth with "left" lit.
+    let with_right = |on: &[u32]| {
+        let mut frames = lit.clone();
+        frames.extend(frames_of(
+            std::slice::from_ref(&joined.placed),
+            on,
+            LinearRgb::ZERO,
+        ));
+        truth_values(&rig, &frames)
+    };
+    let black = with_right(&[]).0;
+    let truth: Vec<(Vec<LinearRgb>, Vec<bool>)> = joined
+        .placed
+        .ids()
+        .iter()
+        .map(|&n| {
+            let (y, spread) = with_right(&[n]);
+            (
+                y.iter().zip(&black).map(|(a, b)| *a - *b).collect(),
+                spread.iter().map(|s| s.max_abs() < 0.05).collect(),
+            )
+        })
+        .collect();
+    let measured: Vec<Vec<LinearRgb>> = joined.hot.columns.iter().map(|c| c.1.clone()).collect();
+    let checked = check_columns(&measured, &joined.hot.sigma, &joined.hot.measurable, &truth);
+    println!("hot: {checked} entries checked against the truth");
+    assert!(checked > 20, "only {checked} entries above the noise");
+}
