@@ -3,12 +3,16 @@
 //! A [`Plant`] stands in for projectors and camera: the true transport `P`, `d`, optional capture
 //! noise, an optional projector gamma the nodes do not know, a camera saturation level, and
 //! nodes that leave at a given capture. [`run`] drives one [`NodeState`] per node and the
-//! camera's [`ErrorAggregator`], counting captures and model rounds separately.
+//! round [`Controller`] the camera agent drives too (when to capture, model rounds, restarts,
+//! settling), counting captures and model rounds separately.
+//!
+//! It knows nothing of messages or agents: a round here is a loop over the nodes.
 
 use crate::aggregator::ErrorAggregator;
-use crate::model::{ModelError, Problem, check_len};
+use crate::model::{ModelError, PatchId, Problem, check_len};
 use crate::rgb::LinearRgb;
-use crate::round::Settle;
+use crate::round::Controller;
+pub use crate::round::objective_noise;
 use crate::rules::{NodeState, StepRule};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -156,7 +160,7 @@ pub struct LoopConfig {
     /// Capture budget, the conventional start's capture included.
     pub max_captures: usize,
     /// Stop (DESIGN §3.6) when no node moved by more than [`HALF_CODE_STEP`] in the last
-    /// cycle, or when the measured `G` has settled ([`Settle`]: it changed by less than its own
+    /// cycle, or when the measured `G` has settled ([`crate::round::Settle`]: it changed by less than its own
     /// noise in two captures running): with a real camera the noise keeps every node moving a
     /// little, and the second test ends the flicker.
     pub stop_when_settled: bool,
@@ -278,14 +282,13 @@ pub fn run_observed(
         });
     }
     let mut nodes = build_nodes(model, config.rule, start)?;
-    let mut aggregator = ErrorAggregator::new(model.patches());
+    let mut controller = Controller::new(model.noise().to_vec(), config.model_rounds);
     let mut stale: VecDeque<(Vec<LinearRgb>, bool)> = VecDeque::new();
     let mut records = Vec::new();
     let mut model_rounds = 0;
     let mut node_updates = 0;
     let mut max_step = 0.0;
     let mut stop = StopReason::Budget;
-    let mut settle = Settle::default();
     for capture in 1..=config.max_captures {
         let shown: Vec<LinearRgb> = nodes.iter().map(NodeState::shown).collect();
         let measured = plant.capture(&shown, capture);
@@ -295,7 +298,12 @@ pub fn run_observed(
             .zip(&measured)
             .map(|(&r, &y)| r - y)
             .collect();
-        let summary = aggregator.measured(errors)?;
+        // The nodes gone by now are the loop's live projectors changing (departures are final).
+        let gone = (0..nodes.len())
+            .filter(|&n| !plant.present(n, capture))
+            .count();
+        controller.live(gone as u64);
+        let summary = controller.measured(errors)?;
         let record = CaptureRecord {
             capture,
             model_rounds,
@@ -319,8 +327,7 @@ pub fn run_observed(
             break;
         }
         // The one settle rule, as the camera agent applies it.
-        let noise = objective_noise(aggregator.errors(), model.noise());
-        if settle.observe(summary.objective, noise) && config.stop_when_settled {
+        if config.stop_when_settled && controller.settled() {
             stop = StopReason::NoiseFloor;
             break;
         }
@@ -331,7 +338,7 @@ pub fn run_observed(
             .map(|n| plant.present(n, capture + 1))
             .collect();
         // The errors the nodes act on: this capture's, or the one `delay` captures old.
-        stale.push_back((aggregator.errors().to_vec(), summary.restart));
+        stale.push_back((controller.errors().to_vec(), summary.restart));
         if stale.len() <= config.delay {
             max_step = 0.0;
             continue;
@@ -339,17 +346,16 @@ pub fn run_observed(
         let Some((errors, restart)) = stale.pop_front() else {
             continue;
         };
-        max_step = distributed_round(&mut nodes, &active, &errors, restart, &mut aggregator)?;
+        max_step = distributed_round(&mut nodes, &active, &errors, restart, &mut controller)?;
         node_updates += active.iter().filter(|&&a| a).count();
-        for _ in 0..config.model_rounds {
-            let summary = aggregator.predicted();
-            let errors = aggregator.errors().to_vec();
+        while let Some(summary) = controller.predicted() {
+            let errors = controller.errors().to_vec();
             let step = distributed_round(
                 &mut nodes,
                 &active,
                 &errors,
                 summary.restart,
-                &mut aggregator,
+                &mut controller,
             )?;
             max_step = f64::max(max_step, step);
             model_rounds += 1;
@@ -387,26 +393,43 @@ pub fn build_nodes(
         .collect()
 }
 
-/// First-order standard deviation of a measured `G` from the patch noise:
-/// `sqrt(Σ_i Σ_c (e_ic σ_ic)²)`.
-pub fn objective_noise(errors: &[LinearRgb], noise: &[LinearRgb]) -> f64 {
-    errors
-        .iter()
-        .zip(noise)
-        .map(|(e, s)| e.hadamard(*s).norm_squared())
-        .sum::<f64>()
-        .sqrt()
+/// Where a round's contributions go: the camera's errors, held by an [`ErrorAggregator`] or
+/// by the [`Controller`] that holds one.
+pub trait Contributions {
+    /// One node's contribution change `δ_n` on its support; refused whole if malformed.
+    fn add(
+        &mut self,
+        delta: impl IntoIterator<Item = (PatchId, LinearRgb)>,
+    ) -> Result<(), ModelError>;
+}
+
+impl Contributions for ErrorAggregator {
+    fn add(
+        &mut self,
+        delta: impl IntoIterator<Item = (PatchId, LinearRgb)>,
+    ) -> Result<(), ModelError> {
+        self.add_contribution(delta)
+    }
+}
+
+impl Contributions for Controller {
+    fn add(
+        &mut self,
+        delta: impl IntoIterator<Item = (PatchId, LinearRgb)>,
+    ) -> Result<(), ModelError> {
+        self.contribution(delta)
+    }
 }
 
 /// One round for every active node: gather its errors on its support, update, hand its
-/// contribution to the aggregator. Returns the largest `|Δx|`. This is the whole per-round
+/// contribution to `contributions`. Returns the largest `|Δx|`. This is the whole per-round
 /// compute of the distributed system, without the messages.
 pub fn distributed_round(
     nodes: &mut [NodeState],
     active: &[bool],
     errors: &[LinearRgb],
     restart: bool,
-    aggregator: &mut ErrorAggregator,
+    contributions: &mut impl Contributions,
 ) -> Result<f64, ModelError> {
     let mut max_step = 0.0f64;
     let mut local = Vec::new();
@@ -415,7 +438,7 @@ pub fn distributed_round(
         local.extend(node.column().support().iter().map(|&i| errors[i as usize]));
         let delta = node.update(&local, restart)?;
         max_step = max_step.max(delta.max_abs());
-        aggregator.add_contribution(node.contribution(delta))?;
+        contributions.add(node.contribution(delta))?;
     }
     Ok(max_step)
 }

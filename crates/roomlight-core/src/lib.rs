@@ -7,9 +7,11 @@
 //! - [`conventional`]: the conventional start of DESIGN §3.1.
 //! - [`optimum`]: the exact bounded least-squares optimum, the yardstick.
 //! - [`metrics`]: `G`, CIEDE2000, RMS and ANSI contrast.
-//! - [`round`]: the round controller: live projectors and their readiness, what a round waits
-//!   for, the settle rule, calibration retries. A state machine; time is passed in.
-//! - [`closed_loop`]: an in-memory plant and loop to compare rules without a network.
+//! - [`round`]: the round controller: when to capture and when to run model rounds, restarts,
+//!   the settle rule; live projectors and their readiness, what a round waits for, calibration
+//!   retries. A state machine; time is passed in.
+//! - [`closed_loop`]: an in-memory plant and loop to compare rules without a network, driving
+//!   the same round controller as the camera agent.
 //! - [`synthetic`]: synthetic rooms for benchmarks and tests.
 //!
 //! Pure: no I/O, no async, no clocks. Randomness only from explicit seeds.

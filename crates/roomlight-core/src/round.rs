@@ -1,14 +1,154 @@
 //! The round controller (DESIGN §3.4, §3.6, §6): which projectors and nodes are live and
 //! calibrated and what each shows, what a round waits for (acknowledgements of a frame,
-//! contributions with a deadline), how many model rounds follow a capture, when the room has
-//! settled, and when to try a failed calibration again.
+//! contributions with a deadline), when to capture and when to run a model round instead, the
+//! restart flag, when the room has settled, and when to try a failed calibration again.
+//!
+//! - [`Controller`]: the sequence of rounds — after each capture `k` model rounds, then a
+//!   capture; each round's errors (measured, or predicted from the contributions), its `G` and
+//!   restart flag (`G` rose, or the live projectors changed); the settle rule. The camera
+//!   agent's round loop and the in-memory closed loop both drive it.
+//! - [`Projectors`]: the live projectors, their readiness and node owners (the camera agent).
+//! - [`Collection`]: the contributions one round waits for, until a deadline.
+//! - [`Settle`] and [`Backoff`]: the settle rule and calibration retries.
 //!
 //! A pure state machine: no I/O, no async, no clocks. Time is a `Duration` since an epoch the
 //! caller chooses, passed in with every call that needs it. It knows nothing of messages,
 //! streams or cameras: the camera agent and the in-memory loop drive it.
 
+use crate::aggregator::{ErrorAggregator, RoundSummary};
+use crate::model::{ModelError, PatchId};
+use crate::rgb::LinearRgb;
 use std::collections::{HashMap, HashSet};
 use std::time::Duration;
+
+/// What the next round is, as the [`Controller`] decides it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Next {
+    /// Capture, and send the measured errors.
+    Capture,
+    /// Send errors predicted from the last round's contributions, without a capture.
+    Model,
+}
+
+/// The sequence of rounds (DESIGN §3.4): a capture, then `model_rounds` model rounds whose
+/// errors are the last ones minus the nodes' contributions (`ê ← ê − Σ δ_n`), then a capture
+/// again. Each round's restart flag is set when `G` rose over the previous round (adaptive
+/// restart) or when the live projectors changed since the last round (a projector that joins
+/// starts its momentum afresh: a restart puts every node on the same momentum sequence again,
+/// and the problem the momentum was built on is not the one now). Settling is judged on the
+/// captures alone ([`Settle`]).
+///
+/// Drive it as: `match next() { Capture => measured(errors), Model => predicted() }`, send the
+/// round's errors, hand it each contribution ([`Controller::contribution`]); repeat.
+#[derive(Debug, Clone)]
+pub struct Controller {
+    aggregator: ErrorAggregator,
+    /// The per-patch noise `σ` of the captures, for the settle rule.
+    noise: Vec<LinearRgb>,
+    model_rounds: usize,
+    /// Model rounds still to run before the next capture.
+    pending: usize,
+    /// The generation of the live projectors the last round was sent to.
+    generation: Option<u64>,
+    /// The live projectors changed since the last round: the next one restarts.
+    changed: bool,
+    settle: Settle,
+}
+
+impl Controller {
+    /// A controller for a room of `noise.len()` patches whose captures have noise `σ` per
+    /// patch, running `model_rounds` model rounds after each capture.
+    pub fn new(noise: Vec<LinearRgb>, model_rounds: usize) -> Self {
+        Self {
+            aggregator: ErrorAggregator::new(noise.len()),
+            noise,
+            model_rounds,
+            pending: 0,
+            generation: None,
+            changed: false,
+            settle: Settle::default(),
+        }
+    }
+
+    /// What the next round is: a model round while some remain after the last capture, else
+    /// a capture.
+    pub fn next(&self) -> Next {
+        if self.pending > 0 {
+            Next::Model
+        } else {
+            Next::Capture
+        }
+    }
+
+    /// The live projectors are at `generation` (see [`Projectors::generation`]; any count that
+    /// changes whenever a projector enters or leaves the rounds): when it differs from the
+    /// one the last round saw, the next round restarts. The first generation seen is no change.
+    pub fn live(&mut self, generation: u64) {
+        if self.generation.is_some_and(|g| g != generation) {
+            self.changed = true;
+        }
+        self.generation = Some(generation);
+    }
+
+    /// A capture measured `errors = r − y` (one per patch): the measured round to send. Model
+    /// rounds follow it, and the settle rule takes its `G`. Refused (nothing changes) when the
+    /// errors have the wrong length or a value that is not finite.
+    pub fn measured(&mut self, errors: Vec<LinearRgb>) -> Result<RoundSummary, ModelError> {
+        let mut summary = self.aggregator.measured(errors)?;
+        let noise = objective_noise(self.aggregator.errors(), &self.noise);
+        self.settle.observe(summary.objective, noise);
+        self.pending = self.model_rounds;
+        summary.restart |= std::mem::take(&mut self.changed);
+        Ok(summary)
+    }
+
+    /// The next model round (errors predicted from the contributions since the last round),
+    /// or `None` when a capture is due instead.
+    pub fn predicted(&mut self) -> Option<RoundSummary> {
+        if self.next() != Next::Model {
+            return None;
+        }
+        self.pending -= 1;
+        let mut summary = self.aggregator.predicted();
+        summary.restart |= std::mem::take(&mut self.changed);
+        Some(summary)
+    }
+
+    /// One node's contribution change `δ_n` to the round just sent: the predicted errors lose
+    /// it. Refused whole (nothing applied) if a patch is unknown or a value is not finite.
+    pub fn contribution(
+        &mut self,
+        delta: impl IntoIterator<Item = (PatchId, LinearRgb)>,
+    ) -> Result<(), ModelError> {
+        self.aggregator.add_contribution(delta)
+    }
+
+    /// The errors of the last round (measured, less the contributions since), one per patch.
+    pub fn errors(&self) -> &[LinearRgb] {
+        self.aggregator.errors()
+    }
+
+    /// The measured `G` has settled at its noise (see [`Settle`]).
+    pub fn settled(&self) -> bool {
+        self.settle.settled()
+    }
+
+    /// A capture has been taken: [`Controller::errors`] describe the room.
+    pub fn has_measured(&self) -> bool {
+        self.settle.measured()
+    }
+}
+
+/// First-order standard deviation of a measured `G` from the patch noise:
+/// `sqrt(Σ_i Σ_c (e_ic σ_ic)²)` (the settle rule's noise).
+pub fn objective_noise(errors: &[LinearRgb], noise: &[LinearRgb]) -> f64 {
+    errors
+        .iter()
+        .zip(noise)
+        .map(|(e, s)| e.hadamard(*s).norm_squared())
+        .sum::<f64>()
+        .sqrt()
+}
 
 /// One live projector, as the rounds see it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -69,6 +209,8 @@ pub struct Projectors {
     owner: HashMap<u32, String>,
     /// See [`Projector::counts`].
     counts: [usize; 5],
+    /// Counts the changes of the projectors taking part in the rounds (calibrated and lit).
+    generation: u64,
 }
 
 impl Projectors {
@@ -91,6 +233,9 @@ impl Projectors {
     /// Removes a projector; what it was.
     pub fn leave(&mut self, id: &str) -> Option<Projector> {
         let p = self.projectors.remove(id)?;
+        if p.counts()[4] > 0 {
+            self.generation += 1;
+        }
         self.add_counts(&p, -1);
         for n in &p.nodes {
             if self.owner.get(n).is_some_and(|o| o == id) {
@@ -103,6 +248,9 @@ impl Projectors {
     /// Removes every projector; their ids.
     pub fn clear(&mut self) -> Vec<String> {
         self.owner.clear();
+        if self.counts[4] > 0 {
+            self.generation += 1;
+        }
         self.counts = [0; 5];
         self.projectors.drain().map(|(id, _)| id).collect()
     }
@@ -158,6 +306,9 @@ impl Projectors {
         for &n in &nodes {
             self.owner.insert(n, id.to_string());
         }
+        if self.projectors.get(id).is_some_and(|p| p.counts()[4] > 0) {
+            self.generation += 1;
+        }
         self.update(id, |p| p.nodes = nodes);
     }
 
@@ -184,6 +335,12 @@ impl Projectors {
     /// Some calibrated projector runs rounds.
     pub fn any_running(&self) -> bool {
         self.counts[4] > 0
+    }
+
+    /// Changes whenever a projector enters the rounds (calibrated and lit), leaves them, or
+    /// has its nodes changed while in them; for [`Controller::live`].
+    pub fn generation(&self) -> u64 {
+        self.generation
     }
 
     /// There is something to do: a projector shows a frame or waits for its calibration.
@@ -231,6 +388,9 @@ impl Projectors {
         let before = p.counts();
         f(p);
         let after = p.counts();
+        if before[4] != after[4] {
+            self.generation += 1;
+        }
         for k in 0..5 {
             self.counts[k] = self.counts[k] + after[k] - before[k];
         }

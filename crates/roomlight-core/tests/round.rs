@@ -1,8 +1,14 @@
-//! The round controller on its own: readiness and late projectors, a round's contributions with
-//! a deadline and a projector leaving mid-round, the settle rule, and the calibration backoff.
-//! No clocks: time is a `Duration` the test chooses.
+//! The round controller on its own: captures and model rounds, restarts on a rising `G` and on
+//! a change of the live projectors, settling; readiness and late projectors, a round's
+//! contributions with a deadline and a projector leaving mid-round, the settle rule, and the
+//! calibration backoff. Plain values: no network, no clocks (time is a `Duration` the test
+//! chooses).
 
-use roomlight_core::round::{Backoff, Collection, Projectors, Received, Settle};
+use roomlight_core::LinearRgb;
+use roomlight_core::aggregator::ErrorKind;
+use roomlight_core::round::{
+    Backoff, Collection, Controller, Next, Projectors, Received, Settle, objective_noise,
+};
 use std::time::Duration;
 
 fn ms(v: u64) -> Duration {
@@ -189,4 +195,158 @@ fn a_failed_calibration_backs_off_doubling_to_3_2_s() {
     backoff.failed("q", now);
     backoff.retain(&["p".to_string()]);
     assert_eq!(backoff.earliest(), None);
+}
+
+/// A room of three patches whose captures have noise σ = `sigma` on every channel.
+fn controller(sigma: f64, model_rounds: usize) -> Controller {
+    Controller::new(vec![LinearRgb::splat(sigma); 3], model_rounds)
+}
+
+fn errors(v: f64) -> Vec<LinearRgb> {
+    vec![LinearRgb::splat(v); 3]
+}
+
+#[test]
+fn after_a_capture_come_k_model_rounds_then_a_capture() {
+    let mut c = controller(0.0, 3);
+    assert_eq!(c.next(), Next::Capture, "nothing to predict from yet");
+    assert_eq!(c.predicted(), None);
+    assert!(!c.has_measured());
+    for cycle in 0..2u64 {
+        let measured = c.measured(errors(1.0)).expect("valid errors");
+        assert_eq!(measured.kind, ErrorKind::Measured);
+        assert_eq!(measured.round, 4 * cycle + 1);
+        let mut rounds = Vec::new();
+        while c.next() == Next::Model {
+            let predicted = c.predicted().expect("a model round is due");
+            assert_eq!(predicted.kind, ErrorKind::Predicted);
+            rounds.push(predicted.round);
+        }
+        assert_eq!(rounds, [2, 3, 4].map(|r| r + 4 * cycle));
+        assert_eq!(c.predicted(), None, "a capture is due");
+    }
+    assert!(c.has_measured());
+    // Without model rounds every round is a capture.
+    let mut c = controller(0.0, 0);
+    c.measured(errors(1.0)).expect("valid");
+    assert_eq!(c.next(), Next::Capture);
+}
+
+#[test]
+fn model_rounds_predict_the_errors_from_the_contributions() {
+    let mut c = controller(0.0, 1);
+    c.measured(errors(1.0)).expect("valid");
+    c.contribution([(0, LinearRgb::splat(0.25)), (2, LinearRgb::splat(0.5))])
+        .expect("a valid contribution");
+    c.contribution([(0, LinearRgb::splat(0.25))])
+        .expect("another node's");
+    // Refused whole: nothing of it is applied.
+    assert!(
+        c.contribution([(1, LinearRgb::splat(9.0)), (7, LinearRgb::ZERO)])
+            .is_err()
+    );
+    assert!(
+        c.contribution([(1, LinearRgb([f64::NAN, 0.0, 0.0]))])
+            .is_err()
+    );
+    let predicted = c.predicted().expect("one model round");
+    assert_eq!(c.errors(), [0.5, 1.0, 0.5].map(LinearRgb::splat));
+    // G = ½ Σ e² over patches and channels.
+    assert!((predicted.objective - 1.5 * (0.25 + 1.0 + 0.25)).abs() < 1e-12);
+}
+
+#[test]
+fn a_capture_whose_errors_are_malformed_is_refused_and_changes_nothing() {
+    let mut c = controller(0.0, 2);
+    assert!(c.measured(vec![LinearRgb::ZERO; 2]).is_err(), "two patches");
+    assert!(c.measured(errors(f64::INFINITY)).is_err());
+    assert_eq!(c.next(), Next::Capture);
+    assert!(!c.has_measured());
+    assert_eq!(c.measured(errors(1.0)).expect("valid").round, 1);
+}
+
+#[test]
+fn the_restart_flag_follows_a_rising_objective() {
+    let mut c = controller(0.0, 1);
+    assert!(
+        !c.measured(errors(1.0)).expect("valid").restart,
+        "first round"
+    );
+    // G rises in the model round: the nodes' contributions overshot.
+    c.contribution([(0, LinearRgb::splat(3.0))]).expect("valid");
+    assert!(c.predicted().expect("model round").restart);
+    assert!(!c.measured(errors(0.5)).expect("valid").restart, "G fell");
+}
+
+#[test]
+fn a_join_or_a_leave_sets_restart_on_the_next_round_only() {
+    let mut room = two_lit();
+    let mut c = controller(0.0, 1);
+    c.live(room.generation());
+    assert!(
+        !c.measured(errors(1.0)).expect("valid").restart,
+        "the first projectors seen are no change"
+    );
+    // A projector joins and lights up before the model round: that round restarts.
+    room.join("c", vec![4], true);
+    c.live(room.generation());
+    room.shown("c", 0);
+    c.live(room.generation());
+    assert!(c.predicted().expect("model round").restart);
+    c.live(room.generation());
+    assert!(
+        !c.measured(errors(0.5)).expect("valid").restart,
+        "once is enough"
+    );
+    // A projector that leaves: the next round restarts too.
+    room.leave("a");
+    c.live(room.generation());
+    assert!(c.predicted().expect("model round").restart);
+    // Acknowledgements and rounds are no change.
+    let g = room.generation();
+    room.start_round(5);
+    room.shown("b", 5);
+    assert_eq!(room.generation(), g);
+    c.live(g);
+    assert!(!c.measured(errors(0.25)).expect("valid").restart);
+}
+
+#[test]
+fn the_generation_counts_projectors_entering_and_leaving_the_rounds() {
+    let mut room = Projectors::default();
+    let g0 = room.generation();
+    room.join("hot", vec![], false);
+    room.shown("hot", 0);
+    assert_eq!(room.generation(), g0, "uncalibrated: not in the rounds");
+    room.set_nodes("hot", vec![1, 2]);
+    assert_eq!(room.generation(), g0);
+    room.calibrated("hot");
+    assert_eq!(room.generation(), g0 + 1, "calibrated and lit: in");
+    room.set_nodes("hot", vec![1, 2, 3]);
+    assert_eq!(room.generation(), g0 + 2, "its nodes changed while in");
+    room.join("dark", vec![5], true);
+    room.leave("dark");
+    assert_eq!(room.generation(), g0 + 2, "never lit: never in");
+    room.leave("hot");
+    assert_eq!(room.generation(), g0 + 3);
+}
+
+#[test]
+fn the_controller_settles_after_two_quiet_captures() {
+    // σ = 0.1 per channel: with e = 1 everywhere σ_G = sqrt(9 · 0.01) = 0.3.
+    let mut c = controller(0.1, 2);
+    assert!((objective_noise(&errors(1.0), &errors(0.1)) - 0.3).abs() < 1e-12);
+    c.measured(errors(2.0)).expect("valid");
+    assert!(!c.settled());
+    c.measured(errors(1.0)).expect("valid");
+    assert!(!c.settled(), "G moved by 13.5, far beyond its noise");
+    c.measured(errors(1.01)).expect("valid");
+    assert!(!c.settled(), "one quiet capture");
+    // Model rounds do not count: only captures are judged.
+    while c.predicted().is_some() {}
+    assert!(!c.settled());
+    c.measured(errors(1.0)).expect("valid");
+    assert!(c.settled(), "two quiet captures running");
+    c.measured(errors(3.0)).expect("valid");
+    assert!(!c.settled(), "a real change unsettles it");
 }

@@ -1,15 +1,17 @@
 //! The round loop: calibrate the projectors waiting for it (backing off on failure) while the
 //! others go on; wait until every live projector shows its last frame (late ones are left out),
-//! capture, send each node the errors on its support, collect contributions, run model rounds,
-//! and report a status. It knows nothing of the handshake or how a peer's stream is read.
+//! capture, send each node agent the errors on its nodes' supports, collect contributions, run
+//! model rounds, and report a status. What the next round is, its restart flag and whether the
+//! room has settled are the core's round controller's decisions (`roomlight_core::round::
+//! Controller`, the same the in-memory closed loop makes); this loop carries them out over the
+//! wire. It knows nothing of the handshake or how a peer's stream is read.
 
 use super::capture::Captures;
 use super::{Contribution, RoomStatus, Shared};
 use crate::hardware::Camera;
 use roomlight_core::LinearRgb;
-use roomlight_core::aggregator::{ErrorAggregator, ErrorKind, RoundSummary};
-use roomlight_core::closed_loop::objective_noise;
-use roomlight_core::round::{Backoff, Collection, Received, Settle};
+use roomlight_core::aggregator::{ErrorKind, RoundSummary};
+use roomlight_core::round::{Backoff, Collection, Controller, Next as NextRound, Received};
 use roomlight_proto::v1;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -27,20 +29,17 @@ enum Next {
     Round,
 }
 
-/// The round loop's state: the camera, the errors, and what it has done so far.
+/// The round loop's state: the camera, the round controller, and what it has done so far.
 pub(super) struct Rounds<C> {
     shared: Arc<Shared>,
     eye: Captures<C>,
     contributions: mpsc::Receiver<Contribution>,
     status: watch::Sender<RoomStatus>,
-    aggregator: ErrorAggregator,
-    /// The model's per-patch noise (for the settle rule).
-    sigma: Vec<LinearRgb>,
+    /// Captures and model rounds, the errors, restarts and settling.
+    controller: Controller,
     calibrated_hot: u64,
     /// When to try a failed calibration again.
     backoff: Backoff,
-    /// The settle rule over the measured `G`s.
-    settle: Settle,
     /// The round controller's clock: time since the loop started.
     epoch: tokio::time::Instant,
 }
@@ -52,20 +51,16 @@ impl<C: Camera> Rounds<C> {
         contributions: mpsc::Receiver<Contribution>,
         status: watch::Sender<RoomStatus>,
     ) -> Self {
-        let (patches, sigma) = {
-            let live = shared.live();
-            (live.problem.patches(), live.problem.noise().to_vec())
-        };
+        let sigma = shared.live().problem.noise().to_vec();
+        let model_rounds = shared.config.model_rounds;
         Self {
             shared,
             eye: Captures::new(camera),
             contributions,
             status,
-            aggregator: ErrorAggregator::new(patches),
-            sigma,
+            controller: Controller::new(sigma, model_rounds),
             calibrated_hot: 0,
             backoff: Backoff::default(),
-            settle: Settle::default(),
             epoch: tokio::time::Instant::now(),
         }
     }
@@ -101,12 +96,13 @@ impl<C: Camera> Rounds<C> {
         self.backoff.retain(&waiting);
         if let Some(projector) = due {
             // The room's errors without it, once a round has measured them.
-            let errors = self.settle.measured().then(|| self.aggregator.errors());
-            let calibrated =
-                super::calibration::calibrate(&shared, &mut self.eye, &projector, errors).await;
-            if !calibrated.is_empty() {
-                self.calibrated_hot += calibrated.len() as u64;
-                calibrated.iter().for_each(|p| self.backoff.forget(p));
+            let errors = self
+                .controller
+                .has_measured()
+                .then(|| self.controller.errors());
+            if super::calibration::calibrate_hot(&shared, &mut self.eye, &projector, errors).await {
+                self.calibrated_hot += 1;
+                self.backoff.forget(&projector);
                 return Next::Again;
             }
             // Tried again after the others (the cause is logged each time).
@@ -135,8 +131,8 @@ impl<C: Camera> Rounds<C> {
         self.epoch.elapsed()
     }
 
-    /// One capture and the rounds that follow it: the measured round, then the model rounds;
-    /// then the status.
+    /// One capture and the rounds that follow it: the measured round, then the model rounds
+    /// the controller asks for; then the status.
     async fn measured_cycle(&mut self) {
         let shared = self.shared.clone();
         shared
@@ -150,7 +146,8 @@ impl<C: Camera> Rounds<C> {
         };
         self.leave_out_unmeasurable(&ok).await;
         let errors = shared.live().errors(&y);
-        let summary = match self.aggregator.measured(errors) {
+        self.note_live();
+        let summary = match self.controller.measured(errors) {
             Ok(s) => s,
             Err(e) => {
                 tracing::error!(error = %e, "capture refused");
@@ -159,16 +156,17 @@ impl<C: Camera> Rounds<C> {
         };
         let mut round = summary.round;
         let measured_objective = summary.objective;
-        let noise = objective_noise(self.aggregator.errors(), &self.sigma);
-        let settled = self.settle.observe(measured_objective, noise);
         self.round_trip(&summary).await;
-        for _ in 0..shared.config.model_rounds {
+        while self.controller.next() == NextRound::Model {
             // Acknowledgements follow contributions: wait for them too.
             shared
                 .registry
                 .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
                 .await;
-            let summary = self.aggregator.predicted();
+            self.note_live();
+            let Some(summary) = self.controller.predicted() else {
+                break;
+            };
             round = summary.round;
             self.round_trip(&summary).await;
         }
@@ -180,9 +178,15 @@ impl<C: Camera> Rounds<C> {
             live_projectors,
             bytes_out: shared.bytes_out.swap(0, Ordering::Relaxed),
             bytes_in: shared.bytes_in.swap(0, Ordering::Relaxed),
-            settled,
+            settled: self.controller.settled(),
             calibrated_hot: self.calibrated_hot,
         });
+    }
+
+    /// Tells the controller which projectors take part now (a change restarts the next round).
+    fn note_live(&mut self) {
+        let generation = self.shared.registry.lock().projectors().generation();
+        self.controller.live(generation);
     }
 
     /// Calibrated over the wire: a patch the room's light now saturates or an edge now crosses
@@ -213,13 +217,13 @@ impl<C: Camera> Rounds<C> {
 
     /// Sends the round's errors and collects its contributions.
     async fn round_trip(&mut self, summary: &RoundSummary) {
-        let sent = broadcast(&self.shared, self.aggregator.errors(), summary);
+        let sent = broadcast(&self.shared, self.controller.errors(), summary);
         let collection =
             Collection::new(summary.round, sent, self.now(), self.shared.config.deadline);
         self.collect(collection).await;
     }
 
-    /// Collects a round's contributions into the aggregator until every node sent has answered
+    /// Collects a round's contributions into the controller until every node sent has answered
     /// or left, or the deadline passes. O(1) per message: a projector that leaves hands the
     /// round its nodes (the registry keeps them), nothing scans the peers.
     async fn collect(&mut self, mut collection: Collection) {
@@ -242,7 +246,7 @@ impl<C: Camera> Rounds<C> {
                         match collection.receive(c.round, entry.node) {
                             Received::Counted => {
                                 let delta = entry.patches.into_iter().zip(entry.values);
-                                if let Err(e) = self.aggregator.add_contribution(delta) {
+                                if let Err(e) = self.controller.contribution(delta) {
                                     tracing::warn!(node = entry.node, error = %e, "contribution refused");
                                 }
                             }
