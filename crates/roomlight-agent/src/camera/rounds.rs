@@ -100,9 +100,11 @@ impl<C: Camera> Rounds<C> {
                 .controller
                 .has_measured()
                 .then(|| self.controller.errors());
-            if super::calibration::calibrate_hot(&shared, &mut self.eye, &projector, errors).await {
-                self.calibrated_hot += 1;
-                self.backoff.forget(&projector);
+            let calibrated =
+                super::calibration::calibrate(&shared, &mut self.eye, &projector, errors).await;
+            if !calibrated.is_empty() {
+                self.calibrated_hot += calibrated.len() as u64;
+                calibrated.iter().for_each(|p| self.backoff.forget(p));
                 return Next::Again;
             }
             // Tried again after the others (the cause is logged each time).
