@@ -4,7 +4,7 @@ mod config;
 mod graycode_cmd;
 mod procs;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use roomlight_lab::bench;
 use roomlight_lab::demo::{self, DemoOptions};
@@ -57,9 +57,10 @@ enum Command {
         #[command(subcommand)]
         which: graycode_cmd::GraycodeCommand,
     },
-    /// Benchmarks: speed against error. Without a subcommand: the whole evidence — the default
-    /// room's presets, the hard cases, a thousand-node room, sparsity and scaling — as a table,
-    /// `--json` and an HTML page (`--out`).
+    /// Benchmarks: speed against error. Without a subcommand: the whole evidence — the core,
+    /// the default room's presets, the hard cases, a thousand-node room and sparsity (a table,
+    /// `--json`, an HTML page with `--out`), scaling over loopback, calibration and the
+    /// simulator — and with `--out DIR` every bench's tables in DIR/results.md.
     Bench(BenchArgs),
 }
 
@@ -85,8 +86,8 @@ struct DemoArgs {
 struct BenchArgs {
     #[command(subcommand)]
     which: Option<BenchCommand>,
-    /// The small room, fewer captures, a subset of rules on the hard cases, 100 synthetic nodes
-    /// (under a minute).
+    /// The small room, fewer captures, a subset of rules on the hard cases, 100 synthetic
+    /// nodes, and every other bench with its own `--quick`.
     #[arg(long)]
     quick: bool,
     /// Runs per case and rule, each with its own camera noise; figures are their medians.
@@ -96,13 +97,15 @@ struct BenchArgs {
     /// Write one record per case and rule as JSON to this file.
     #[arg(long)]
     json: Option<PathBuf>,
-    /// Write the plots (SVG), bench.json and index.html to this folder.
+    /// Write the room's plots (SVG), bench.json and index.html, and results.md (every bench's
+    /// tables with date, commit, machine and command), to this folder.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Seed of the camera noise (repeats use the following seeds).
+    /// Seed of the camera noise (repeats use the following seeds) and of the core's rooms.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Only the cases whose name contains this text (e.g. `stale`, `lab/warm`, `scaling`).
+    /// Only the room's cases whose name contains this text (e.g. `stale`, `lab/warm`,
+    /// `scaling`); the core, calibration and simulator benches are then skipped.
     #[arg(long)]
     case: Option<String>,
 }
@@ -196,16 +199,20 @@ fn main() -> Result<()> {
 
 fn bench(args: BenchArgs) -> Result<()> {
     match args.which {
-        None => bench::room::run(&bench::room::Plan {
-            quick: args.quick,
-            presets: true,
-            hard: true,
-            scaling: true,
-            repeats: args.repeats.unwrap_or(if args.quick { 1 } else { 3 }),
-            seed: args.seed,
-            json: args.json,
-            out: args.out,
-            case: args.case,
+        None => bench::evidence::run(&bench::evidence::Evidence {
+            plan: bench::room::Plan {
+                quick: args.quick,
+                presets: true,
+                hard: true,
+                scaling: true,
+                repeats: args.repeats.unwrap_or(if args.quick { 1 } else { 3 }),
+                seed: args.seed,
+                json: args.json,
+                out: args.out,
+                case: args.case,
+            },
+            exe: std::env::current_exe().context("finding the roomlight binary")?,
+            command: typed_command(),
         }),
         Some(BenchCommand::Core { quick, json, seed }) => {
             bench::core::core(quick, json.as_deref(), seed)
@@ -235,4 +242,19 @@ fn bench(args: BenchArgs) -> Result<()> {
         Some(BenchCommand::Calib { quick }) => bench::calib::run(quick),
         Some(BenchCommand::Sim { quick, out }) => bench::sim::run(quick, out.as_deref()),
     }
+}
+
+/// The command line as typed, the program named `roomlight` whatever its path; arguments with
+/// spaces quoted.
+fn typed_command() -> String {
+    std::iter::once("roomlight".to_string())
+        .chain(std::env::args().skip(1).map(|a| {
+            if a.contains(char::is_whitespace) {
+                format!("'{a}'")
+            } else {
+                a
+            }
+        }))
+        .collect::<Vec<_>>()
+        .join(" ")
 }

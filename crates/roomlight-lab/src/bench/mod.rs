@@ -1,13 +1,16 @@
 //! The benches: speed against error of the optimisation core (`core`), of the whole method in
 //! the simulated room (`room`), of calibration (`calib`), of the distributed runtime over
-//! loopback (`net`) and of the simulator (`sim`), and the HTML page that shows them (`report`).
-//! Timings are printed and written, never asserted; memory is the resident set (`memory`).
+//! loopback (`net`) and of the simulator (`sim`), the HTML page that shows the room's
+//! (`report`), and the whole evidence (`evidence`) with its `results.md` (`results`). Timings
+//! are printed and written, never asserted; memory is the resident set (`memory`).
 
 pub mod calib;
 pub mod core;
+pub mod evidence;
 pub mod memory;
 pub mod net;
 pub mod report;
+pub mod results;
 pub mod room;
 pub mod sim;
 pub mod sparsity;

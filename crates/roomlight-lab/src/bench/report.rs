@@ -15,13 +15,21 @@ fn slug(case: &str) -> String {
         .collect()
 }
 
+/// The sizes of the scaling run (none without one).
+fn scaling_points(outcome: &Outcome) -> &[crate::bench::net::NetPoint] {
+    outcome
+        .scaling
+        .as_ref()
+        .map_or(&[], |run| run.sizes.as_slice())
+}
+
 /// Writes the page, the plots and bench.json into `dir` (made if missing).
 pub fn write(dir: &Path, outcome: &Outcome) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let json = serde_json::json!({
         "records": outcome.records,
         "sparsity": outcome.sparsity,
-        "scaling": outcome.scaling,
+        "scaling": scaling_points(outcome),
         "failed": outcome.failed,
         "curves": outcome.curves,
     });
@@ -122,9 +130,9 @@ fn html(outcome: &Outcome, figures: &str) -> String {
         .map(|s| format!("<li>{}</li>", escape(&s.line())))
         .collect();
     let mut scaling = String::new();
-    if !outcome.scaling.is_empty() {
+    if !scaling_points(outcome).is_empty() {
         let mut rows = String::new();
-        for p in &outcome.scaling {
+        for p in scaling_points(outcome) {
             let _ = write!(
                 rows,
                 "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
@@ -141,8 +149,7 @@ fn html(outcome: &Outcome, figures: &str) -> String {
             );
         }
         let fit = |f: fn(&crate::bench::net::NetPoint) -> f64| {
-            let points: Vec<(f64, f64)> = outcome
-                .scaling
+            let points: Vec<(f64, f64)> = scaling_points(outcome)
                 .iter()
                 .filter(|p| p.rounds > 0)
                 .map(|p| (p.nodes as f64, f(p)))

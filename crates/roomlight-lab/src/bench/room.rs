@@ -15,6 +15,7 @@ use roomlight_core::metrics::patch_delta_e;
 use roomlight_core::optimum::optimum;
 use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, Problem, StepRule};
+use roomlight_sim::scene::Scene;
 use roomlight_sim::scenes::{HardCase, hard_case_of};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -137,7 +138,8 @@ pub struct Outcome {
     /// Per case: per rule, the median curve over the repeats.
     pub curves: Vec<(String, Vec<Curve>)>,
     pub sparsity: Vec<super::sparsity::Sparsity>,
-    pub scaling: Vec<crate::bench::net::NetPoint>,
+    /// The scaling run (`bench net`), when the plan has one.
+    pub scaling: Option<crate::bench::net::NetRun>,
     /// Cases that could not run, and why (reported, not left out).
     pub failed: Vec<(String, String)>,
 }
@@ -240,20 +242,41 @@ fn summarise(case: &str, rule: &str, runs: &[Run]) -> (Record, Vec<Point>) {
     (record, curve)
 }
 
+impl Plan {
+    /// True when the case `name` passes the `--case` filter.
+    fn wants(&self, name: &str) -> bool {
+        self.case.as_deref().is_none_or(|f| name.contains(f))
+    }
+
+    /// Refuses a plan that cannot run (before anything is measured).
+    pub fn check(&self) -> Result<()> {
+        if self.repeats == 0 {
+            bail!("--repeats must be at least 1");
+        }
+        Ok(())
+    }
+
+    /// True when the scaling run (`bench net`) is part of the plan and passes the filter.
+    pub fn runs_scaling(&self) -> bool {
+        self.scaling && self.wants("scaling")
+    }
+}
+
 /// Runs the plan: prints the tables, writes `--json` and `--out`.
 pub fn run(plan: &Plan) -> Result<()> {
-    if plan.repeats == 0 {
-        bail!("--repeats must be at least 1");
-    }
     let t0 = Instant::now();
+    let mut outcome = measure(plan)?;
+    if plan.runs_scaling() {
+        outcome.scaling = Some(crate::bench::net::run(plan.quick, None)?);
+    }
+    finish(plan, &outcome, t0)
+}
+
+/// Every case of the plan, the scaling run excepted (the caller runs it, so that it can be
+/// reported as a bench of its own).
+pub fn measure(plan: &Plan) -> Result<Outcome> {
+    plan.check()?;
     let mut outcome = Outcome::default();
-    let budget: u64 = if plan.quick { 8 } else { 30 };
-    let hard_budget: u64 = if plan.quick { 8 } else { 15 };
-    let hard = |budget| Variant {
-        few_rules: plan.quick,
-        ..Variant::plain(budget)
-    };
-    let wanted = |name: &str| plan.case.as_deref().is_none_or(|f| name.contains(f));
     if plan.presets || plan.hard {
         let mut base = if plan.quick {
             roomlight_sim::scenes::small()?
@@ -263,103 +286,29 @@ pub fn run(plan: &Plan) -> Result<()> {
         if plan.quick {
             base.camera.resolution = [640, 480];
         }
-        let base_name = base.name.clone();
         // The base room is calibrated once, and only when one of its cases is wanted.
         let mut calibrated: Option<Bench> = None;
         if plan.presets {
-            let presets = if plan.quick { 1 } else { base.presets.len() };
-            for (preset, spec) in base.presets.iter().enumerate().take(presets) {
-                let name = format!("{base_name}/{}", spec.name);
-                if wanted(&name) {
-                    let variant = Variant::plain(budget);
-                    Bench::once(&mut calibrated, &base, plan.seed)?.case(
-                        &mut outcome,
-                        plan,
-                        &name,
-                        preset,
-                        variant,
-                        preset == 0,
-                    )?;
-                }
-            }
+            presets(plan, &base, &mut calibrated, &mut outcome)?;
         }
         if plan.hard {
-            // Errors one and two captures stale (camera latency), a projector leaving and
-            // another joining: the base room's first preset.
-            for latency in [1, 2] {
-                let name = format!("{base_name}/stale-{latency}");
-                if !wanted(&name) {
-                    continue;
-                }
-                // Discarding late frames spends captures: a longer budget.
-                let variant = Variant {
-                    latency,
-                    ..hard(if plan.quick { 10 } else { 20 })
-                };
-                Bench::once(&mut calibrated, &base, plan.seed)?.case(
-                    &mut outcome,
-                    plan,
-                    &name,
-                    0,
-                    variant,
-                    false,
-                )?;
-            }
-            let (leave_at, join_at) = if plan.quick { (2, 4) } else { (5, 10) };
-            // The joining projector's attenuation known to the camera agent, or measured hot
-            // when it joins (its nodes black, then each white: more captures).
-            for hot in [false, true] {
-                let name = format!(
-                    "{base_name}/leave-{leave_at}-join-{join_at}{}",
-                    if hot { "-hot" } else { "" }
-                );
-                if !wanted(&name) {
-                    continue;
-                }
-                let b = Bench::once(&mut calibrated, &base, plan.seed)?;
-                match Churn::pick(&b.room, &b.cal, leave_at, join_at, hot) {
-                    Ok(churn) => {
-                        let joining = b
-                            .cal
-                            .regions
-                            .iter()
-                            .filter(|r| r.projector == churn.joining)
-                            .count() as u64;
-                        let calibration = if hot { joining + 1 } else { 0 };
-                        let variant = Variant {
-                            churn: Some(churn),
-                            ..hard(hard_budget.max(join_at + 8) + calibration)
-                        };
-                        b.case(&mut outcome, plan, &name, 0, variant, false)?;
-                    }
-                    Err(e) => outcome.failed.push((name, format!("{e:#}"))),
-                }
-            }
-            for case in HardCase::ALL {
-                let scene = hard_case_of(base.clone(), case)?;
-                let name = scene.name.clone();
-                if !wanted(&name) {
-                    continue;
-                }
-                println!("hard case {name}: calibrating");
-                let attempt = Bench::calibrate(scene, plan.seed)
-                    .and_then(|b| b.case(&mut outcome, plan, &name, 0, hard(hard_budget), false));
-                if let Err(e) = attempt {
-                    // A case the pipeline cannot calibrate or run is reported, not left out.
-                    println!("  {name}: could not run: {e:#}");
-                    outcome.failed.push((name, format!("{e:#}")));
-                }
-            }
+            stale_cases(plan, &base, &mut calibrated, &mut outcome)?;
+            churn_cases(plan, &base, &mut calibrated, &mut outcome)?;
+            hard_scenes(plan, &base, &mut outcome)?;
             let nodes = if plan.quick { 100 } else { 1000 };
-            if wanted(&format!("synthetic-{nodes}")) {
-                synthetic_case(&mut outcome, plan, nodes, hard_budget)?;
+            if plan.wants(&format!("synthetic-{nodes}")) {
+                synthetic_case(&mut outcome, plan, nodes, hard_budget(plan))?;
             }
         }
     }
-    if plan.scaling && wanted("scaling") {
-        outcome.scaling = crate::bench::net::run(plan.quick, None)?.sizes;
-    }
-    print_table(&outcome.records);
+    Ok(outcome)
+}
+
+/// Prints the table, the cases that failed and the time since `t0`; writes `--json` and
+/// `--out`.
+pub fn finish(plan: &Plan, outcome: &Outcome, t0: Instant) -> Result<()> {
+    println!("{CAPTION}");
+    println!("{}", table(&outcome.records));
     for (case, why) in &outcome.failed {
         println!("{case}: could not run: {why}");
     }
@@ -373,8 +322,123 @@ pub fn run(plan: &Plan) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(dir) = &plan.out {
-        crate::bench::report::write(dir, &outcome)?;
+        crate::bench::report::write(dir, outcome)?;
         println!("report: {}", dir.join("index.html").display());
+    }
+    Ok(())
+}
+
+/// Captures per rule on the hard cases.
+fn hard_budget(plan: &Plan) -> u64 {
+    if plan.quick { 8 } else { 15 }
+}
+
+/// The base room under each LED preset (only the first with `quick`).
+fn presets(
+    plan: &Plan,
+    base: &Scene,
+    calibrated: &mut Option<Bench>,
+    outcome: &mut Outcome,
+) -> Result<()> {
+    let budget: u64 = if plan.quick { 8 } else { 30 };
+    let presets = if plan.quick { 1 } else { base.presets.len() };
+    for (preset, spec) in base.presets.iter().enumerate().take(presets) {
+        let name = format!("{}/{}", base.name, spec.name);
+        if plan.wants(&name) {
+            let variant = Variant::plain(budget);
+            Bench::once(calibrated, base, plan.seed)?.case(
+                outcome,
+                plan,
+                &name,
+                preset,
+                variant,
+                preset == 0,
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// Errors one and two captures stale (camera latency) on the base room's first preset.
+fn stale_cases(
+    plan: &Plan,
+    base: &Scene,
+    calibrated: &mut Option<Bench>,
+    outcome: &mut Outcome,
+) -> Result<()> {
+    for latency in [1, 2] {
+        let name = format!("{}/stale-{latency}", base.name);
+        if !plan.wants(&name) {
+            continue;
+        }
+        // Discarding late frames spends captures: a longer budget.
+        let variant = Variant {
+            latency,
+            ..Variant::hard(plan, if plan.quick { 10 } else { 20 })
+        };
+        Bench::once(calibrated, base, plan.seed)?.case(outcome, plan, &name, 0, variant, false)?;
+    }
+    Ok(())
+}
+
+/// A projector leaving and another joining, on the base room's first preset: the joining
+/// projector's attenuation known to the camera agent, or measured hot when it joins (its nodes
+/// black, then each white: more captures).
+fn churn_cases(
+    plan: &Plan,
+    base: &Scene,
+    calibrated: &mut Option<Bench>,
+    outcome: &mut Outcome,
+) -> Result<()> {
+    let (leave_at, join_at) = if plan.quick { (2, 4) } else { (5, 10) };
+    for hot in [false, true] {
+        let name = format!(
+            "{}/leave-{leave_at}-join-{join_at}{}",
+            base.name,
+            if hot { "-hot" } else { "" }
+        );
+        if !plan.wants(&name) {
+            continue;
+        }
+        let b = Bench::once(calibrated, base, plan.seed)?;
+        match Churn::pick(&b.room, &b.cal, leave_at, join_at, hot) {
+            Ok(churn) => {
+                let joining = b
+                    .cal
+                    .regions
+                    .iter()
+                    .filter(|r| r.projector == churn.joining)
+                    .count() as u64;
+                let calibration = if hot { joining + 1 } else { 0 };
+                let variant = Variant {
+                    churn: Some(churn),
+                    ..Variant::hard(plan, hard_budget(plan).max(join_at + 8) + calibration)
+                };
+                b.case(outcome, plan, &name, 0, variant, false)?;
+            }
+            Err(e) => outcome.failed.push((name, format!("{e:#}"))),
+        }
+    }
+    Ok(())
+}
+
+/// The variants of the room (DIM, reflective, …), each calibrated on its own.
+fn hard_scenes(plan: &Plan, base: &Scene, outcome: &mut Outcome) -> Result<()> {
+    for case in HardCase::ALL {
+        let scene = hard_case_of(base.clone(), case)?;
+        let name = scene.name.clone();
+        if !plan.wants(&name) {
+            continue;
+        }
+        println!("hard case {name}: calibrating");
+        let variant = Variant::hard(plan, hard_budget(plan));
+        let attempt = Bench::calibrate(scene, plan.seed)
+            .and_then(|b| b.case(outcome, plan, &name, 0, variant, false));
+        if let Err(e) = attempt {
+            // A case the pipeline cannot calibrate or run is reported, not left out.
+            println!("  {name}: could not run: {e:#}");
+            outcome.failed.push((name, format!("{e:#}")));
+        }
     }
     Ok(())
 }
@@ -398,6 +462,14 @@ impl Variant {
             few_rules: false,
         }
     }
+
+    /// A hard case: the quick bench runs only a few rules on it.
+    fn hard(plan: &Plan, budget: u64) -> Self {
+        Self {
+            few_rules: plan.quick,
+            ..Self::plain(budget)
+        }
+    }
 }
 
 /// A calibrated simulated room, ready to run cases on.
@@ -410,11 +482,7 @@ struct Bench {
 
 impl Bench {
     /// The bench in `slot`, calibrated on first use.
-    fn once<'a>(
-        slot: &'a mut Option<Bench>,
-        scene: &roomlight_sim::scene::Scene,
-        seed: u64,
-    ) -> Result<&'a Bench> {
+    fn once<'a>(slot: &'a mut Option<Bench>, scene: &Scene, seed: u64) -> Result<&'a Bench> {
         if slot.is_none() {
             println!("calibrating {}", scene.name);
             *slot = Some(Bench::calibrate(scene.clone(), seed)?);
@@ -422,7 +490,7 @@ impl Bench {
         slot.as_ref().context("the calibrated room")
     }
 
-    fn calibrate(scene: roomlight_sim::scene::Scene, seed: u64) -> Result<Self> {
+    fn calibrate(scene: Scene, seed: u64) -> Result<Self> {
         let room = Arc::new(roomlight_sim::Room::build(scene).context("building the room")?);
         let mut noise = roomlight_sim::CameraNoise::with_seed(&room, seed);
         let bar = indicatif::ProgressBar::hidden();
@@ -661,7 +729,11 @@ async fn synthetic_run(
     })
 }
 
-fn print_table(records: &[Record]) {
+/// What the table of records shows, printed above it.
+pub const CAPTION: &str = "medians over the repeats (range in brackets); captures to 1% / 0.1% excess over the model's G*, from the conventional start (capture 0), through the agents on loopback; after a leave and a join they count from the join";
+
+/// The records as a table (a terminal's preset; the caller may load another).
+pub fn table(records: &[Record]) -> Table {
     let mut table = Table::new();
     table.load_preset(UTF8_FULL_CONDENSED).set_header([
         "case",
@@ -699,10 +771,7 @@ fn print_table(records: &[Record]) {
             r.diverged.to_string(),
         ]);
     }
-    println!(
-        "medians over the repeats (range in brackets); captures to 1% / 0.1% excess over the model's G*, from the conventional start (capture 0), through the agents on loopback; after a leave and a join they count from the join"
-    );
-    println!("{table}");
+    table
 }
 
 /// "3" or "3 (2…5)" or "> 30".
