@@ -63,86 +63,25 @@ pub struct SyntheticRoom {
 pub fn synthetic_room(config: &SyntheticConfig) -> Result<SyntheticRoom, ModelError> {
     let n = config.nodes;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-    let side = (n as f64).sqrt().ceil().max(1.0) as usize;
-    let position = |k: usize| ((k % side) as f64, (k / side) as f64);
+    let grid = Grid {
+        side: (n as f64).sqrt().ceil().max(1.0) as usize,
+        nodes: n,
+    };
     let rho = colorchecker::reflectances();
     let patches = n * PATCHES_PER_CHART;
-    // Per-node peak output: a slight colour tint, and some nodes dim.
-    let gains: Vec<LinearRgb> = (0..n)
-        .map(|_| {
-            let base = if rng.random::<f64>() < config.dim_share {
-                0.15
-            } else {
-                rng.random_range(0.7..1.0)
-            };
-            LinearRgb([
-                base * rng.random_range(0.9..1.1),
-                base,
-                base * rng.random_range(0.9..1.1),
-            ]) * (0.3 * config.exposure)
-        })
-        .collect();
-    // The LED target illuminance at each chart: smooth over the room, warm to cool.
-    let illuminance: Vec<LinearRgb> = (0..n)
-        .map(|m| {
-            let (x, y) = position(m);
-            let wave = 1.0 + 0.3 * (0.7 * x).sin() * (0.5 * y).cos();
-            let warm = 0.5 + 0.5 * (0.3 * x + 0.2 * y).sin();
-            let tint = LinearRgb([1.0 + 0.15 * warm, 1.0, 1.0 - 0.15 * warm]);
-            tint * (wave * config.target_level * 0.3 * 0.85 * config.exposure)
-        })
-        .collect();
+    let gains = node_gains(config, &mut rng);
+    let illuminance = target_illuminance(config, grid);
     let black: Vec<LinearRgb> = (0..patches)
         .map(|i| rho[i % PATCHES_PER_CHART] * (0.002 * config.exposure))
         .collect();
     let target_clean: Vec<LinearRgb> = (0..patches)
         .map(|i| rho[i % PATCHES_PER_CHART].hadamard(illuminance[i / PATCHES_PER_CHART]) + black[i])
         .collect();
-    // Inter-reflection couples every chart within a few metres with the room's mean albedo.
-    let reach = 2.5;
-    let mut columns = Vec::with_capacity(n);
-    for (node, gain) in gains.iter().enumerate() {
-        let (nx, ny) = position(node);
-        let mut dense: Vec<(usize, LinearRgb)> = Vec::new();
-        let lo_x = (nx - reach).floor().max(0.0) as usize;
-        let hi_x = ((nx + reach).ceil() as usize).min(side - 1);
-        let lo_y = (ny - reach).floor().max(0.0) as usize;
-        let hi_y = ((ny + reach).ceil() as usize).min(side - 1);
-        for cy in lo_y..=hi_y {
-            for cx in lo_x..=hi_x {
-                let chart = cy * side + cx;
-                if chart >= n {
-                    continue;
-                }
-                let d = ((cx as f64 - nx).powi(2) + (cy as f64 - ny).powi(2)).sqrt();
-                let direct = if chart == node {
-                    0.85
-                } else {
-                    0.25 * (-d * d / 0.5).exp()
-                };
-                let indirect = 0.08 * config.interreflection * (-d / 0.6).exp();
-                for (j, r) in rho.iter().enumerate() {
-                    let p = r.hadamard(*gain) * (direct + indirect);
-                    dense.push((chart * PATCHES_PER_CHART + j, p));
-                }
-            }
-        }
-        dense.sort_by_key(|&(i, _)| i);
-        let mut support = Vec::with_capacity(dense.len());
-        let mut values = Vec::with_capacity(dense.len());
-        for (i, p) in dense {
-            let sigma = noise_sigma(config.noise_floor, target_clean[i]);
-            let kept = p.zip(
-                sigma,
-                |v, s| if v > config.cutoff_sigmas * s { v } else { 0.0 },
-            );
-            if kept.max_abs() > 0.0 {
-                support.push(patch_id(i)?);
-                values.push(kept);
-            }
-        }
-        columns.push(AttenuationColumn::new(support, values)?);
-    }
+    let columns = gains
+        .iter()
+        .enumerate()
+        .map(|(node, gain)| node_column(config, grid, node, *gain, &target_clean))
+        .collect::<Result<Vec<_>, _>>()?;
     let noise: Vec<LinearRgb> = target_clean
         .iter()
         .map(|&t| noise_sigma(config.noise_floor, t))
@@ -158,6 +97,106 @@ pub fn synthetic_room(config: &SyntheticConfig) -> Result<SyntheticRoom, ModelEr
         problem: Problem::new(columns, black, target_clean, noise)?,
         charts,
     })
+}
+
+/// The nodes (and their charts) on a square grid of walls, row by row.
+#[derive(Debug, Clone, Copy)]
+struct Grid {
+    side: usize,
+    nodes: usize,
+}
+
+impl Grid {
+    /// Where node (or chart) `k` sits, in grid units.
+    fn position(self, k: usize) -> (f64, f64) {
+        ((k % self.side) as f64, (k / self.side) as f64)
+    }
+}
+
+/// Per-node peak output: a slight colour tint, and some nodes dim (drawn node by node).
+fn node_gains(config: &SyntheticConfig, rng: &mut ChaCha8Rng) -> Vec<LinearRgb> {
+    (0..config.nodes)
+        .map(|_| {
+            let base = if rng.random::<f64>() < config.dim_share {
+                0.15
+            } else {
+                rng.random_range(0.7..1.0)
+            };
+            LinearRgb([
+                base * rng.random_range(0.9..1.1),
+                base,
+                base * rng.random_range(0.9..1.1),
+            ]) * (0.3 * config.exposure)
+        })
+        .collect()
+}
+
+/// The LED target illuminance at each chart: smooth over the room, warm to cool.
+fn target_illuminance(config: &SyntheticConfig, grid: Grid) -> Vec<LinearRgb> {
+    (0..config.nodes)
+        .map(|m| {
+            let (x, y) = grid.position(m);
+            let wave = 1.0 + 0.3 * (0.7 * x).sin() * (0.5 * y).cos();
+            let warm = 0.5 + 0.5 * (0.3 * x + 0.2 * y).sin();
+            let tint = LinearRgb([1.0 + 0.15 * warm, 1.0, 1.0 - 0.15 * warm]);
+            tint * (wave * config.target_level * 0.3 * 0.85 * config.exposure)
+        })
+        .collect()
+}
+
+/// One node's attenuation column: direct light on its own chart, spill onto neighbouring
+/// charts, and inter-reflection that couples every chart within a few metres with the room's
+/// mean albedo; entries below the noise cutoff dropped.
+fn node_column(
+    config: &SyntheticConfig,
+    grid: Grid,
+    node: usize,
+    gain: LinearRgb,
+    target_clean: &[LinearRgb],
+) -> Result<AttenuationColumn, ModelError> {
+    let (side, n) = (grid.side, grid.nodes);
+    let rho = colorchecker::reflectances();
+    let reach = 2.5;
+    let (nx, ny) = grid.position(node);
+    let mut dense: Vec<(usize, LinearRgb)> = Vec::new();
+    let lo_x = (nx - reach).floor().max(0.0) as usize;
+    let hi_x = ((nx + reach).ceil() as usize).min(side - 1);
+    let lo_y = (ny - reach).floor().max(0.0) as usize;
+    let hi_y = ((ny + reach).ceil() as usize).min(side - 1);
+    for cy in lo_y..=hi_y {
+        for cx in lo_x..=hi_x {
+            let chart = cy * side + cx;
+            if chart >= n {
+                continue;
+            }
+            let d = ((cx as f64 - nx).powi(2) + (cy as f64 - ny).powi(2)).sqrt();
+            let direct = if chart == node {
+                0.85
+            } else {
+                0.25 * (-d * d / 0.5).exp()
+            };
+            let indirect = 0.08 * config.interreflection * (-d / 0.6).exp();
+            for (j, r) in rho.iter().enumerate() {
+                let p = r.hadamard(gain) * (direct + indirect);
+                dense.push((chart * PATCHES_PER_CHART + j, p));
+            }
+        }
+    }
+    dense.sort_by_key(|&(i, _)| i);
+    let mut support = Vec::with_capacity(dense.len());
+    let mut values = Vec::with_capacity(dense.len());
+    for (i, p) in dense {
+        let sigma = noise_sigma(config.noise_floor, target_clean[i]);
+        let kept = p.zip(
+            sigma,
+            |v, s| if v > config.cutoff_sigmas * s { v } else { 0.0 },
+        );
+        if kept.max_abs() > 0.0 {
+            support.push(patch_id(i)?);
+            values.push(kept);
+        }
+    }
+    AttenuationColumn::new(support, values)
 }
 
 /// Shot-and-read noise of a patch mean: `σ = floor · (1 + 4·√signal)`.
