@@ -18,10 +18,12 @@ pub enum ProtoError {
         field: &'static str,
     },
     /// Packed values do not match their patch ids.
-    #[error("{field}: {values} values for {patches} patches, expected three per patch")]
+    #[error(
+        "{field}: {bytes} bytes of values for {patches} patches, expected 24 per patch (three little-endian doubles)"
+    )]
     Length {
         field: &'static str,
-        values: usize,
+        bytes: usize,
         patches: usize,
     },
     /// A value is NaN or infinite.
@@ -68,12 +70,35 @@ impl From<ProtoError> for tonic::Status {
     }
 }
 
+/// Bytes of one RGB triple on the wire: three little-endian doubles.
+const RGB_BYTES: usize = 24;
+
 /// Packs patch ids and their values.
 pub fn to_sparse(patches: &[PatchId], values: &[LinearRgb]) -> v1::SparseRgb {
+    sparse_from_iter(patches, values.iter().copied())
+}
+
+/// Packs patch ids and their values, one value per patch in order, straight from an iterator
+/// (a node's errors gathered from the room's, or its contribution computed as it goes).
+pub fn sparse_from_iter(
+    patches: &[PatchId],
+    values: impl IntoIterator<Item = LinearRgb>,
+) -> v1::SparseRgb {
     v1::SparseRgb {
         patches: patches.to_vec(),
-        values: values.iter().flat_map(|v| v.0).collect(),
+        values: pack_rgb(patches.len(), values),
     }
+}
+
+/// `values` as three little-endian doubles each (`count` of them expected, to size the buffer).
+pub fn pack_rgb(count: usize, values: impl IntoIterator<Item = LinearRgb>) -> Vec<u8> {
+    let mut packed = Vec::with_capacity(RGB_BYTES * count);
+    for v in values {
+        for c in v.0 {
+            packed.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    packed
 }
 
 /// Unpacks and validates: three finite values per patch, strictly increasing patch ids.
@@ -81,8 +106,8 @@ pub fn from_sparse(
     field: &'static str,
     sparse: &v1::SparseRgb,
 ) -> Result<(Vec<PatchId>, Vec<LinearRgb>), ProtoError> {
-    check_sparse(field, sparse)?;
-    Ok((sparse.patches.clone(), rgb_values(&sparse.values)))
+    check_patches(field, sparse)?;
+    Ok((sparse.patches.clone(), unpack_rgb(field, &sparse.values)?))
 }
 
 /// [`from_sparse`], taking the message apart instead of copying its patch ids.
@@ -90,20 +115,35 @@ pub fn into_sparse(
     field: &'static str,
     sparse: v1::SparseRgb,
 ) -> Result<(Vec<PatchId>, Vec<LinearRgb>), ProtoError> {
-    check_sparse(field, &sparse)?;
-    let values = rgb_values(&sparse.values);
+    check_patches(field, &sparse)?;
+    let values = unpack_rgb(field, &sparse.values)?;
     Ok((sparse.patches, values))
 }
 
-fn rgb_values(packed: &[f64]) -> Vec<LinearRgb> {
-    packed
-        .chunks_exact(3)
-        .map(|c| LinearRgb([c[0], c[1], c[2]]))
-        .collect()
+/// Packed triples back into values, every one finite (the length is checked by the caller).
+fn unpack_rgb(field: &'static str, packed: &[u8]) -> Result<Vec<LinearRgb>, ProtoError> {
+    let mut values = Vec::with_capacity(packed.len() / RGB_BYTES);
+    for (k, triple) in packed.chunks_exact(RGB_BYTES).enumerate() {
+        let mut v = [0.0; 3];
+        for (c, bytes) in v.iter_mut().zip(triple.chunks_exact(8)) {
+            let mut le = [0u8; 8];
+            le.copy_from_slice(bytes);
+            *c = f64::from_le_bytes(le);
+        }
+        if let Some(i) = v.iter().position(|c| !c.is_finite()) {
+            return Err(ProtoError::NotFinite {
+                field,
+                index: 3 * k + i,
+                value: v[i],
+            });
+        }
+        values.push(LinearRgb(v));
+    }
+    Ok(values)
 }
 
-/// Three finite values per patch, strictly increasing patch ids, not too many.
-fn check_sparse(field: &'static str, sparse: &v1::SparseRgb) -> Result<(), ProtoError> {
+/// 24 bytes of values per patch, strictly increasing patch ids, not too many.
+fn check_patches(field: &'static str, sparse: &v1::SparseRgb) -> Result<(), ProtoError> {
     let n = sparse.patches.len();
     if n > MAX_SPARSE_ENTRIES {
         return Err(ProtoError::TooLarge {
@@ -112,23 +152,11 @@ fn check_sparse(field: &'static str, sparse: &v1::SparseRgb) -> Result<(), Proto
             max: MAX_SPARSE_ENTRIES,
         });
     }
-    if sparse.values.len() != 3 * n {
+    if sparse.values.len() != RGB_BYTES * n {
         return Err(ProtoError::Length {
             field,
-            values: sparse.values.len(),
+            bytes: sparse.values.len(),
             patches: n,
-        });
-    }
-    if let Some((index, &value)) = sparse
-        .values
-        .iter()
-        .enumerate()
-        .find(|(_, v)| !v.is_finite())
-    {
-        return Err(ProtoError::NotFinite {
-            field,
-            index,
-            value,
         });
     }
     if let Some(w) = sparse.patches.windows(2).find(|w| w[1] <= w[0]) {

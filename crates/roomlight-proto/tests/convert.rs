@@ -3,8 +3,8 @@
 use prost::Message;
 use roomlight_core::LinearRgb;
 use roomlight_proto::convert::{
-    MAX_BATCH_NODES, NodeVector, ProtoError, from_node_rgbs, from_rgb, from_sparse, to_node_rgb,
-    to_rgb,
+    MAX_BATCH_NODES, NodeVector, ProtoError, from_node_rgbs, from_rgb, from_sparse, pack_rgb,
+    to_node_rgb, to_rgb,
 };
 use roomlight_proto::v1;
 
@@ -59,19 +59,19 @@ fn sparse_vectors_round_trip_through_bytes() {
 fn malformed_sparse_vectors_are_refused() {
     let short = v1::SparseRgb {
         patches: vec![1, 2],
-        values: vec![0.0; 5],
+        values: vec![0; 47],
     };
     assert!(matches!(
         from_sparse("delta", &short),
         Err(ProtoError::Length {
-            values: 5,
+            bytes: 47,
             patches: 2,
             ..
         })
     ));
     let nan = v1::SparseRgb {
         patches: vec![1],
-        values: vec![0.0, f64::NAN, 0.0],
+        values: pack_rgb(1, [LinearRgb([0.0, f64::NAN, 0.0])]),
     };
     let err = from_sparse("delta", &nan).expect_err("nan");
     assert!(
@@ -80,7 +80,7 @@ fn malformed_sparse_vectors_are_refused() {
     );
     let unsorted = v1::SparseRgb {
         patches: vec![4, 4],
-        values: vec![0.0; 6],
+        values: vec![0; 48],
     };
     assert!(matches!(
         from_sparse("delta", &unsorted),
@@ -92,7 +92,7 @@ fn malformed_sparse_vectors_are_refused() {
     ));
     let status: tonic::Status = ProtoError::Length {
         field: "delta",
-        values: 5,
+        bytes: 47,
         patches: 2,
     }
     .into();
@@ -109,14 +109,14 @@ fn malformed_entries_of_a_batch_are_refused_one_by_one() {
         node: 12,
         values: Some(v1::SparseRgb {
             patches: vec![1],
-            values: vec![0.0, f64::INFINITY, 0.0],
+            values: pack_rgb(1, [LinearRgb([0.0, f64::INFINITY, 0.0])]),
         }),
     };
     let short = v1::NodeRgb {
         node: 13,
         values: Some(v1::SparseRgb {
             patches: vec![1, 2],
-            values: vec![0.0; 4],
+            values: vec![0; 32],
         }),
     };
     let absent = v1::NodeRgb {
@@ -137,7 +137,7 @@ fn malformed_entries_of_a_batch_are_refused_one_by_one() {
         "node 99: contribution: node 99 is not one of this projector's nodes",
         "node 10: contribution: node 10 appears more than once",
         "node 12: contribution: value 1 is inf, expected a finite number",
-        "node 13: contribution: 4 values for 2 patches, expected three per patch",
+        "node 13: contribution: 32 bytes of values for 2 patches, expected 24 per patch (three little-endian doubles)",
         "node 14: contribution: field values is missing",
     ];
     assert_eq!(reasons, expected);

@@ -12,6 +12,7 @@ use crate::hardware::Camera;
 use roomlight_core::LinearRgb;
 use roomlight_core::aggregator::{ErrorKind, RoundSummary};
 use roomlight_core::round::{Backoff, Collection, Controller, Next as NextRound, Received};
+use roomlight_proto::convert::sparse_from_iter;
 use roomlight_proto::v1;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -294,15 +295,11 @@ fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary) -> V
             nodes
                 .iter()
                 .filter_map(|&n| {
-                    let column = live.problem.columns().get(n as usize)?;
-                    let support = column.support();
-                    let values = support.iter().flat_map(|&i| errors[i as usize].0).collect();
+                    let support = live.problem.columns().get(n as usize)?.support();
+                    let values = support.iter().map(|&i| errors[i as usize]);
                     Some(v1::NodeRgb {
                         node: n,
-                        values: Some(v1::SparseRgb {
-                            patches: support.to_vec(),
-                            values,
-                        }),
+                        values: Some(sparse_from_iter(support, values)),
                     })
                 })
                 .collect()

@@ -12,7 +12,9 @@ use super::wire::{Wire, assignment_from_wire, pattern_from_wire};
 use crate::AgentError;
 use crate::hardware::Display;
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState};
-use roomlight_proto::convert::{from_node_rgbs, from_rgb, from_sparse, to_rgb, to_sparse};
+use roomlight_proto::convert::{
+    from_node_rgbs, from_rgb, from_sparse, sparse_from_iter, to_rgb, to_sparse,
+};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::collections::HashMap;
 use std::time::Duration;
@@ -317,16 +319,10 @@ impl<D: Display> Session<'_, D> {
 /// One node's contribution change `δ_n = p_n Δx_n` on its support, packed for the wire.
 fn contribution(node: u32, state: &NodeState, delta: LinearRgb) -> v1::NodeRgb {
     let column = state.column();
+    let delta = column.values().iter().map(|p| p.hadamard(delta));
     v1::NodeRgb {
         node,
-        values: Some(v1::SparseRgb {
-            patches: column.support().to_vec(),
-            values: column
-                .values()
-                .iter()
-                .flat_map(|p| p.hadamard(delta).0)
-                .collect(),
-        }),
+        values: Some(sparse_from_iter(column.support(), delta)),
     }
 }
 
