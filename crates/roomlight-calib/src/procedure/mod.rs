@@ -4,7 +4,8 @@
 //! nodes (feathered across overlaps, the target kept dark, beside projectors already lit),
 //! attenuation (one at a time or Hadamard) and hot calibration of a projector joining a lit
 //! room. Every step is a method a caller may run on its own; [`Procedure::bring_up`] and
-//! [`Procedure::join`] chain them for the two situations the system meets. It owns the order
+//! [`Procedure::join`] chain them for the two situations the system meets; [`Target`] turns
+//! the target lighting's capture into the model's patches and problem. It owns the order
 //! of captures and what is shown for each; it must not know where frames are shown or photos
 //! come from (processes, networks, the simulator), nor what the caller does with the results.
 
@@ -22,8 +23,10 @@ use crate::rig::{Assignment, Frame, Projector, ProjectorKind, ProjectorRole, Rig
 use roomlight_core::LinearRgb;
 
 mod steps;
+mod target;
 
 pub use steps::Procedure;
+pub use target::Target;
 
 /// How the procedure measures; [`Settings::default`] is what the benches measured best.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,6 +49,11 @@ pub struct Settings {
     pub scheme: Scheme,
     /// How projectors are split into nodes and feathered.
     pub nodes: NodeConfig,
+    /// Whether the camera resolves XOR-04's 4-pixel stripes on standard projectors. A camera
+    /// that sees several projector pixels in one of its own (an evaluation camera close to
+    /// the projector) averages them away; it needs plain Gray code, as a defocused
+    /// projector does ([`Settings::coding`]).
+    pub fine_stripes: bool,
 }
 
 impl Default for Settings {
@@ -58,6 +66,28 @@ impl Default for Settings {
             ramp_levels: 9,
             scheme: Scheme::Hadamard,
             nodes: NodeConfig::default(),
+            fine_stripes: true,
+        }
+    }
+}
+
+impl Settings {
+    /// The coding a projector gets: XOR-04 where the projector's optics and the camera
+    /// resolve its fine stripes, plain Gray code otherwise ([`coding`]).
+    pub fn coding(&self, p: &Projector) -> Coding {
+        if self.fine_stripes {
+            coding(p)
+        } else {
+            Coding::Gray
+        }
+    }
+
+    /// The decoder for a projector: strict for a large aperture, whose blur makes a stripe
+    /// edge undecided rather than off by the blur.
+    pub fn decoder(&self, p: &Projector) -> DecodeConfig {
+        match p.kind {
+            ProjectorKind::LargeAperture => self.decode_large,
+            ProjectorKind::Standard => self.decode,
         }
     }
 }
@@ -252,7 +282,8 @@ pub fn luminaires(projectors: &[Projector]) -> Vec<Projector> {
 }
 
 /// The coding a projector's optics allow: a large aperture's defocus blurs XOR-04's fine
-/// stripes away, so it gets plain Gray code.
+/// stripes away, so it gets plain Gray code (for a camera that resolves the stripes; see
+/// [`Settings::coding`]).
 pub fn coding(p: &Projector) -> Coding {
     match p.kind {
         ProjectorKind::LargeAperture => Coding::Gray,

@@ -121,8 +121,8 @@ impl<'a, R: Rig> Procedure<'a, R> {
     ) -> Result<Vec<Decoded>, ProcedureError> {
         let mut decoded = self.code(projectors, dark, whites).await?;
         for d in &mut decoded {
-            let m =
-                Manifest::with_coding(d.projector.width, d.projector.height, coding(&d.projector))?;
+            let coding = self.settings.coding(&d.projector);
+            let m = Manifest::with_coding(d.projector.width, d.projector.height, coding)?;
             d.second = self.second_pass(&d.projector, &m, &mut d.corr).await?;
         }
         Ok(decoded)
@@ -139,7 +139,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
     ) -> Result<Vec<Decoded>, ProcedureError> {
         let manifests: Vec<Manifest> = projectors
             .iter()
-            .map(|p| Manifest::with_coding(p.width, p.height, coding(p)))
+            .map(|p| Manifest::with_coding(p.width, p.height, self.settings.coding(p)))
             .collect::<Result<_, _>>()?;
         let groups = coding_groups(projectors, dark, whites, &self.settings);
         let planned = groups
@@ -207,7 +207,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
                     let frame = match manifests[k].patterns.get(j) {
                         Some(f) => Frame::Structured {
                             pattern: f.pattern,
-                            coding: coding(&projectors[k]),
+                            coding: manifests[k].coding,
                         },
                         None => Frame::BLACK,
                     };
@@ -226,10 +226,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
             .zip(owned_pixels(group, gains))
             .map(|(&k, ours)| {
                 let p = &projectors[k];
-                let config = match p.kind {
-                    ProjectorKind::LargeAperture => self.settings.decode_large,
-                    ProjectorKind::Standard => self.settings.decode,
-                };
+                let config = self.settings.decoder(p);
                 (p.clone(), manifests[k].clone(), config, ours)
             })
             .collect();
@@ -263,9 +260,10 @@ impl<'a, R: Rig> Procedure<'a, R> {
         Ok(corrs)
     }
 
-    /// A second structured-light pass on standard projector `p` (shown alone; the others
-    /// keep their light) where [`SecondPassPlan::new`] finds it worth its captures and the rig
-    /// can show masked patterns. Leaves `p` black.
+    /// A second structured-light pass on standard projector `p` coded with XOR-04 (shown
+    /// alone; the others keep their light) where [`SecondPassPlan::new`] finds it worth its
+    /// captures and the rig can show masked patterns: plain Gray code's coarse stripes do not
+    /// cancel the reflected light a second pass is for. Leaves `p` black.
     pub async fn second_pass(
         &mut self,
         p: &Projector,
@@ -274,7 +272,13 @@ impl<'a, R: Rig> Procedure<'a, R> {
     ) -> Result<Option<SecondPass>, ProcedureError> {
         let config = self.settings.decode;
         let plan = match SecondPassPlan::new(&config, corr) {
-            Some(plan) if p.kind == ProjectorKind::Standard && self.rig.shows_masks() => plan,
+            Some(plan)
+                if p.kind == ProjectorKind::Standard
+                    && manifest.coding == Coding::Xor04
+                    && self.rig.shows_masks() =>
+            {
+                plan
+            }
             _ => return Ok(None),
         };
         self.report(Event::Stage {
