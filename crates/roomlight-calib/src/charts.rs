@@ -171,7 +171,15 @@ pub fn sample_chart(
     chart: &ChartCorners,
     config: &SampleConfig,
 ) -> Result<Vec<PatchSample>, CalibError> {
-    let saturation = config.saturation;
+    let hom = chart_homography(image, chart)?;
+    Ok((0..COLUMNS * ROWS)
+        .map(|k| sample_patch(image, &hom, k, config))
+        .collect())
+}
+
+/// The chart's homography from patch units to image pixels, once its corners are known to lie
+/// in the image and to form a convex quadrilateral of at least 16 pixels.
+fn chart_homography(image: &LinearImage, chart: &ChartCorners) -> Result<Homography, CalibError> {
     let (w, h) = (f64::from(image.width), f64::from(image.height));
     for c in &chart.corners {
         if !(c[0].is_finite()
@@ -212,106 +220,142 @@ pub fn sample_chart(
             ),
         });
     }
-    let hom = Homography::from_corners(&chart.corners).ok_or_else(|| CalibError::Invalid {
+    Homography::from_corners(&chart.corners).ok_or_else(|| CalibError::Invalid {
         field: "chart corners",
         problem: format!(
             "chart {}: the corners {:?} do not form a quadrilateral",
             chart.name, chart.corners
         ),
-    })?;
-    let mut out = Vec::with_capacity(COLUMNS * ROWS);
-    for k in 0..COLUMNS * ROWS {
-        let (col, row) = ((k % COLUMNS) as f64, (k / COLUMNS) as f64);
-        let half = 0.25 * PATCH_SIDE; // the inner half of the patch square
-        let (cu, cv) = (col + 0.5, row + 0.5);
-        let quad = [
-            hom.apply(cu - half, cv - half),
-            hom.apply(cu + half, cv - half),
-            hom.apply(cu + half, cv + half),
-            hom.apply(cu - half, cv + half),
-        ];
-        let out_of_image = quad
-            .iter()
-            .any(|p| !(p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w && p[1] <= h));
-        if out_of_image {
-            out.push(PatchSample {
-                mean: LinearRgb::ZERO,
-                std_error: LinearRgb::ZERO,
-                pixels: 0,
-                status: PatchStatus::OutOfImage,
-            });
-            continue;
-        }
-        let (x0, x1) = (
-            quad.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min),
-            quad.iter().map(|p| p[0]).fold(0.0, f64::max),
-        );
-        let (y0, y1) = (
-            quad.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min),
-            quad.iter().map(|p| p[1]).fold(0.0, f64::max),
-        );
-        let mut values = Vec::new();
-        let mut side = Vec::new();
-        let mut saturated = false;
-        let centre = hom.apply(cu, cv);
-        let (axis_u, axis_v) = (hom.apply(cu + 1.0, cv), hom.apply(cu, cv + 1.0));
-        let (du, dv) = (
-            [axis_u[0] - centre[0], axis_u[1] - centre[1]],
-            [axis_v[0] - centre[0], axis_v[1] - centre[1]],
-        );
-        for y in (y0.floor() as u32)..(y1.ceil() as u32).min(image.height) {
-            for x in (x0.floor() as u32)..(x1.ceil() as u32).min(image.width) {
-                if inside(&quad, [f64::from(x) + 0.5, f64::from(y) + 0.5]) {
-                    let v = image.pixels[(y * image.width + x) as usize];
-                    saturated |= v.iter().any(|&c| c >= saturation || !c.is_finite());
-                    values.push(v);
-                    let (px, py) = (
-                        f64::from(x) + 0.5 - centre[0],
-                        f64::from(y) + 0.5 - centre[1],
-                    );
-                    side.push((
-                        px * du[0] + py * du[1] >= 0.0,
-                        px * dv[0] + py * dv[1] >= 0.0,
-                    ));
-                }
-            }
-        }
-        let status = if saturated {
-            PatchStatus::Saturated
-        } else if values.len() < 4 {
-            PatchStatus::TooFewPixels
-        } else if nonuniform(&values, &side, config) {
-            PatchStatus::NonUniform
-        } else {
-            PatchStatus::Ok
+    })
+}
+
+/// Patch `k` (row-major, six columns): the trimmed mean of the pixels inside the inner half of
+/// its square, or why it cannot be used.
+fn sample_patch(
+    image: &LinearImage,
+    hom: &Homography,
+    k: usize,
+    config: &SampleConfig,
+) -> PatchSample {
+    let (w, h) = (f64::from(image.width), f64::from(image.height));
+    let (col, row) = ((k % COLUMNS) as f64, (k / COLUMNS) as f64);
+    let half = 0.25 * PATCH_SIDE; // the inner half of the patch square
+    let (cu, cv) = (col + 0.5, row + 0.5);
+    let quad = [
+        hom.apply(cu - half, cv - half),
+        hom.apply(cu + half, cv - half),
+        hom.apply(cu + half, cv + half),
+        hom.apply(cu - half, cv + half),
+    ];
+    let out_of_image = quad
+        .iter()
+        .any(|p| !(p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w && p[1] <= h));
+    if out_of_image {
+        return PatchSample {
+            mean: LinearRgb::ZERO,
+            std_error: LinearRgb::ZERO,
+            pixels: 0,
+            status: PatchStatus::OutOfImage,
         };
-        if status == PatchStatus::Ok {
-            let (mean, sample_se, pixels) = trimmed(&mut values);
-            // With a handful of pixels the sample spread is itself noisy: never report less than
-            // the camera's noise model gives for this many pixels.
-            let std_error = LinearRgb(std::array::from_fn(|c| {
-                let model = ((f64::from(config.read_noise).powi(2)
-                    + f64::from(config.shot_noise).powi(2) * mean[c].max(0.0))
-                    / pixels as f64)
-                    .sqrt();
-                sample_se[c].max(model)
-            }));
-            out.push(PatchSample {
-                mean,
-                std_error,
-                pixels,
-                status,
-            });
-        } else {
-            out.push(PatchSample {
-                mean: LinearRgb::ZERO,
-                std_error: LinearRgb::ZERO,
-                pixels: values.len(),
-                status,
-            });
+    }
+    let PatchPixels {
+        mut values,
+        side,
+        saturated,
+    } = pixels_in(image, hom, &quad, (cu, cv), config.saturation);
+    let status = if saturated {
+        PatchStatus::Saturated
+    } else if values.len() < 4 {
+        PatchStatus::TooFewPixels
+    } else if nonuniform(&values, &side, config) {
+        PatchStatus::NonUniform
+    } else {
+        PatchStatus::Ok
+    };
+    if status == PatchStatus::Ok {
+        let (mean, sample_se, pixels) = trimmed(&mut values);
+        // With a handful of pixels the sample spread is itself noisy: never report less than
+        // the camera's noise model gives for this many pixels.
+        let std_error = LinearRgb(std::array::from_fn(|c| {
+            let model = ((f64::from(config.read_noise).powi(2)
+                + f64::from(config.shot_noise).powi(2) * mean[c].max(0.0))
+                / pixels as f64)
+                .sqrt();
+            sample_se[c].max(model)
+        }));
+        PatchSample {
+            mean,
+            std_error,
+            pixels,
+            status,
+        }
+    } else {
+        PatchSample {
+            mean: LinearRgb::ZERO,
+            std_error: LinearRgb::ZERO,
+            pixels: values.len(),
+            status,
         }
     }
-    Ok(out)
+}
+
+/// The pixels of a patch's box.
+struct PatchPixels {
+    values: Vec<[f32; 3]>,
+    /// Per pixel, which side of the patch centre it lies on along the chart's u and v axes.
+    side: Vec<(bool, bool)>,
+    /// Any pixel at the saturation level or not finite.
+    saturated: bool,
+}
+
+/// The pixels whose centres lie inside `quad` (the patch's inner half around patch coordinates
+/// `(cu, cv)`, inside the image).
+fn pixels_in(
+    image: &LinearImage,
+    hom: &Homography,
+    quad: &[[f64; 2]; 4],
+    (cu, cv): (f64, f64),
+    saturation: f32,
+) -> PatchPixels {
+    let (x0, x1) = (
+        quad.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min),
+        quad.iter().map(|p| p[0]).fold(0.0, f64::max),
+    );
+    let (y0, y1) = (
+        quad.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min),
+        quad.iter().map(|p| p[1]).fold(0.0, f64::max),
+    );
+    let mut values = Vec::new();
+    let mut side = Vec::new();
+    let mut saturated = false;
+    let centre = hom.apply(cu, cv);
+    let (axis_u, axis_v) = (hom.apply(cu + 1.0, cv), hom.apply(cu, cv + 1.0));
+    let (du, dv) = (
+        [axis_u[0] - centre[0], axis_u[1] - centre[1]],
+        [axis_v[0] - centre[0], axis_v[1] - centre[1]],
+    );
+    for y in (y0.floor() as u32)..(y1.ceil() as u32).min(image.height) {
+        for x in (x0.floor() as u32)..(x1.ceil() as u32).min(image.width) {
+            if inside(quad, [f64::from(x) + 0.5, f64::from(y) + 0.5]) {
+                let v = image.pixels[(y * image.width + x) as usize];
+                saturated |= v.iter().any(|&c| c >= saturation || !c.is_finite());
+                values.push(v);
+                let (px, py) = (
+                    f64::from(x) + 0.5 - centre[0],
+                    f64::from(y) + 0.5 - centre[1],
+                );
+                side.push((
+                    px * du[0] + py * du[1] >= 0.0,
+                    px * dv[0] + py * dv[1] >= 0.0,
+                ));
+            }
+        }
+    }
+    PatchPixels {
+        values,
+        side,
+        saturated,
+    }
 }
 
 /// True when the two halves of the box (along the chart's u or v axis) differ by more than

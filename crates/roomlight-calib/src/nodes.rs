@@ -178,6 +178,51 @@ pub fn segment_beside(
         });
     };
     let (cw, ch) = (first.width as usize, first.height as usize);
+    check_sizes(luminaires, target_mask, claimed, (cw, ch))?;
+    let centres = patch_centres(charts, cw, ch)?;
+    // The charts each projector lights, checked before any blending work.
+    let lit = lit_charts(luminaires, &centres, config)?;
+    let shares = overlap_shares(luminaires, (cw, ch), config);
+    let per = blend_in_order(luminaires, &shares, target_mask, claimed, config);
+    let mut nodes = Vec::new();
+    let mut excluded = Vec::with_capacity(luminaires.len());
+    let mut claims = Vec::with_capacity(luminaires.len());
+    for (k, ((c, done), anchors)) in luminaires.iter().zip(per).zip(lit).enumerate() {
+        let Some(Blended {
+            blend,
+            black,
+            claim,
+        }) = done
+        else {
+            continue;
+        };
+        let weights = node_weights(c, &anchors, &blend, &black, config);
+        for ((chart, anchor), w) in anchors.into_iter().zip(weights) {
+            nodes.push(Node {
+                projector: k,
+                chart,
+                anchor,
+                weights: w,
+            });
+        }
+        claims.push(claim);
+        excluded.push(black);
+    }
+    Ok(Segmentation {
+        nodes,
+        excluded,
+        claims,
+    })
+}
+
+/// Every map, the target mask and the claimed shares have the camera's size `(cw, ch)`, and
+/// every claim is a share in `[0, 1]`.
+fn check_sizes(
+    luminaires: &[Correspondence],
+    target_mask: Option<&[bool]>,
+    claimed: Option<&[f32]>,
+    (cw, ch): (usize, usize),
+) -> Result<(), CalibError> {
     for (k, c) in luminaires.iter().enumerate() {
         if c.width as usize != cw || c.height as usize != ch {
             return Err(CalibError::Invalid {
@@ -216,13 +261,24 @@ pub fn segment_beside(
             });
         }
     }
-    let centres = patch_centres(charts, cw, ch)?;
-    // The charts each projector lights, checked before any blending work.
-    let lit: Vec<Vec<(usize, (f32, f32))>> = luminaires
+    Ok(())
+}
+
+/// A chart a projector lights and the node's anchor on it (projector pixels).
+type Anchor = (usize, (f32, f32));
+
+/// Per projector, the charts it lights and its anchor on each; a projector that lights none is
+/// refused.
+fn lit_charts(
+    luminaires: &[Correspondence],
+    centres: &[Vec<usize>],
+    config: &NodeConfig,
+) -> Result<Vec<Vec<Anchor>>, CalibError> {
+    luminaires
         .iter()
         .enumerate()
         .map(|(k, c)| {
-            let a = anchors(c, &centres, config);
+            let a = anchors(c, centres, config);
             if a.is_empty() {
                 return Err(CalibError::Invalid {
                     field: "projectors",
@@ -234,12 +290,19 @@ pub fn segment_beside(
             }
             Ok(a)
         })
-        .collect::<Result<_, _>>()?;
-    // Overlap shares in camera space: each projector's share at a surface point ramps from 0 at
-    // the boundary of its footprint (frustum edge or shadow) to 1 at `edge_feather_px` camera
-    // pixels inside it; the shares of the projectors at a point are normalised to sum to 1.
-    // The footprint is the decoded region with small gaps (unknown pixels) closed.
-    let shares: Vec<Vec<f32>> = luminaires
+        .collect()
+}
+
+/// Overlap shares in camera space: each projector's share at a surface point ramps from 0 at
+/// the boundary of its footprint (frustum edge or shadow) to 1 at `edge_feather_px` camera
+/// pixels inside it; the shares of the projectors at a point are normalised to sum to 1.
+/// The footprint is the decoded region with small gaps (unknown pixels) closed.
+fn overlap_shares(
+    luminaires: &[Correspondence],
+    (cw, ch): (usize, usize),
+    config: &NodeConfig,
+) -> Vec<Vec<f32>> {
+    luminaires
         .iter()
         .map(|c| {
             let covered: Vec<bool> = c.map.iter().map(Option::is_some).collect();
@@ -249,12 +312,27 @@ pub fn segment_beside(
                 .map(|d| (d / config.edge_feather_px.max(1e-3)).min(1.0))
                 .collect()
         })
-        .collect();
-    // The projectors take their blend one after the other, coarsest first: each takes its
-    // share of what the ones before it left (their actual light at each camera pixel, pixel
-    // steps and all), in proportion to its share among itself and those still to come. The
-    // last at a surface point takes exactly what is left there, so its finer pixel grid
-    // absorbs the staircase of the coarser ones' ramps instead of adding its own.
+        .collect()
+}
+
+/// The projectors take their blend one after the other, coarsest first: each takes its
+/// share of what the ones before it left (their actual light at each camera pixel, pixel
+/// steps and all), in proportion to its share among itself and those still to come. The
+/// last at a surface point takes exactly what is left there, so its finer pixel grid
+/// absorbs the staircase of the coarser ones' ramps instead of adding its own.
+///
+/// Returns, per projector, its blend per projector pixel, its pixels kept black and its claims.
+fn blend_in_order(
+    luminaires: &[Correspondence],
+    shares: &[Vec<f32>],
+    target_mask: Option<&[bool]>,
+    claimed: Option<&[f32]>,
+    config: &NodeConfig,
+) -> Vec<Option<Blended>> {
+    let Some(first) = luminaires.first() else {
+        return Vec::new();
+    };
+    let (cw, ch) = (first.width as usize, first.height as usize);
     let mut order: Vec<usize> = (0..luminaires.len()).collect();
     let fineness: Vec<f64> = luminaires
         .iter()
@@ -262,7 +340,6 @@ pub fn segment_beside(
         .collect();
     order.sort_by(|a, b| fineness[*a].total_cmp(&fineness[*b]).then(a.cmp(b)));
     let mut taken: Vec<f32> = claimed.map_or_else(|| vec![0.0; cw * ch], <[f32]>::to_vec);
-    // Per projector: its blend per projector pixel, its pixels kept black, its claims.
     let mut per: Vec<Option<Blended>> = vec![None; luminaires.len()];
     for (rank, &k) in order.iter().enumerate() {
         let c = &luminaires[k];
@@ -289,21 +366,7 @@ pub fn segment_beside(
                 None => 1.0,
             })
             .collect();
-        // Target exclusion: projector pixels that light target pixels, dilated by the margin.
-        let mut black = vec![false; pw * ph];
-        if let Some(mask) = target_mask {
-            for (i, m) in c.map.iter().enumerate() {
-                if let (true, Some((x, y))) = (mask[i], m) {
-                    black[*y as usize * pw + *x as usize] = true;
-                }
-            }
-            for p in 0..pw * ph {
-                if let Some(i) = inv[p] {
-                    black[p] |= mask[i as usize];
-                }
-            }
-            black = dilate(&black, pw, ph, config.target_margin_px);
-        }
+        let black = target_black(c, &inv, target_mask, config.target_margin_px);
         // The light it gives each camera pixel: the blend of the projector pixel decoded there
         // (0 where it is kept black); in its footprint's gaps, the camera-space blend.
         let claim: Vec<f32> = (0..cw * ch)
@@ -326,59 +389,69 @@ pub fn segment_beside(
             claim,
         });
     }
-    let mut nodes = Vec::new();
-    let mut excluded = Vec::with_capacity(luminaires.len());
-    let mut claims = Vec::with_capacity(luminaires.len());
-    for (k, ((c, done), anchors)) in luminaires.iter().zip(per).zip(lit).enumerate() {
-        let (pw, ph) = (c.projector_width as usize, c.projector_height as usize);
-        let Some(Blended {
-            blend,
-            black,
-            claim,
-        }) = done
-        else {
-            continue;
-        };
-        // Node weights: piecewise-linear partition of unity over the distance to each anchor.
-        let mut weights = vec![vec![0.0f32; pw * ph]; anchors.len()];
-        let band = config.node_feather_px.max(1e-3);
-        let mut raw = vec![0.0f32; anchors.len()];
+    per
+}
+
+/// Target exclusion: the projector pixels that light target pixels (decoded there, or the
+/// inverse map's pick), dilated by `margin` pixels; none without a target mask.
+fn target_black(
+    c: &Correspondence,
+    inv: &[Option<u32>],
+    target_mask: Option<&[bool]>,
+    margin: u32,
+) -> Vec<bool> {
+    let (pw, ph) = (c.projector_width as usize, c.projector_height as usize);
+    let mut black = vec![false; pw * ph];
+    if let Some(mask) = target_mask {
+        for (i, m) in c.map.iter().enumerate() {
+            if let (true, Some((x, y))) = (mask[i], m) {
+                black[*y as usize * pw + *x as usize] = true;
+            }
+        }
         for p in 0..pw * ph {
-            if black[p] {
-                continue;
-            }
-            let (x, y) = ((p % pw) as f32 + 0.5, (p / pw) as f32 + 0.5);
-            let d: Vec<f32> = anchors
-                .iter()
-                .map(|(_, (ax, ay))| ((x - ax).powi(2) + (y - ay).powi(2)).sqrt())
-                .collect();
-            let dmin = d.iter().copied().fold(f32::INFINITY, f32::min);
-            let mut sum = 0.0;
-            for (r, dn) in raw.iter_mut().zip(&d) {
-                *r = (1.0 - (dn - dmin) / band).max(0.0);
-                sum += *r;
-            }
-            // sum ≥ 1: the nearest anchor always contributes 1.
-            for (w, r) in weights.iter_mut().zip(&raw) {
-                w[p] = blend[p] * r / sum;
+            if let Some(i) = inv[p] {
+                black[p] |= mask[i as usize];
             }
         }
-        for ((chart, anchor), w) in anchors.into_iter().zip(weights) {
-            nodes.push(Node {
-                projector: k,
-                chart,
-                anchor,
-                weights: w,
-            });
-        }
-        claims.push(claim);
-        excluded.push(black);
+        black = dilate(&black, pw, ph, margin);
     }
-    Ok(Segmentation {
-        nodes,
-        excluded,
-        claims,
-    })
+    black
+}
+
+/// Node weights of one projector: a piecewise-linear partition of unity over the distance to
+/// each anchor, times the overlap blend; zero where the projector is kept black.
+fn node_weights(
+    c: &Correspondence,
+    anchors: &[Anchor],
+    blend: &[f32],
+    black: &[bool],
+    config: &NodeConfig,
+) -> Vec<Vec<f32>> {
+    let (pw, ph) = (c.projector_width as usize, c.projector_height as usize);
+    let mut weights = vec![vec![0.0f32; pw * ph]; anchors.len()];
+    let band = config.node_feather_px.max(1e-3);
+    let mut raw = vec![0.0f32; anchors.len()];
+    for p in 0..pw * ph {
+        if black[p] {
+            continue;
+        }
+        let (x, y) = ((p % pw) as f32 + 0.5, (p / pw) as f32 + 0.5);
+        let d: Vec<f32> = anchors
+            .iter()
+            .map(|(_, (ax, ay))| ((x - ax).powi(2) + (y - ay).powi(2)).sqrt())
+            .collect();
+        let dmin = d.iter().copied().fold(f32::INFINITY, f32::min);
+        let mut sum = 0.0;
+        for (r, dn) in raw.iter_mut().zip(&d) {
+            *r = (1.0 - (dn - dmin) / band).max(0.0);
+            sum += *r;
+        }
+        // sum ≥ 1: the nearest anchor always contributes 1.
+        for (w, r) in weights.iter_mut().zip(&raw) {
+            w[p] = blend[p] * r / sum;
+        }
+    }
+    weights
 }
 
 /// Adds a projector's claims (see [`Segmentation::claims`]) to the shares already claimed at

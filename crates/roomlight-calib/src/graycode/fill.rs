@@ -34,28 +34,14 @@ pub(super) fn fill_from_neighbours(
     map: &mut [Option<(u32, u32)>],
     confidence: &mut [f32],
 ) {
-    const AROUND: [(isize, isize); 8] = [
-        (-1, -1),
-        (0, -1),
-        (1, -1),
-        (-1, 0),
-        (1, 0),
-        (-1, 1),
-        (0, 1),
-        (1, 1),
-    ];
-    let at = |i: usize, (dx, dy): (isize, isize), k: isize| -> Option<usize> {
-        let (x, y) = ((i % w) as isize + dx * k, (i / w) as isize + dy * k);
-        (x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h)
-            .then(|| y as usize * w + x as usize)
-    };
+    let grid = Grid { w, h };
     let mut tries = vec![0u8; w * h];
     let mut readings = Vec::new();
     let mut queue: VecDeque<usize> = VecDeque::new();
     let push_around =
         |i: usize, map: &[Option<(u32, u32)>], tries: &mut [u8], queue: &mut VecDeque<usize>| {
             for dir in AROUND {
-                if let Some(j) = at(i, dir, 1)
+                if let Some(j) = grid.at(i, dir, 1)
                     && map[j].is_none()
                     && tries[j] < FILL_TRIES
                     && reached(j)
@@ -74,30 +60,7 @@ pub(super) fn fill_from_neighbours(
         if map[i].is_some() {
             continue;
         }
-        // Predictions per axis from the neighbours: extrapolations where there are any.
-        let (mut extrapolated, mut adjacent): ([Vec<i64>; 2], [Vec<i64>; 2]) = Default::default();
-        for dir in AROUND {
-            let Some(a) = at(i, dir, 1).and_then(|j| map[j]) else {
-                continue;
-            };
-            let b = at(i, dir, 2).and_then(|j| map[j]);
-            for (k, (va, vb)) in [(a.0, b.map(|b| b.0)), (a.1, b.map(|b| b.1))]
-                .into_iter()
-                .enumerate()
-            {
-                adjacent[k].push(i64::from(va));
-                if let Some(vb) = vb {
-                    extrapolated[k].push(2 * i64::from(va) - i64::from(vb));
-                }
-            }
-        }
-        let mut predictions = [0, 1].map(|k| {
-            if extrapolated[k].is_empty() {
-                std::mem::take(&mut adjacent[k])
-            } else {
-                std::mem::take(&mut extrapolated[k])
-            }
-        });
+        let mut predictions = grid.predictions(i, map);
         reading(i, &mut readings);
         let ld = direct[i];
         let (Some((x, x_gap)), Some((y, y_gap))) = (
@@ -111,6 +74,64 @@ pub(super) fn fill_from_neighbours(
         // inverse map mostly prefers it.
         confidence[i] = 0.25 * (x_gap.min(y_gap) / (2.0 * ld).max(f32::MIN_POSITIVE)).min(1.0);
         push_around(i, map, &mut tries, &mut queue);
+    }
+}
+
+/// The eight neighbours of a pixel, as steps.
+const AROUND: [(isize, isize); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
+/// The camera image as row-major pixel indices.
+#[derive(Debug, Clone, Copy)]
+struct Grid {
+    w: usize,
+    h: usize,
+}
+
+impl Grid {
+    /// The pixel `k` steps from `i` in direction `(dx, dy)`, if inside the image.
+    fn at(self, i: usize, (dx, dy): (isize, isize), k: isize) -> Option<usize> {
+        let w = self.w;
+        let (x, y) = ((i % w) as isize + dx * k, (i / w) as isize + dy * k);
+        (x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < self.h)
+            .then(|| y as usize * w + x as usize)
+    }
+
+    /// Predictions per axis of pixel `i`'s projector coordinates from its decoded neighbours:
+    /// linear extrapolations of two neighbours in a row where there are any, else the adjacent
+    /// neighbours' own coordinates.
+    fn predictions(self, i: usize, map: &[Option<(u32, u32)>]) -> [Vec<i64>; 2] {
+        let (mut extrapolated, mut adjacent): ([Vec<i64>; 2], [Vec<i64>; 2]) = Default::default();
+        for dir in AROUND {
+            let Some(a) = self.at(i, dir, 1).and_then(|j| map[j]) else {
+                continue;
+            };
+            let b = self.at(i, dir, 2).and_then(|j| map[j]);
+            for (k, (va, vb)) in [(a.0, b.map(|b| b.0)), (a.1, b.map(|b| b.1))]
+                .into_iter()
+                .enumerate()
+            {
+                adjacent[k].push(i64::from(va));
+                if let Some(vb) = vb {
+                    extrapolated[k].push(2 * i64::from(va) - i64::from(vb));
+                }
+            }
+        }
+        [0, 1].map(|k| {
+            if extrapolated[k].is_empty() {
+                std::mem::take(&mut adjacent[k])
+            } else {
+                std::mem::take(&mut extrapolated[k])
+            }
+        })
     }
 }
 

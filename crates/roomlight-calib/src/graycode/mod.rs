@@ -445,26 +445,13 @@ pub fn decode_where<'a>(
     ours: Option<&[bool]>,
     mut capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
 ) -> Result<Correspondence, CalibError> {
-    let find = |pattern: Pattern| {
-        manifest
-            .patterns
-            .iter()
-            .find(|p| p.pattern == pattern)
-            .ok_or(CalibError::Invalid {
-                field: "manifest",
-                problem: format!("has no {pattern:?} pattern"),
-            })
-    };
-    let white_file = find(Pattern::White)?;
-    let white = capture(white_file)?;
-    let (w, h) = (white.width, white.height);
-    let mut intensity = |p: &PatternFile| -> Result<Vec<f32>, CalibError> {
-        let img = capture(p)?;
-        img.expect_size(w, h, &p.file)?;
-        Ok(img.intensity())
-    };
-    let white = intensity(white_file)?;
-    let black = intensity(find(Pattern::Black)?)?;
+    let Captures {
+        w,
+        h,
+        white,
+        black,
+        pairs,
+    } = read_captures(manifest, &mut capture)?;
     let n = (w * h) as usize;
     if let Some(mask) = ours
         && mask.len() != n
@@ -474,97 +461,14 @@ pub fn decode_where<'a>(
             problem: format!("{} pixels, the captures have {w}x{h}", mask.len()),
         });
     }
-    // Pairs (pattern − black, inverse − black) per axis and bit.
-    let mut pairs: Vec<(Axis, u32, Vec<f32>, Vec<f32>)> = Vec::new();
-    for (axis, bits) in [
-        (Axis::Column, manifest.column_bits),
-        (Axis::Row, manifest.row_bits),
-    ] {
-        for bit in 0..bits {
-            let p = intensity(find(Pattern::Bit {
-                axis,
-                bit,
-                inverse: false,
-            })?)?;
-            let q = intensity(find(Pattern::Bit {
-                axis,
-                bit,
-                inverse: true,
-            })?)?;
-            let p: Vec<f32> = p.iter().zip(&black).map(|(a, b)| a - b).collect();
-            let q: Vec<f32> = q.iter().zip(&black).map(|(a, b)| a - b).collect();
-            pairs.push((axis, bit, p, q));
-        }
-    }
-    // Direct and global light from the two finest patterns of each axis (Nayar et al.): with
-    // half the pixels on, max = Ld + Lg/2 and min = Lg/2.
-    // With XOR coding every pattern is high-frequency, so every pair can be used.
     let xor = manifest.coding == Coding::Xor04;
-    let fine: Vec<&(Axis, u32, Vec<f32>, Vec<f32>)> = pairs
-        .iter()
-        .filter(|(axis, bit, _, _)| {
-            let bits = if *axis == Axis::Column {
-                manifest.column_bits
-            } else {
-                manifest.row_bits
-            };
-            xor || bit + 2 >= bits
-        })
-        .collect();
-    let mut direct = vec![0.0f32; n];
-    let mut global = vec![0.0f32; n];
-    for i in 0..n {
-        let (mut ld, mut lg) = (0.0f32, 0.0f32);
-        for (_, _, p, q) in &fine {
-            let (hi, lo) = (p[i].max(q[i]), p[i].min(q[i]).max(0.0));
-            ld = ld.max(hi - lo);
-            lg += 2.0 * lo;
-        }
-        direct[i] = ld;
-        global[i] = lg / fine.len().max(1) as f32;
-    }
+    let (direct, global) = direct_and_global(manifest, &pairs, n);
     let mut sorted: Vec<f32> = direct.iter().copied().filter(|v| v.is_finite()).collect();
     sorted.sort_by(f32::total_cmp);
     let p99 = sorted.get(sorted.len() * 99 / 100).copied().unwrap_or(0.0);
     let reach = (config.min_direct_share * p99).max(6.0 * config.noise_floor);
-    // One reading per pattern pair: the difference `d` and, where the direct light decides it,
-    // the encoded value it shows (`None`: untrusted), with the noise of the difference.
     let reading = |i: usize, out: &mut Vec<Reading>| {
-        let (ld, lg) = (direct[i], global[i]);
-        out.clear();
-        out.extend(pairs.iter().map(|(axis, bit, p, q)| {
-            let (a, b) = (p[i], q[i]);
-            let d = a - b;
-            // Noise of a difference of two pixels around their level.
-            let level = a.max(b).max(0.0);
-            let sigma = (2.0
-                * (config.noise_floor * config.noise_floor
-                    + config.shot_noise * config.shot_noise * level))
-                .sqrt();
-            let margin = (config.min_margin_share * ld).max(3.0 * sigma);
-            let trusted = if d.abs() < margin {
-                None
-            } else if xor || ld > lg {
-                // High-frequency pairs see the same global light: the sign is the direct
-                // part's.
-                Some(d > 0.0)
-            } else if a < ld && b > lg {
-                // Global light dominates a coarse stripe: trust only what direct light
-                // explains.
-                Some(false)
-            } else if a > lg && b < ld {
-                Some(true)
-            } else {
-                None
-            };
-            Reading {
-                axis: *axis,
-                bit: *bit,
-                d,
-                sigma,
-                trusted,
-            }
-        }));
+        read_pixel(config, xor, &pairs, i, (direct[i], global[i]), out);
     };
     let reached = |i: usize| {
         // NaN (a corrupt capture) counts as not reached.
@@ -578,48 +482,11 @@ pub fn decode_where<'a>(
         if !reached(i) {
             continue;
         }
-        let ld = direct[i];
-        // (value, trusted) of every encoded bit, per axis, most significant first.
-        let mut read: [Vec<(bool, bool)>; 2] = [Vec::new(), Vec::new()];
-        let mut worst = f32::INFINITY;
         reading(i, &mut readings);
-        for r in &readings {
-            if r.trusted.is_some() {
-                worst = worst.min(r.d.abs() / ld);
-            }
-            read[usize::from(r.axis == Axis::Row)]
-                .push((r.trusted.unwrap_or(r.d > 0.0), r.trusted.is_some()));
+        if let Some((xy, c)) = decode_pixel(manifest, config, direct[i], &readings) {
+            map[i] = Some(xy);
+            confidence[i] = c;
         }
-        // Undo the XOR with the base bit; a bit is trusted only if its base is too.
-        let mut codes = [0u32; 2];
-        let mut uncertain = 0;
-        for (k, bits) in read.iter().enumerate() {
-            let base = manifest
-                .base_bit(bits.len() as u32)
-                .map(|b| bits[b as usize]);
-            for (b, &(value, trusted)) in bits.iter().enumerate() {
-                let (value, trusted) = match base {
-                    Some((bv, bt)) if Some(b as u32) != manifest.base_bit(bits.len() as u32) => {
-                        (value != bv, trusted && bt)
-                    }
-                    _ => (value, trusted),
-                };
-                uncertain += usize::from(!trusted);
-                codes[k] = (codes[k] << 1) | u32::from(value);
-            }
-        }
-        // One untrusted bit lies on that bit's stripe edge, where both readings are neighbours:
-        // at most one pixel off. More than one: unknown rather than wrong.
-        if uncertain > config.max_uncertain_bits.min(1) {
-            continue;
-        }
-        let (x, y) = (gray_inverse(codes[0]), gray_inverse(codes[1]));
-        if x >= manifest.width || y >= manifest.height {
-            continue;
-        }
-        map[i] = Some((x, y));
-        let c = worst.min(1.0);
-        confidence[i] = if uncertain == 1 { 0.5 * c } else { c };
     }
     // The fill correlates the differences with candidate codes: that needs every pair's sign to
     // be the direct light's, true of XOR coding's high-frequency patterns only.
@@ -646,6 +513,209 @@ pub fn decode_where<'a>(
         global,
         reach,
     })
+}
+
+/// A pattern and its inverse, each less the black capture: `(axis, bit, pattern, inverse)`.
+type Pair = (Axis, u32, Vec<f32>, Vec<f32>);
+
+/// One projector's captures as the decoder reads them: intensities, the pairs less black.
+struct Captures {
+    w: u32,
+    h: u32,
+    white: Vec<f32>,
+    black: Vec<f32>,
+    pairs: Vec<Pair>,
+}
+
+/// The manifest's entry for `pattern`.
+fn find(manifest: &Manifest, pattern: Pattern) -> Result<&PatternFile, CalibError> {
+    manifest
+        .patterns
+        .iter()
+        .find(|p| p.pattern == pattern)
+        .ok_or(CalibError::Invalid {
+            field: "manifest",
+            problem: format!("has no {pattern:?} pattern"),
+        })
+}
+
+/// Reads white (its size is the camera's), black, then every pair, column bits first, in the
+/// order a rig that shows them one by one expects; every capture must have white's size.
+fn read_captures<'a>(
+    manifest: &Manifest,
+    capture: &mut impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
+) -> Result<Captures, CalibError> {
+    let white_file = find(manifest, Pattern::White)?;
+    let white = capture(white_file)?;
+    let (w, h) = (white.width, white.height);
+    let mut intensity = |p: &PatternFile| -> Result<Vec<f32>, CalibError> {
+        let img = capture(p)?;
+        img.expect_size(w, h, &p.file)?;
+        Ok(img.intensity())
+    };
+    let white = intensity(white_file)?;
+    let black = intensity(find(manifest, Pattern::Black)?)?;
+    let mut pairs: Vec<Pair> = Vec::new();
+    for (axis, bits) in [
+        (Axis::Column, manifest.column_bits),
+        (Axis::Row, manifest.row_bits),
+    ] {
+        for bit in 0..bits {
+            let p = intensity(find(
+                manifest,
+                Pattern::Bit {
+                    axis,
+                    bit,
+                    inverse: false,
+                },
+            )?)?;
+            let q = intensity(find(
+                manifest,
+                Pattern::Bit {
+                    axis,
+                    bit,
+                    inverse: true,
+                },
+            )?)?;
+            let p: Vec<f32> = p.iter().zip(&black).map(|(a, b)| a - b).collect();
+            let q: Vec<f32> = q.iter().zip(&black).map(|(a, b)| a - b).collect();
+            pairs.push((axis, bit, p, q));
+        }
+    }
+    Ok(Captures {
+        w,
+        h,
+        white,
+        black,
+        pairs,
+    })
+}
+
+/// Direct and global light per pixel from the two finest patterns of each axis (Nayar et al.):
+/// with half the pixels on, max = Ld + Lg/2 and min = Lg/2. With XOR coding every pattern is
+/// high-frequency, so every pair can be used.
+fn direct_and_global(manifest: &Manifest, pairs: &[Pair], n: usize) -> (Vec<f32>, Vec<f32>) {
+    let xor = manifest.coding == Coding::Xor04;
+    let fine: Vec<&Pair> = pairs
+        .iter()
+        .filter(|(axis, bit, _, _)| {
+            let bits = if *axis == Axis::Column {
+                manifest.column_bits
+            } else {
+                manifest.row_bits
+            };
+            xor || bit + 2 >= bits
+        })
+        .collect();
+    let mut direct = vec![0.0f32; n];
+    let mut global = vec![0.0f32; n];
+    for i in 0..n {
+        let (mut ld, mut lg) = (0.0f32, 0.0f32);
+        for (_, _, p, q) in &fine {
+            let (hi, lo) = (p[i].max(q[i]), p[i].min(q[i]).max(0.0));
+            ld = ld.max(hi - lo);
+            lg += 2.0 * lo;
+        }
+        direct[i] = ld;
+        global[i] = lg / fine.len().max(1) as f32;
+    }
+    (direct, global)
+}
+
+/// One reading per pattern pair at pixel `i` with direct and global light `(ld, lg)`: the
+/// difference `d` and, where the direct light decides it, the encoded value it shows
+/// (`None`: untrusted), with the noise of the difference.
+fn read_pixel(
+    config: &DecodeConfig,
+    xor: bool,
+    pairs: &[Pair],
+    i: usize,
+    (ld, lg): (f32, f32),
+    out: &mut Vec<Reading>,
+) {
+    out.clear();
+    out.extend(pairs.iter().map(|(axis, bit, p, q)| {
+        let (a, b) = (p[i], q[i]);
+        let d = a - b;
+        // Noise of a difference of two pixels around their level.
+        let level = a.max(b).max(0.0);
+        let sigma = (2.0
+            * (config.noise_floor * config.noise_floor
+                + config.shot_noise * config.shot_noise * level))
+            .sqrt();
+        let margin = (config.min_margin_share * ld).max(3.0 * sigma);
+        let trusted = if d.abs() < margin {
+            None
+        } else if xor || ld > lg {
+            // High-frequency pairs see the same global light: the sign is the direct
+            // part's.
+            Some(d > 0.0)
+        } else if a < ld && b > lg {
+            // Global light dominates a coarse stripe: trust only what direct light
+            // explains.
+            Some(false)
+        } else if a > lg && b < ld {
+            Some(true)
+        } else {
+            None
+        };
+        Reading {
+            axis: *axis,
+            bit: *bit,
+            d,
+            sigma,
+            trusted,
+        }
+    }));
+}
+
+/// A reached pixel's projector pixel and confidence from its readings alone (direct light
+/// `ld`); `None` with more untrusted bits than allowed or a code outside the projector.
+fn decode_pixel(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    ld: f32,
+    readings: &[Reading],
+) -> Option<((u32, u32), f32)> {
+    // (value, trusted) of every encoded bit, per axis, most significant first.
+    let mut read: [Vec<(bool, bool)>; 2] = [Vec::new(), Vec::new()];
+    let mut worst = f32::INFINITY;
+    for r in readings {
+        if r.trusted.is_some() {
+            worst = worst.min(r.d.abs() / ld);
+        }
+        read[usize::from(r.axis == Axis::Row)]
+            .push((r.trusted.unwrap_or(r.d > 0.0), r.trusted.is_some()));
+    }
+    // Undo the XOR with the base bit; a bit is trusted only if its base is too.
+    let mut codes = [0u32; 2];
+    let mut uncertain = 0;
+    for (k, bits) in read.iter().enumerate() {
+        let base = manifest
+            .base_bit(bits.len() as u32)
+            .map(|b| bits[b as usize]);
+        for (b, &(value, trusted)) in bits.iter().enumerate() {
+            let (value, trusted) = match base {
+                Some((bv, bt)) if Some(b as u32) != manifest.base_bit(bits.len() as u32) => {
+                    (value != bv, trusted && bt)
+                }
+                _ => (value, trusted),
+            };
+            uncertain += usize::from(!trusted);
+            codes[k] = (codes[k] << 1) | u32::from(value);
+        }
+    }
+    // One untrusted bit lies on that bit's stripe edge, where both readings are neighbours:
+    // at most one pixel off. More than one: unknown rather than wrong.
+    if uncertain > config.max_uncertain_bits.min(1) {
+        return None;
+    }
+    let (x, y) = (gray_inverse(codes[0]), gray_inverse(codes[1]));
+    if x >= manifest.width || y >= manifest.height {
+        return None;
+    }
+    let c = worst.min(1.0);
+    Some(((x, y), if uncertain == 1 { 0.5 * c } else { c }))
 }
 
 /// One pattern pair at one camera pixel: `d` = pattern − inverse, its noise, and the encoded
