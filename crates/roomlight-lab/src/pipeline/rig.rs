@@ -14,24 +14,72 @@ use std::collections::HashMap;
 /// normal one (in the lab floor-right's needs ×6; ×64 decoded no more pixels).
 const LONGEST_EXPOSURE: f32 = roomlight_calib::graycode::SECOND_PASS_LONGEST;
 
-/// The simulated room as a rig; every projector is live.
+/// The simulated room as a rig: every projector live unless told otherwise; a projector that
+/// is not live shows black and cannot be shown on.
 #[derive(Debug)]
 pub struct SimRig<'a> {
     room: &'a Room,
     noise: &'a mut CameraNoise,
     frames: Vec<roomlight_sim::Frame>,
     assignments: HashMap<usize, Assignment>,
+    /// Room indices of the live projectors, in the order they went live.
+    live: Vec<usize>,
+    shows_masks: bool,
+    captures: usize,
 }
 
 impl<'a> SimRig<'a> {
-    /// Every projector black, the LEDs off.
+    /// Every projector live and black, the LEDs off.
     pub fn new(room: &'a Room, noise: &'a mut CameraNoise) -> Self {
         Self {
             room,
             noise,
             frames: vec![roomlight_sim::Frame::Black; room.projectors().len()],
             assignments: HashMap::new(),
+            live: (0..room.projectors().len()).collect(),
+            shows_masks: true,
+            captures: 0,
         }
+    }
+
+    /// Only the projectors named live (the others stay black until they [`Self::go_live`]).
+    pub fn with_live(mut self, ids: &[&str]) -> Result<Self, RigError> {
+        self.live = ids
+            .iter()
+            .map(|id| {
+                self.room
+                    .projector(id)
+                    .map_err(|_| RigError::Gone((*id).to_string()))
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(self)
+    }
+
+    /// Projector `id` switched on: live from now on (a projector joining the room).
+    pub fn go_live(&mut self, id: &str) -> Result<(), RigError> {
+        let k = self
+            .room
+            .projector(id)
+            .map_err(|_| RigError::Gone(id.to_string()))?;
+        if !self.live.contains(&k) {
+            self.live.push(k);
+        }
+        Ok(())
+    }
+
+    /// Whether the rig shows masked patterns (a rig that cannot skips the second pass).
+    pub fn set_shows_masks(&mut self, shows: bool) {
+        self.shows_masks = shows;
+    }
+
+    /// Captures taken.
+    pub fn captures(&self) -> usize {
+        self.captures
+    }
+
+    /// The room it shows frames in.
+    pub fn room(&self) -> &'a Room {
+        self.room
     }
 
     /// The frames every projector shows now, in the simulator's terms.
@@ -42,7 +90,19 @@ impl<'a> SimRig<'a> {
     fn index(&self, id: &str) -> Result<usize, RigError> {
         self.room
             .projector(id)
-            .map_err(|_| RigError::Gone(id.to_string()))
+            .ok()
+            .filter(|k| self.live.contains(k))
+            .ok_or_else(|| RigError::Gone(id.to_string()))
+    }
+
+    /// `frame` on projector `id` in the simulator's terms, drawn as the rig draws it (uniform
+    /// codes take the simulator's fast path).
+    pub fn sim_frame_of(&self, id: &str, frame: &Frame) -> Result<roomlight_sim::Frame, RigError> {
+        let k = self
+            .room
+            .projector(id)
+            .map_err(|_| RigError::Gone(id.to_string()))?;
+        self.sim_frame(k, frame)
     }
 
     /// `frame` on projector `k` in the simulator's terms (uniform codes take its fast path).
@@ -86,14 +146,15 @@ pub fn projector(room: &Room, k: usize) -> Projector {
 
 impl Rig for SimRig<'_> {
     fn projectors(&self) -> Vec<Projector> {
-        (0..self.room.projectors().len())
-            .map(|k| projector(self.room, k))
-            .collect()
+        self.live.iter().map(|&k| projector(self.room, k)).collect()
     }
 
     async fn show(&mut self, frames: &[(&str, Frame)]) -> Result<(), RigError> {
         for (id, frame) in frames {
             let k = self.index(id)?;
+            if matches!(frame, Frame::Masked { .. }) && !self.shows_masks {
+                return Err(RigError::Unsupported(id.to_string(), "masked patterns"));
+            }
             self.frames[k] = self.sim_frame(k, frame)?;
         }
         Ok(())
@@ -111,6 +172,7 @@ impl Rig for SimRig<'_> {
             .render(&self.frames, None)
             .map_err(|e| RigError::Camera(e.to_string()))?;
         let c = self.noise.expose_longer(&capture, f64::from(exposure));
+        self.captures += 1;
         Ok(LinearImage {
             width: c.width,
             height: c.height,
@@ -126,6 +188,6 @@ impl Rig for SimRig<'_> {
     }
 
     fn shows_masks(&self) -> bool {
-        true
+        self.shows_masks
     }
 }

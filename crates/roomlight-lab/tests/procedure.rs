@@ -1,144 +1,35 @@
-//! The calibration procedure on a Rig backed by the simulated room, against the simulator's
-//! truth: correspondences, simultaneous coding of disjoint projectors, the second pass,
-//! partition of unity, attenuation, and a projector joining a lit room hot.
+//! The one calibration procedure (roomlight_calib::procedure) on the simulated room as a rig
+//! (the lab's `SimRig`, the rig the demo and the benches calibrate through), against the
+//! simulator's truth: correspondences, simultaneous coding of disjoint projectors, the second
+//! pass, partition of unity, attenuation, and a projector joining a lit room hot.
 
-mod common;
-
-use common::{chart_corners, small_scene, to_image};
 use roomlight_calib::charts::SampleConfig;
 use roomlight_calib::graycode::Correspondence;
-use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{Partition, add_claim, dilate, partition_of_unity};
 use roomlight_calib::procedure::{Event, Placed, Procedure, Settings, Setup, Stage};
-use roomlight_calib::rig::{
-    Assignment, CameraLimits, Frame, Projector, ProjectorKind, ProjectorRole, Rig, RigError,
-    block_on,
-};
+use roomlight_calib::rig::{Frame, ProjectorKind, Rig, block_on};
 use roomlight_core::LinearRgb;
-use roomlight_sim::{CameraNoise, ProjectorImage, Room, scenes};
-use std::collections::HashMap;
+use roomlight_lab::pipeline::{SimRig, chart_corners};
+use roomlight_sim::{CameraNoise, Room, Scene, scenes};
 use std::sync::{Arc, Mutex};
 
-/// The simulated room as a rig: frames rendered with the simulator's hidden responses,
-/// captures exposed through its noisy camera. Only `live` projectors can be shown on.
-struct SimRig<'r> {
-    room: &'r Room,
-    live: Vec<usize>,
-    frames: Vec<roomlight_sim::Frame>,
-    assignments: HashMap<usize, Assignment>,
-    noise: CameraNoise,
-    captures: usize,
-    images: bool,
+/// The small room seen by a 640×480 camera (enough pixels per patch).
+fn small_scene() -> Scene {
+    let mut scene = scenes::small().expect("scene");
+    scene.camera.resolution = [640, 480];
+    scene
 }
 
-impl<'r> SimRig<'r> {
-    fn new(room: &'r Room, live: &[&str], seed: u64) -> Self {
-        Self {
-            room,
-            live: live
-                .iter()
-                .map(|id| room.projector(id).expect("projector"))
-                .collect(),
-            frames: vec![roomlight_sim::Frame::Black; room.projectors().len()],
-            assignments: HashMap::new(),
-            noise: CameraNoise::with_seed(room, seed),
-            captures: 0,
-            images: true,
-        }
-    }
-
-    fn index(&self, id: &str) -> Result<usize, RigError> {
-        self.room
-            .projector(id)
-            .ok()
-            .filter(|k| self.live.contains(k))
-            .ok_or_else(|| RigError::Gone(id.to_string()))
-    }
-
-    /// What projector `k` shows `frame` as, in the simulator's terms.
-    fn sim_frame(&self, k: usize, frame: &Frame) -> roomlight_sim::Frame {
-        let p = &self.room.projectors()[k].pinhole;
-        match frame {
-            Frame::Uniform(code) => roomlight_sim::Frame::Uniform(*code),
-            other => roomlight_sim::Frame::Image(ProjectorImage {
-                width: p.width,
-                height: p.height,
-                pixels: other
-                    .codes(p.width, p.height, self.assignments.get(&k))
-                    .expect("frame codes"),
-            }),
-        }
-    }
-}
-
-impl Rig for SimRig<'_> {
-    fn projectors(&self) -> Vec<Projector> {
-        self.live
-            .iter()
-            .map(|&k| {
-                let p = &self.room.projectors()[k];
-                Projector {
-                    id: p.name.clone(),
-                    width: p.pinhole.width,
-                    height: p.pinhole.height,
-                    kind: match p.kind {
-                        roomlight_sim::scene::ProjectorKind::LargeAperture => {
-                            ProjectorKind::LargeAperture
-                        }
-                        roomlight_sim::scene::ProjectorKind::Standard => ProjectorKind::Standard,
-                    },
-                    role: match self.room.scene().projectors[k].role {
-                        roomlight_sim::scene::ProjectorRole::Luminaire => ProjectorRole::Luminaire,
-                        roomlight_sim::scene::ProjectorRole::Texture => ProjectorRole::Texture,
-                    },
-                }
-            })
-            .collect()
-    }
-
-    async fn show(&mut self, frames: &[(&str, Frame)]) -> Result<(), RigError> {
-        for (id, frame) in frames {
-            let k = self.index(id)?;
-            if matches!(frame, Frame::Masked { .. }) && !self.images {
-                return Err(RigError::Unsupported(id.to_string(), "masked patterns"));
-            }
-            self.frames[k] = self.sim_frame(k, frame);
-        }
-        Ok(())
-    }
-
-    async fn assign(&mut self, projector: &str, assignment: &Assignment) -> Result<(), RigError> {
-        let k = self.index(projector)?;
-        self.assignments.insert(k, assignment.clone());
-        Ok(())
-    }
-
-    async fn capture(&mut self, exposure: f32) -> Result<LinearImage, RigError> {
-        let capture = self
-            .room
-            .render(&self.frames, None)
-            .map_err(|e| RigError::Camera(e.to_string()))?;
-        self.captures += 1;
-        Ok(to_image(
-            &self.noise.expose_longer(&capture, f64::from(exposure)),
-        ))
-    }
-
-    fn camera(&self) -> CameraLimits {
-        CameraLimits {
-            saturation: self.room.scene().camera.saturation as f32,
-            longest_exposure: 16.0,
-        }
-    }
-
-    fn shows_masks(&self) -> bool {
-        self.images
-    }
+/// The simulated room as a rig with only `live` projectors, captures exposed through `noise`.
+fn rig<'a>(room: &'a Room, noise: &'a mut CameraNoise, live: &[&str]) -> SimRig<'a> {
+    SimRig::new(room, noise)
+        .with_live(live)
+        .expect("live projectors")
 }
 
 fn setup(room: &Room) -> Setup {
     Setup {
-        corners: chart_corners(room),
+        corners: chart_corners(room).expect("charts in view"),
         sample: SampleConfig::default(),
         target_mask: room.pixels().iter().map(|p| p.target).collect(),
     }
@@ -226,12 +117,13 @@ fn partition(room: &Room, placed: &[&Placed]) -> Partition {
 /// The simulator's noiseless patch values with every projector showing `frames` (by id;
 /// the others black) drawn as the rig draws them.
 fn truth_values(rig: &SimRig, frames: &[(&str, Frame)]) -> (Vec<LinearRgb>, Vec<LinearRgb>) {
-    let mut all = vec![roomlight_sim::Frame::Black; rig.room.projectors().len()];
+    let room = rig.room();
+    let mut all = vec![roomlight_sim::Frame::Black; room.projectors().len()];
     for (id, f) in frames {
-        let k = rig.room.projector(id).expect("projector");
-        all[k] = rig.sim_frame(k, f);
+        let k = room.projector(id).expect("projector");
+        all[k] = rig.sim_frame_of(id, f).expect("frame");
     }
-    rig.room.patch_values_and_spread(&all, None).expect("truth")
+    room.patch_values_and_spread(&all, None).expect("truth")
 }
 
 /// Compares measured columns with the truth (noiseless, node alone at white minus all black,
@@ -292,12 +184,13 @@ fn frames_of<'p>(placed: &'p [Placed], on: &[u32], rest: LinearRgb) -> Vec<(&'p 
 fn bring_up_decodes_segments_and_measures_the_small_room() {
     let room = Room::build(small_scene()).expect("room");
     let setup = setup(&room);
-    let mut rig = SimRig::new(&room, &["left", "right", "area", "texture"], 21);
+    let mut noise = CameraNoise::with_seed(&room, 21);
+    let mut rig = rig(&room, &mut noise, &["left", "right", "area", "texture"]);
     let (events, progress) = recorder();
     let up = block_on(Procedure::new(&mut rig, Settings::default(), progress).bring_up(&setup))
         .expect("bring-up");
     let events = events.lock().expect("events").clone();
-    assert_eq!(up.captures, rig.captures);
+    assert_eq!(up.captures, rig.captures());
     assert_eq!(
         events
             .iter()
@@ -358,10 +251,12 @@ fn bring_up_decodes_segments_and_measures_the_small_room() {
     for p in &standard {
         let k = room.projector(&p.projector.id).expect("projector");
         let all_on: Vec<u32> = p.ids();
-        let frame = rig.sim_frame(
-            k,
-            &frames_of(std::slice::from_ref(*p), &all_on, LinearRgb::ZERO)[0].1,
-        );
+        let frame = rig
+            .sim_frame_of(
+                &p.projector.id,
+                &frames_of(std::slice::from_ref(*p), &all_on, LinearRgb::ZERO)[0].1,
+            )
+            .expect("frame");
         let on_target = room.target_irradiance(k, &frame).expect("target")[1];
         let table = room
             .direct_irradiance_at(k, &frame, [0.75, 0.62, 0.32], [0.0, 0.0, 1.0])
@@ -376,7 +271,7 @@ fn bring_up_decodes_segments_and_measures_the_small_room() {
 
 /// The small room with its two standard luminaires turned apart, one onto each chart, so that
 /// their footprints do not overlap.
-fn apart_scene() -> roomlight_sim::Scene {
+fn apart_scene() -> Scene {
     let mut scene = small_scene();
     scene.projectors.truncate(2);
     scene.objects.retain(|o| !o.target);
@@ -393,7 +288,8 @@ fn apart_scene() -> roomlight_sim::Scene {
 #[test]
 fn projectors_whose_footprints_do_not_overlap_are_coded_in_one_pass() {
     let room = Room::build(apart_scene()).expect("room");
-    let mut rig = SimRig::new(&room, &["left", "right"], 31);
+    let mut noise = CameraNoise::with_seed(&room, 31);
+    let mut rig = rig(&room, &mut noise, &["left", "right"]);
     let (events, progress) = recorder();
     let mut procedure = Procedure::new(&mut rig, Settings::default(), progress);
     let live = procedure.rig().projectors();
@@ -440,7 +336,8 @@ fn a_second_pass_decodes_the_labs_grazing_face() {
     let mut scene = scenes::lab().expect("lab");
     scene.camera.resolution = [320, 240];
     let room = Room::build(scene).expect("room");
-    let mut rig = SimRig::new(&room, &["floor-right"], 7);
+    let mut noise = CameraNoise::with_seed(&room, 7);
+    let mut rig = rig(&room, &mut noise, &["floor-right"]);
     let (events, progress) = recorder();
     let mut procedure = Procedure::new(&mut rig, Settings::default(), progress);
     let live = procedure.rig().projectors();
@@ -459,7 +356,7 @@ fn a_second_pass_decodes_the_labs_grazing_face() {
     );
     assert_accurate(&room, "floor-right", &decoded[0].corr);
     // A rig that cannot show images skips it.
-    rig.images = false;
+    rig.set_shows_masks(false);
     let mut procedure = Procedure::new(&mut rig, Settings::default(), |_| {});
     let mut corr = decoded[0].corr.clone();
     corr.map.iter_mut().enumerate().for_each(|(i, m)| {
@@ -482,13 +379,14 @@ fn a_second_pass_decodes_the_labs_grazing_face() {
 fn a_projector_joins_hot_beside_a_lit_one() {
     let room = Room::build(small_scene()).expect("room");
     let setup = setup(&room);
-    let mut rig = SimRig::new(&room, &["left"], 41);
+    let mut noise = CameraNoise::with_seed(&room, 41);
+    let mut rig = rig(&room, &mut noise, &["left"]);
     let up = block_on(Procedure::new(&mut rig, Settings::default(), |_| {}).bring_up(&setup))
         .expect("bring-up");
     // "left" lit at mid grey, then "right" switched on and calibrated hot.
     let lit = frames_of(&up.placed, &[], LinearRgb::splat(0.5));
     block_on(rig.show(&lit)).expect("lit");
-    rig.live.push(room.projector("right").expect("right"));
+    rig.go_live("right").expect("right");
     let claimed = up.placed[0].claim.clone().expect("a charted projector");
     let first = up.placed[0].nodes.len() as u32;
     let (events, progress) = recorder();
@@ -505,7 +403,7 @@ fn a_projector_joins_hot_beside_a_lit_one() {
     assert_eq!(joined.placed.nodes[0].id, first);
     // No footprint grouping for one projector: its white is the top of its ramp.
     let events = events.lock().expect("events").clone();
-    assert_eq!(joined.captures, rig.captures - up.captures);
+    assert_eq!(joined.captures, rig.captures() - up.captures);
     assert_eq!(
         captured_in(&events, Stage::Hot),
         joined.placed.nodes.len() + 1
