@@ -1,0 +1,197 @@
+//! Calibration over the wire in one process: the rendered room served on loopback, the camera
+//! agent on its camera with a survey, and a node agent per projector drawing into the rendered
+//! projectors. The procedure runs over the wire as it runs in process.
+
+use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus, Survey};
+use roomlight_agent::node::{self, NodeConfig};
+use roomlight_calib::charts::{PatchStatus, sample_charts};
+use roomlight_calib::graycode::{Coding, Manifest};
+use roomlight_core::{LinearRgb, Problem, StepRule};
+use roomlight_lab::pipeline::{chart_corners, sample_config};
+use roomlight_lab::rendered::{self, RenderedCamera, rendered_display};
+use roomlight_proto::v1;
+use roomlight_sim::Room;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::watch;
+use tokio_util::sync::CancellationToken;
+
+/// The small room with its two standard luminaires turned apart, one onto each chart, so that
+/// their footprints do not overlap (as roomlight-calib's procedure tests turn them).
+fn apart_scene() -> roomlight_sim::Scene {
+    let mut scene = roomlight_sim::scenes::small().expect("small");
+    scene.camera.resolution = [640, 480];
+    scene.projectors.truncate(2);
+    scene.objects.retain(|o| !o.target);
+    let left = &mut scene.projectors[0];
+    left.look_at_mm = [400.0, 600.0, 0.0];
+    left.fov_deg = 40.0;
+    let right = &mut scene.projectors[1];
+    right.position_mm = [1500.0, 300.0, 1100.0];
+    right.look_at_mm = [1100.0, 1200.0, 700.0];
+    right.fov_deg = 35.0;
+    scene
+}
+
+/// The camera agent's model before any projector: the room's black (lights off) and target
+/// (its first LED preset) through the charts, as `roomlight camera` with a survey measures them.
+async fn survey_model(room: &Room, camera: &RenderedCamera) -> (RoomModel, Vec<usize>) {
+    let corners = chart_corners(room).expect("corners");
+    let sample = sample_config(room);
+    let preset = room.scene().presets[0].name.clone();
+    let measure = async |lights: &str| {
+        camera.set_lights(lights).await.expect("lights");
+        sample_charts(&camera.image().await.expect("image"), &corners, &sample).expect("charts")
+    };
+    let black = measure("").await;
+    let target = measure(&preset).await;
+    camera.set_lights("").await.expect("lights off");
+    let patches: Vec<usize> = (0..target.len())
+        .filter(|&i| black[i].status == PatchStatus::Ok && target[i].status == PatchStatus::Ok)
+        .collect();
+    let problem = Problem::new(
+        Vec::new(),
+        patches.iter().map(|&i| black[i].mean).collect(),
+        patches.iter().map(|&i| target[i].mean).collect(),
+        patches.iter().map(|&i| target[i].std_error).collect(),
+    )
+    .expect("problem");
+    let [w, h] = room.scene().camera.resolution;
+    let survey = Survey {
+        corners,
+        sample,
+        target_mask: vec![false; w as usize * h as usize],
+        patches: patches.clone(),
+    };
+    let model = RoomModel {
+        problem,
+        owners: Default::default(),
+        start: None,
+        hot: Default::default(),
+        survey: Some(survey),
+    };
+    (model, patches)
+}
+
+/// Waits until `done` holds for a status (the first one that does), within `limit`.
+async fn first_status(
+    status: &mut watch::Receiver<RoomStatus>,
+    limit: Duration,
+    done: impl Fn(&RoomStatus) -> bool,
+) -> RoomStatus {
+    tokio::time::timeout(limit, async {
+        loop {
+            if done(&status.borrow_and_update()) {
+                return status.borrow().clone();
+            }
+            status.changed().await.expect("the camera agent stopped");
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("no such status within {limit:?}: {:?}", status.borrow()))
+}
+
+/// Brings up the apart room with only `projectors` live, their node agents started together,
+/// and returns the first status with all of them calibrated, once the room has run a measured
+/// round lit by them.
+async fn bring_up(projectors: &[&str]) -> RoomStatus {
+    let mut scene = apart_scene();
+    scene
+        .projectors
+        .retain(|p| projectors.contains(&p.name.as_str()));
+    let room = Arc::new(Room::build(scene).expect("room"));
+    let cancel = CancellationToken::new();
+    let hardware = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let hardware_at = format!("http://{}", hardware.local_addr().expect("address"));
+    tokio::spawn(rendered::serve(room.clone(), 3, hardware, cancel.clone()));
+    let client = rendered::connect(hardware_at).await.expect("connect");
+    let corners = chart_corners(&room).expect("corners");
+    let sample = sample_config(&room);
+    let probe = RenderedCamera::new(client.clone(), corners.clone(), Vec::new(), sample);
+    let (model, patches) = survey_model(&room, &probe).await;
+    let camera = RenderedCamera::new(client.clone(), corners, patches, sample);
+    let config = CameraConfig {
+        room: "apart".into(),
+        token: "t".into(),
+        heartbeat: Duration::from_millis(200),
+        deadline: Duration::from_secs(10),
+        model_rounds: 2,
+        calibration_epoch: 1,
+        stale_frames: 0,
+        model_out: None,
+    };
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+    let (mut status, agent) = camera::serve(config, model, camera, listener, cancel.clone());
+    let mut nodes = Vec::new();
+    for p in &room.scene().projectors {
+        let [w, h] = p.resolution;
+        let display =
+            rendered_display(client.clone(), p.name.clone(), (w, h), None, cancel.clone());
+        let config = NodeConfig {
+            endpoint: endpoint.clone(),
+            room: "apart".into(),
+            token: "t".into(),
+            projector_id: p.name.clone(),
+            kind: v1::ProjectorKind::Standard,
+            rule: StepRule::Momentum { theta: 1.0 },
+            start: LinearRgb::splat(0.5),
+            state_file: None,
+        };
+        nodes.push(tokio::spawn(node::run(config, display, cancel.clone())));
+    }
+    let n = projectors.len() as u64;
+    let calibrated = first_status(&mut status, Duration::from_secs(600), |s| {
+        s.calibrated_hot == n
+    })
+    .await;
+    assert_eq!(calibrated.live_projectors, projectors.len());
+    // They take part in the rounds: a later measured round sees the room lit.
+    let lit = first_status(&mut status, Duration::from_secs(120), |s| {
+        s.captures > calibrated.captures + 2
+    })
+    .await;
+    assert!(lit.measured_objective.is_finite(), "{lit:?}");
+    cancel.cancel();
+    agent.await.expect("agent task").expect("agent");
+    for n in nodes {
+        n.await.expect("node task").expect("node agent");
+    }
+    calibrated
+}
+
+/// Two projectors whose footprints do not overlap join a dark room together: the camera agent
+/// brings them up in one procedure and codes them at the same time, so that the room is
+/// calibrated in fewer captures than bringing up each alone takes (each count is the camera
+/// agent's own, and includes one measured round).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn projectors_with_disjoint_footprints_joining_together_are_coded_at_the_same_time() {
+    let together = bring_up(&["left", "right"]).await;
+    let left = bring_up(&["left"]).await;
+    let right = bring_up(&["right"]).await;
+    let one_after_the_other = left.captures + right.captures - 1;
+    eprintln!(
+        "calibrated over the wire: together at capture {}, alone at {} and {}",
+        together.captures, left.captures, right.captures
+    );
+    // Together saves at least one set of structured light: the smaller projector's patterns.
+    let patterns = apart_scene()
+        .projectors
+        .iter()
+        .map(|p| {
+            Manifest::with_coding(p.resolution[0], p.resolution[1], Coding::Xor04)
+                .expect("manifest")
+                .patterns
+                .len() as u64
+        })
+        .min()
+        .expect("projectors");
+    assert!(
+        together.captures + patterns <= one_after_the_other,
+        "together {together:?}, alone {left:?} and {right:?}: coded together should save at least {patterns} captures"
+    );
+}
