@@ -5,10 +5,11 @@
 //! preset, and under the projectors' lighting, by an evaluation camera near the texture projector
 //! (the room camera sees the bust at about 25 pixels across).
 
-use crate::pipeline::{Calibrated, FrameBuilder};
+use crate::pipeline::{Calibrated, FrameBuilder, SimRig};
 use anyhow::{Context, Result, bail};
-use roomlight_calib::graycode::{Coding, Correspondence};
-use roomlight_calib::image_io::LinearImage;
+use roomlight_calib::graycode::Correspondence;
+use roomlight_calib::procedure::{Procedure, Settings};
+use roomlight_calib::rig::block_on;
 use roomlight_core::LinearRgb;
 use roomlight_core::metrics::{GrayImage, Rect, ansi_contrast, luminance, rms_contrast};
 use roomlight_sim::room::PngEncoding;
@@ -87,22 +88,28 @@ fn evaluation_scene(base: &Scene, board: bool, room_camera: bool) -> Result<Scen
     Ok(scene)
 }
 
-fn image(c: &Capture) -> LinearImage {
-    LinearImage {
-        width: c.width,
-        height: c.height,
-        pixels: c.pixels.clone(),
-    }
-}
-
-/// Decodes the texture projector's structured light through the evaluation camera.
+/// Decodes the texture projector's structured light through the evaluation camera, with the
+/// one calibration procedure on the evaluation view as a rig: its black and white, then its
+/// patterns. Plain Gray code: the evaluation camera sees several projector pixels in one of
+/// its own, which averages XOR-04's 4-pixel stripes away.
 fn decode_texture(room: &Room, k: usize, noise: &mut CameraNoise) -> Result<Correspondence> {
-    crate::pipeline::decode_projector(room, k, Coding::Gray, |frames, exposure| {
-        Ok(image(&noise.expose_longer(
-            &room.render(frames, None)?,
-            f64::from(exposure),
-        )))
-    })
+    let texture = [crate::pipeline::projector(room, k)];
+    let settings = Settings {
+        fine_stripes: false,
+        ..Settings::default()
+    };
+    let mut rig = SimRig::new(room, noise);
+    let mut procedure = Procedure::new(&mut rig, settings, |_| {});
+    let decoded = block_on(async {
+        let dark = procedure.dark(&texture).await?;
+        let whites = procedure.whites(&texture).await?;
+        procedure.code(&texture, &dark, &whites).await
+    })?;
+    decoded
+        .into_iter()
+        .next()
+        .map(|d| d.corr)
+        .context("the texture projector was not decoded")
 }
 
 /// A texture in `[0, 1]` at normalised target coordinates `(s, t)` in `[0, 1]²`.

@@ -4,15 +4,16 @@
 
 use anyhow::{Context, Result, bail};
 use roomlight_calib::attenuation::{Attenuation, Scheme, plan, solve};
-use roomlight_calib::charts::{ChartCorners, PatchSample, PatchStatus, sample_charts};
+use roomlight_calib::charts::{ChartCorners, PatchSample, sample_charts};
 use roomlight_calib::graycode::{
     Coding, Correspondence, DecodeConfig, Manifest, SECOND_PASS_LONGEST, decode, second_pass,
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{NodeConfig as SplitConfig, segment};
+use roomlight_calib::procedure::Target;
 use roomlight_calib::response::{Response, fit_response, ramp_codes};
+use roomlight_core::LinearRgb;
 use roomlight_core::conventional::conventional_value;
-use roomlight_core::{AttenuationColumn, LinearRgb, PatchId, Problem};
 use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Frame, NodeRegion, ProjectorImage, Room};
 use std::collections::HashMap;
@@ -409,7 +410,7 @@ pub fn calibrate(
 }
 
 /// Captures the LED preset `preset` (projectors dark) and builds the model for it over the
-/// patches measured in every capture, with its conventional start.
+/// patches measured in every capture ([`Target`]), with its conventional start.
 pub fn measure_target(
     room: &Room,
     cal: &Calibrated,
@@ -418,57 +419,21 @@ pub fn measure_target(
 ) -> Result<Model> {
     let frames = vec![Frame::Black; room.projectors().len()];
     let capture = image(&noise.expose(&room.render(&frames, Some(preset))?));
-    let target = sample_charts(&capture, &cal.corners, &sample_config(room))?;
+    let lit = sample_charts(&capture, &cal.corners, &sample_config(room))?;
     let att = &cal.attenuation;
-    let patches: Vec<usize> = (0..target.len())
-        .filter(|&i| att.usable[i] && target[i].status == PatchStatus::Ok)
-        .collect();
-    if patches.is_empty() {
-        bail!("no chart patch could be measured in every capture");
-    }
-    let index: HashMap<usize, PatchId> = patches
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| (i, k as PatchId))
-        .collect();
-    let columns: Vec<AttenuationColumn> = cal
-        .columns
-        .iter()
-        .map(|c| {
-            let (s, v): (Vec<PatchId>, Vec<LinearRgb>) = c
-                .iter()
-                .filter_map(|&(i, p)| index.get(&(i as usize)).map(|&k| (k, p)))
-                .unzip();
-            AttenuationColumn::new(s, v)
-        })
-        .collect::<Result<_, _>>()?;
-    let problem = Problem::new(
-        columns,
-        patches.iter().map(|&i| att.black[i]).collect(),
-        patches.iter().map(|&i| target[i].mean).collect(),
-        patches.iter().map(|&i| target[i].std_error).collect(),
-    )?;
-    let per_chart = cal.corners.len().max(1);
-    let patches_per_chart = target.len() / per_chart;
-    let charts: Vec<Vec<PatchId>> = cal
-        .node_charts
-        .iter()
-        .map(|m| match m {
-            // No chart: an empty one, so the conventional start falls back (lights stay on).
-            None => Vec::new(),
-            Some(m) => (0..patches_per_chart)
-                .filter_map(|j| index.get(&(patches_per_chart * m + j)).copied())
-                .collect(),
-        })
-        .collect();
+    let target = Target::new(&att.black, &att.usable, &lit)?;
+    let problem = target.problem(target.columns(&cal.columns)?)?;
+    let charts = target.chart_patches(cal.corners.len(), PATCHES_PER_CHART);
+    // A node without a chart gets an empty one, so the conventional start falls back (its
+    // lights stay on).
     let conventional = problem
         .columns()
         .iter()
-        .zip(&charts)
+        .zip(&cal.node_charts)
         .map(|(c, chart)| {
             conventional_value(
                 c,
-                chart,
+                chart.map_or(&[][..], |m| &charts[m]),
                 problem.target(),
                 problem.black(),
                 LinearRgb::splat(0.5),
@@ -477,7 +442,8 @@ pub fn measure_target(
         .collect::<Result<_, _>>()?;
     Ok(Model {
         problem,
-        patches,
+        patches: target.patches.clone(),
+        target,
         conventional,
     })
 }

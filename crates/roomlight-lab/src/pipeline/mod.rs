@@ -52,6 +52,10 @@ pub fn chart_corners(room: &Room) -> Result<Vec<ChartCorners>> {
         .collect()
 }
 
+/// Patches per colour chart.
+const PATCHES_PER_CHART: usize = roomlight_calib::charts::COLUMNS * roomlight_calib::charts::ROWS;
+
+/// How the charts are sampled: the simulated camera's saturation (with a margin) and noise.
 pub fn sample_config(room: &Room) -> SampleConfig {
     let c = &room.scene().camera;
     SampleConfig {

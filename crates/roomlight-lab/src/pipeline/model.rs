@@ -1,11 +1,13 @@
 //! The measured model for one lighting target and what is derived from it: node weights as
-//! sparse pixel lists, node values as projector frames, the problem without its sparsity cut-off.
+//! sparse pixel lists, node values as projector frames, the problem without its sparsity
+//! cut-off. The model's patches and problem come from [`Target`], as for a camera agent
+//! surveying a room.
 
 use anyhow::Result;
+use roomlight_calib::procedure::Target;
 use roomlight_calib::response::Response;
-use roomlight_core::{AttenuationColumn, LinearRgb, PatchId, Problem};
+use roomlight_core::{LinearRgb, Problem};
 use roomlight_sim::{Frame, NodeRegion, ProjectorImage, Room};
-use std::collections::HashMap;
 
 use super::*;
 
@@ -17,6 +19,8 @@ pub struct Model {
     pub problem: Problem,
     /// Room patch index of each model patch.
     pub patches: Vec<usize>,
+    /// The target lighting on those patches, as measured.
+    pub target: Target,
     /// The conventional start (DESIGN §3.1), one value per node.
     pub conventional: Vec<LinearRgb>,
 }
@@ -96,26 +100,14 @@ impl FrameBuilder {
 /// `model` with every attenuation entry kept (no 3σ cut-off), over the same patches: what the
 /// sparse supports are compared against.
 pub fn uncut_problem(cal: &Calibrated, model: &Model) -> Result<Problem> {
-    let index: HashMap<usize, PatchId> = model
-        .patches
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| (i, k as PatchId))
-        .collect();
-    let columns = cal
+    let uncut: Vec<Vec<(u32, LinearRgb)>> = cal
         .attenuation
         .columns(0.0)?
         .iter()
-        .map(|c| {
-            let (s, v): (Vec<PatchId>, Vec<LinearRgb>) = c
-                .iter()
-                .filter_map(|(i, p)| index.get(&(i as usize)).map(|&k| (k, p)))
-                .unzip();
-            AttenuationColumn::new(s, v)
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+        .map(|c| c.iter().collect())
+        .collect();
     Ok(Problem::new(
-        columns,
+        model.target.columns(&uncut)?,
         model.problem.black().to_vec(),
         model.problem.target().to_vec(),
         model.problem.noise().to_vec(),

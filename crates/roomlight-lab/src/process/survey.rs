@@ -6,7 +6,7 @@ use super::files::{ModelFile, SurveyFile, read_json};
 use crate::rendered::{Client, RenderedCamera};
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::{self, RoomModel};
-use roomlight_core::Problem;
+use roomlight_calib::procedure::Target;
 use roomlight_proto::v1;
 use std::collections::HashMap;
 use std::path::Path;
@@ -167,25 +167,18 @@ async fn measured(
     camera.set_lights("").await?;
     let black = sample(camera.image().await?)?;
     camera.set_lights(&preset).await?;
-    let target = sample(camera.image().await?)?;
+    let lit = sample(camera.image().await?)?;
     camera.set_lights("").await?;
-    let ok = roomlight_calib::charts::PatchStatus::Ok;
-    let patches: Vec<usize> = (0..target.len())
-        .filter(|&i| black[i].status == ok && target[i].status == ok)
-        .collect();
-    if patches.is_empty() {
-        bail!("no chart patch could be measured under both the LEDs and the dark");
-    }
-    let problem = Problem::new(
-        Vec::new(),
-        patches.iter().map(|&i| black[i].mean).collect(),
-        patches.iter().map(|&i| target[i].mean).collect(),
-        patches.iter().map(|&i| target[i].std_error).collect(),
-    )?;
+    // The model's patches and problem as the in-process pipeline builds them; no projector
+    // has joined, so no columns yet.
+    let target = Target::from_samples(&black, &lit)
+        .context("no chart patch could be measured under both the LEDs and the dark")?;
+    let problem = target.problem(Vec::new())?;
+    let patches = target.patches;
     println!(
         "survey: {} of {} patches measured, target from preset {preset}",
         patches.len(),
-        target.len()
+        lit.len()
     );
     let camera = checked.camera(camera.client(), patches.clone());
     let model = RoomModel {
