@@ -33,6 +33,9 @@ pub enum ProtoError {
         index: usize,
         value: f64,
     },
+    /// Packed patch ids are not whole little-endian u32s.
+    #[error("{field}: {bytes} bytes of patch ids, expected 4 per patch (little-endian u32)")]
+    PatchBytes { field: &'static str, bytes: usize },
     /// Patch ids are not strictly increasing.
     #[error("{field}: patch ids must be strictly increasing, got {previous} then {next}")]
     Unsorted {
@@ -73,6 +76,9 @@ impl From<ProtoError> for tonic::Status {
 /// Bytes of one RGB triple on the wire: three little-endian doubles.
 const RGB_BYTES: usize = 24;
 
+/// Bytes of one patch id on the wire: a little-endian u32.
+const PATCH_BYTES: usize = 4;
+
 /// Packs patch ids and their values.
 pub fn to_sparse(patches: &[PatchId], values: &[LinearRgb]) -> v1::SparseRgb {
     sparse_from_iter(patches, values.iter().copied())
@@ -85,9 +91,18 @@ pub fn sparse_from_iter(
     values: impl IntoIterator<Item = LinearRgb>,
 ) -> v1::SparseRgb {
     v1::SparseRgb {
-        patches: patches.to_vec(),
+        patches: pack_patches(patches),
         values: pack_rgb(patches.len(), values),
     }
+}
+
+/// Patch ids as little-endian u32s.
+pub fn pack_patches(patches: &[PatchId]) -> Vec<u8> {
+    let mut packed = Vec::with_capacity(PATCH_BYTES * patches.len());
+    for p in patches {
+        packed.extend_from_slice(&p.to_le_bytes());
+    }
+    packed
 }
 
 /// `values` as three little-endian doubles each (`count` of them expected, to size the buffer).
@@ -106,8 +121,8 @@ pub fn from_sparse(
     field: &'static str,
     sparse: &v1::SparseRgb,
 ) -> Result<(Vec<PatchId>, Vec<LinearRgb>), ProtoError> {
-    check_patches(field, sparse)?;
-    Ok((sparse.patches.clone(), unpack_rgb(field, &sparse.values)?))
+    let patches = unpack_patches(field, sparse)?;
+    Ok((patches, unpack_rgb(field, &sparse.values)?))
 }
 
 /// [`from_sparse`], taking the message apart instead of copying its patch ids.
@@ -115,9 +130,9 @@ pub fn into_sparse(
     field: &'static str,
     sparse: v1::SparseRgb,
 ) -> Result<(Vec<PatchId>, Vec<LinearRgb>), ProtoError> {
-    check_patches(field, &sparse)?;
+    let patches = unpack_patches(field, &sparse)?;
     let values = unpack_rgb(field, &sparse.values)?;
-    Ok((sparse.patches, values))
+    Ok((patches, values))
 }
 
 /// Packed triples back into values, every one finite (the length is checked by the caller).
@@ -142,9 +157,15 @@ fn unpack_rgb(field: &'static str, packed: &[u8]) -> Result<Vec<LinearRgb>, Prot
     Ok(values)
 }
 
-/// 24 bytes of values per patch, strictly increasing patch ids, not too many.
-fn check_patches(field: &'static str, sparse: &v1::SparseRgb) -> Result<(), ProtoError> {
-    let n = sparse.patches.len();
+/// The patch ids: whole u32s, not too many, strictly increasing, with 24 bytes of values each.
+fn unpack_patches(field: &'static str, sparse: &v1::SparseRgb) -> Result<Vec<PatchId>, ProtoError> {
+    if !sparse.patches.len().is_multiple_of(PATCH_BYTES) {
+        return Err(ProtoError::PatchBytes {
+            field,
+            bytes: sparse.patches.len(),
+        });
+    }
+    let n = sparse.patches.len() / PATCH_BYTES;
     if n > MAX_SPARSE_ENTRIES {
         return Err(ProtoError::TooLarge {
             field,
@@ -159,14 +180,19 @@ fn check_patches(field: &'static str, sparse: &v1::SparseRgb) -> Result<(), Prot
             patches: n,
         });
     }
-    if let Some(w) = sparse.patches.windows(2).find(|w| w[1] <= w[0]) {
+    let patches: Vec<PatchId> = sparse
+        .patches
+        .chunks_exact(PATCH_BYTES)
+        .map(|b| PatchId::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    if let Some(w) = patches.windows(2).find(|w| w[1] <= w[0]) {
         return Err(ProtoError::Unsorted {
             field,
             previous: w[0],
             next: w[1],
         });
     }
-    Ok(())
+    Ok(patches)
 }
 
 /// One node's entry of a batched message (its errors, or its contribution change), validated.

@@ -3,8 +3,8 @@
 use prost::Message;
 use roomlight_core::LinearRgb;
 use roomlight_proto::convert::{
-    MAX_BATCH_NODES, NodeVector, ProtoError, from_node_rgbs, from_rgb, from_sparse, pack_rgb,
-    to_node_rgb, to_rgb,
+    MAX_BATCH_NODES, NodeVector, ProtoError, from_node_rgbs, from_rgb, from_sparse, pack_patches,
+    pack_rgb, to_node_rgb, to_rgb,
 };
 use roomlight_proto::v1;
 
@@ -58,7 +58,7 @@ fn sparse_vectors_round_trip_through_bytes() {
 #[test]
 fn malformed_sparse_vectors_are_refused() {
     let short = v1::SparseRgb {
-        patches: vec![1, 2],
+        patches: pack_patches(&[1, 2]),
         values: vec![0; 47],
     };
     assert!(matches!(
@@ -70,7 +70,7 @@ fn malformed_sparse_vectors_are_refused() {
         })
     ));
     let nan = v1::SparseRgb {
-        patches: vec![1],
+        patches: pack_patches(&[1]),
         values: pack_rgb(1, [LinearRgb([0.0, f64::NAN, 0.0])]),
     };
     let err = from_sparse("delta", &nan).expect_err("nan");
@@ -79,13 +79,22 @@ fn malformed_sparse_vectors_are_refused() {
         "{err}"
     );
     let unsorted = v1::SparseRgb {
-        patches: vec![4, 4],
+        patches: pack_patches(&[4, 4]),
         values: vec![0; 48],
     };
     assert!(matches!(
         from_sparse("delta", &unsorted),
         Err(ProtoError::Unsorted { .. })
     ));
+    let ragged = v1::SparseRgb {
+        patches: vec![1, 0, 0],
+        values: Vec::new(),
+    };
+    let err = from_sparse("delta", &ragged).expect_err("three bytes");
+    assert!(
+        matches!(err, ProtoError::PatchBytes { bytes: 3, .. }),
+        "{err}"
+    );
     assert!(matches!(
         from_rgb("x", None),
         Err(ProtoError::Missing { .. })
@@ -108,14 +117,14 @@ fn malformed_entries_of_a_batch_are_refused_one_by_one() {
     let nan = v1::NodeRgb {
         node: 12,
         values: Some(v1::SparseRgb {
-            patches: vec![1],
+            patches: pack_patches(&[1]),
             values: pack_rgb(1, [LinearRgb([0.0, f64::INFINITY, 0.0])]),
         }),
     };
     let short = v1::NodeRgb {
         node: 13,
         values: Some(v1::SparseRgb {
-            patches: vec![1, 2],
+            patches: pack_patches(&[1, 2]),
             values: vec![0; 32],
         }),
     };
