@@ -138,7 +138,17 @@ async fn nodes_start_from_the_camera_agents_start_and_the_room_reports_settled_a
         })
         .await;
     sb.add_all_nodes();
-    let status = sb.wait_for(Duration::from_secs(60), |s| s.settled).await;
+    // Rounds of a small room take well under a millisecond: the first projectors can settle
+    // before the last has finished its handshake. Judge the room once all three are in and it
+    // has settled again since (a projector lighting up moves G far beyond its noise).
+    let joined = sb
+        .wait_for(Duration::from_secs(60), |s| s.live_projectors == 3)
+        .await;
+    let status = sb
+        .wait_for(Duration::from_secs(60), |s| {
+            s.settled && s.captures >= joined.captures + 3
+        })
+        .await;
     // Every node's first light the camera saw was the camera agent's start, not its own 0.5
     // (the nodes attach one by one: each is checked at the first capture it was lit in).
     let shown = shown.lock().unwrap_or_else(PoisonError::into_inner).clone();
