@@ -5,11 +5,12 @@
 
 use crate::pipeline::SimRig;
 use anyhow::{Context, Result};
-use roomlight_calib::charts::{PatchStatus, sample_charts};
+use roomlight_calib::charts::{ChartCorners, PatchStatus, sample_charts};
 use roomlight_calib::graycode::{Correspondence, DecodeConfig, Manifest, decode};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::nodes::{
-    NodeConfig, add_claim, partition_of_unity, projector_weights, segment, segment_beside,
+    NodeConfig, Segmentation, add_claim, partition_of_unity, projector_weights, segment,
+    segment_beside,
 };
 use roomlight_calib::procedure::{
     Decoded, Event, Procedure, Settings, Stage, coding, coding_groups,
@@ -88,8 +89,9 @@ fn direct_signal(room: &Room, k: usize) -> (Vec<f32>, f32) {
     (factor, typical)
 }
 
-pub fn run(quick: bool) -> Result<()> {
-    let scene = if quick {
+/// The small room with a 640×480 camera (`quick`) or the lab.
+fn scene(quick: bool) -> Result<roomlight_sim::Scene> {
+    Ok(if quick {
         // The small room's own camera (256×192) sees a chart patch as a few pixels: too few to
         // sample. The quick bench uses the same 640×480 camera as `bench room --quick`.
         let mut small = scenes::small()?;
@@ -97,44 +99,26 @@ pub fn run(quick: bool) -> Result<()> {
         small
     } else {
         scenes::lab()?
-    };
+    })
+}
+
+pub fn run(quick: bool) -> Result<()> {
     let t0 = Instant::now();
-    let room = Room::build(scene).context("building the room")?;
+    let room = Room::build(scene(quick)?).context("building the room")?;
     println!(
         "{}: room built in {:.1} s",
         room.scene().name,
         t0.elapsed().as_secs_f64()
     );
-    let n = room.projectors().len();
     let (decoded_all, decode_secs) = structured_light(&room)?;
-    // Charts and nodes on the same room.
     let charts = crate::pipeline::chart_corners(&room)?;
-    let preset = room
-        .scene()
-        .presets
-        .first()
-        .map(|p| room.preset(&p.name))
-        .transpose()?;
-    let lit = shoot_preset(&room, preset)?;
-    let t = Instant::now();
-    let samples = sample_charts(&lit, &charts, &crate::pipeline::sample_config(&room))?;
-    let elapsed = t.elapsed();
-    let count = |status: PatchStatus| samples.iter().filter(|s| s.status == status).count();
-    println!(
-        "chart sampling: {} charts, {} of {} patches usable ({} saturated, {} out of the image, {} too small, {} crossed by an edge), {:.1} ms",
-        charts.len(),
-        count(PatchStatus::Ok),
-        samples.len(),
-        count(PatchStatus::Saturated),
-        count(PatchStatus::OutOfImage),
-        count(PatchStatus::TooFewPixels),
-        count(PatchStatus::NonUniform),
-        elapsed.as_secs_f64() * 1e3
-    );
+    chart_sampling(&room, &charts)?;
+    let n = room.projectors().len();
     let luminaires: Vec<usize> = (0..n)
         .filter(|&k| {
             room.scene().projectors[k].role == ProjectorRole::Luminaire
                 && room.projectors()[k].kind == ProjectorKind::Standard
+                && decoded_all[k].is_some()
         })
         .collect();
     let corr: Vec<Correspondence> = luminaires
@@ -150,16 +134,63 @@ pub fn run(quick: bool) -> Result<()> {
         seg.nodes.len(),
         t.elapsed().as_secs_f64()
     );
-    // Partition of unity on the surface points, through the simulator's true correspondence,
-    // away from the target (its margin is black): segmented together, and one after the other
-    // as projectors joining a lit room over the wire are.
+    partition(&room, &luminaires, &corr, &seg, &charts, &mask);
+    target_light(&room, &luminaires, &seg)?;
+    let mut d = decode_secs;
+    d.sort_by(f64::total_cmp);
+    println!(
+        "decode per projector: median {:.2} s",
+        d.get(d.len() / 2).copied().unwrap_or(0.0)
+    );
+    decode_speed()
+}
+
+/// The charts sampled under the first LED preset: which patches are usable, and how long
+/// sampling takes.
+fn chart_sampling(room: &Room, charts: &[ChartCorners]) -> Result<()> {
+    let preset = room
+        .scene()
+        .presets
+        .first()
+        .map(|p| room.preset(&p.name))
+        .transpose()?;
+    let lit = shoot_preset(room, preset)?;
+    let t = Instant::now();
+    let samples = sample_charts(&lit, charts, &crate::pipeline::sample_config(room))?;
+    let elapsed = t.elapsed();
+    let count = |status: PatchStatus| samples.iter().filter(|s| s.status == status).count();
+    println!(
+        "chart sampling: {} charts, {} of {} patches usable ({} saturated, {} out of the image, {} too small, {} crossed by an edge), {:.1} ms",
+        charts.len(),
+        count(PatchStatus::Ok),
+        samples.len(),
+        count(PatchStatus::Saturated),
+        count(PatchStatus::OutOfImage),
+        count(PatchStatus::TooFewPixels),
+        count(PatchStatus::NonUniform),
+        elapsed.as_secs_f64() * 1e3
+    );
+    Ok(())
+}
+
+/// Partition of unity on the surface points, through the simulator's true correspondence,
+/// away from the target (its margin is black): the standard luminaires (`luminaires`, room
+/// indices, decoded as `corr`) segmented together (`seg`), and one after the other as
+/// projectors joining a lit room over the wire are.
+fn partition(
+    room: &Room,
+    luminaires: &[usize],
+    corr: &[Correspondence],
+    seg: &Segmentation,
+    charts: &[ChartCorners],
+    mask: &[bool],
+) {
     let truth: Vec<Vec<Option<u32>>> = luminaires
         .iter()
-        .filter(|&&k| decoded_all[k].is_some())
         .map(|&k| room.true_correspondence(k))
         .collect();
     let (cw, ch) = (room.camera().width as usize, room.camera().height as usize);
-    let away = roomlight_calib::nodes::dilate(&mask, cw, ch, 8);
+    let away = roomlight_calib::nodes::dilate(mask, cw, ch, 8);
     let weights: Vec<Vec<f32>> = (0..corr.len())
         .map(|k| projector_weights(&seg.nodes, k))
         .collect();
@@ -169,11 +200,11 @@ pub fn run(quick: bool) -> Result<()> {
     );
     let mut claimed = vec![0.0f32; cw * ch];
     let (mut weights, mut dark) = (Vec::new(), Vec::new());
-    for c in &corr {
+    for c in corr {
         let one = segment_beside(
             std::slice::from_ref(c),
-            &charts,
-            Some(&mask),
+            charts,
+            Some(mask),
             &NodeConfig::default(),
             Some(&claimed),
         );
@@ -191,39 +222,41 @@ pub fn run(quick: bool) -> Result<()> {
         "  partition of unity, one after the other: {}",
         partition_of_unity(&truth, &weights, &dark, &away)
     );
-    // Luminaire light on the target against a patch on the desk beside it.
-    let desk = room.scene().charts.iter().position(|c| c.name == "desk");
-    if let Some(desk) = desk {
-        let centre = room.geometry().charts[desk].center.to_array();
-        let (mut on_target, mut on_desk) = (0.0, 0.0);
-        for (slot, &k) in luminaires.iter().enumerate() {
-            let p = &room.projectors()[k].pinhole;
-            let mut pixels = vec![[0.0f32; 3]; (p.width * p.height) as usize];
-            for node in seg.nodes.iter().filter(|nd| nd.projector == slot) {
-                for (px, w) in pixels.iter_mut().zip(&node.weights) {
-                    px.iter_mut().for_each(|c| *c += w);
-                }
+}
+
+/// Luminaire light on the target against a patch on the desk beside it, every standard
+/// luminaire's nodes at full white.
+fn target_light(room: &Room, luminaires: &[usize], seg: &Segmentation) -> Result<()> {
+    let Some(desk) = room.scene().charts.iter().position(|c| c.name == "desk") else {
+        return Ok(());
+    };
+    let centre = room.geometry().charts[desk].center.to_array();
+    let (mut on_target, mut on_desk) = (0.0, 0.0);
+    for (slot, &k) in luminaires.iter().enumerate() {
+        let p = &room.projectors()[k].pinhole;
+        let mut pixels = vec![[0.0f32; 3]; (p.width * p.height) as usize];
+        for node in seg.nodes.iter().filter(|nd| nd.projector == slot) {
+            for (px, w) in pixels.iter_mut().zip(&node.weights) {
+                px.iter_mut().for_each(|c| *c += w);
             }
-            let frame = Frame::Linear(ProjectorImage {
-                width: p.width,
-                height: p.height,
-                pixels,
-            });
-            on_target += room.target_irradiance(k, &frame)?[1];
-            on_desk += room.direct_irradiance_at(k, &frame, centre, [0.0, 0.0, 1.0])?[1];
         }
-        println!(
-            "standard luminaires at full white: direct light on the target is {:.2}% of the desk chart's",
-            100.0 * on_target / on_desk.max(1e-12)
-        );
+        let frame = Frame::Linear(ProjectorImage {
+            width: p.width,
+            height: p.height,
+            pixels,
+        });
+        on_target += room.target_irradiance(k, &frame)?[1];
+        on_desk += room.direct_irradiance_at(k, &frame, centre, [0.0, 0.0, 1.0])?[1];
     }
-    let mut d = decode_secs;
-    d.sort_by(f64::total_cmp);
     println!(
-        "decode per projector: median {:.2} s",
-        d.get(d.len() / 2).copied().unwrap_or(0.0)
+        "standard luminaires at full white: direct light on the target is {:.2}% of the desk chart's",
+        100.0 * on_target / on_desk.max(1e-12)
     );
-    // Decode speed at the reference size: a 1920×1080 projector from 1280×960 captures.
+    Ok(())
+}
+
+/// Decode speed at the reference size: a 1920×1080 projector from 1280×960 captures.
+fn decode_speed() -> Result<()> {
     let big = Manifest::new(1920, 1080)?;
     let caps: Vec<LinearImage> = big
         .patterns
