@@ -115,13 +115,18 @@ impl<C: Camera> Rig for WireRig<'_, C> {
         Ok(())
     }
 
+    /// Resolves once the node agent has taken the assignment (an empty Show of node values
+    /// behind it changes nothing on the display and is acknowledged after it): taking one
+    /// writes the node's state file, and a bring-up that assigned every projector at once kept
+    /// six node agents busy together for long enough to miss their heartbeats (the lab over the
+    /// wire).
     async fn assign(&mut self, projector: &str, assignment: &Assignment) -> Result<(), RigError> {
         let (tx, _, _) = self.peer(projector)?;
         let assign = v1::room_message::Body::Assign(assign_message(assignment));
         if !self.shared.offer(projector, &tx, vec![assign]) {
             return Err(RigError::Gone(projector.to_string()));
         }
-        Ok(())
+        self.show(&[(projector, Frame::Nodes(Vec::new()))]).await
     }
 
     async fn capture(&mut self, exposure: f32) -> Result<LinearImage, RigError> {
