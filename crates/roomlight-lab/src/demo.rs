@@ -67,35 +67,9 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         bar: &bar,
         options: args,
     };
-    let mut presets = Vec::new();
-    let mut rules = Vec::new();
-    let mut captures = cal.captures;
-    for (preset, spec) in room.scene().presets.iter().enumerate() {
-        let model = pipeline::measure_target(&room, &cal, preset, &mut noise)?;
-        captures += 1;
-        let truth = pipeline::Truth::new(&room, &transport, &model, preset)?;
-        let result = lab.agents(
-            &model,
-            &truth,
-            RunOptions::default_rule(args.seed + preset as u64),
-        )?;
-        print_preset(&spec.name, &result);
-        let images = preset_images(&room, &cal, &model, &result, preset, &spec.name, dir)?;
-        if preset == 0 {
-            rules = lab.compare_rules(&model, &truth)?;
-        }
-        presets.push(PresetOutcome {
-            name: spec.name.clone(),
-            chart_of_patch: model
-                .patches
-                .iter()
-                .map(|&i| i / PATCHES_PER_CHART)
-                .collect(),
-            model,
-            result,
-            images,
-        });
-    }
+    let (presets, rules) = lab.presets(&mut noise, dir)?;
+    // One capture per preset measures its target.
+    let captures = cal.captures + presets.len();
     let (hot_join, pm) = match presets.first() {
         Some(first) => (lab.hot_join(first)?, Some(lab.pm(first)?)),
         None => (None, None),
@@ -177,6 +151,45 @@ struct Lab<'a> {
 }
 
 impl Lab<'_> {
+    /// Every preset: its target measured, the agents from the default rule's start, its
+    /// pictures; on the first, every rule compared.
+    fn presets(
+        &self,
+        noise: &mut roomlight_sim::CameraNoise,
+        dir: &std::path::Path,
+    ) -> Result<(Vec<PresetOutcome>, Vec<RuleOutcome>)> {
+        let mut presets = Vec::new();
+        let mut rules = Vec::new();
+        for (preset, spec) in self.room.scene().presets.iter().enumerate() {
+            let model = pipeline::measure_target(self.room, self.cal, preset, noise)?;
+            let truth = pipeline::Truth::new(self.room, self.transport, &model, preset)?;
+            let result = self.agents(
+                &model,
+                &truth,
+                RunOptions::default_rule(self.options.seed + preset as u64),
+            )?;
+            print_preset(&spec.name, &result);
+            let images = preset_images(
+                self.room, self.cal, &model, &result, preset, &spec.name, dir,
+            )?;
+            if preset == 0 {
+                rules = self.compare_rules(&model, &truth)?;
+            }
+            presets.push(PresetOutcome {
+                name: spec.name.clone(),
+                chart_of_patch: model
+                    .patches
+                    .iter()
+                    .map(|&i| i / PATCHES_PER_CHART)
+                    .collect(),
+                model,
+                result,
+                images,
+            });
+        }
+        Ok((presets, rules))
+    }
+
     /// The agents on one target, with the live line while they run.
     fn agents(
         &self,
@@ -434,13 +447,45 @@ fn synthetic(args: &DemoOptions) -> Result<()> {
         best.excess(problem.objective(&start)),
         de_start.mean
     );
-    // The camera sees the room with its real noise; the nodes follow momentum with 5 model
-    // rounds between captures, and stop when every node moves less than half a code step.
     let plant_config = PlantConfig {
         noise_scale: 1.0,
         seed: args.seed,
         ..PlantConfig::default()
     };
+    let trace = momentum_loop(problem, &best, &start, &plant_config)?;
+    // The paper's rule on the same room, for comparison.
+    let mut plant = Plant::new(problem.clone(), plant_config)?;
+    let paper = closed_loop::run(
+        problem,
+        &mut plant,
+        &start,
+        &LoopConfig::new(StepRule::paper(), 60),
+    )?;
+    let to = |t: &closed_loop::Trace| {
+        t.records
+            .iter()
+            .find(|r| best.excess(r.true_objective) <= 0.01)
+            .map_or("never".into(), |r| r.capture.to_string())
+    };
+    println!(
+        "captures to 1% excess: paper's fixed step {}, momentum with model rounds {}",
+        to(&paper),
+        to(&trace)
+    );
+    agents_over_grpc(problem, &best, args)?;
+    println!("demo finished in {:.2} s", t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// The in-memory loop on the synthetic room, printed capture by capture: the camera sees the
+/// room with its real noise (`plant_config`); the nodes follow momentum with 5 model rounds
+/// between captures and stop when every node moves less than half a code step.
+fn momentum_loop(
+    problem: &roomlight_core::Problem,
+    best: &roomlight_core::optimum::Optimum,
+    start: &[LinearRgb],
+    plant_config: &PlantConfig,
+) -> Result<closed_loop::Trace> {
     let config = LoopConfig {
         model_rounds: 5,
         stop_when_settled: true,
@@ -449,7 +494,7 @@ fn synthetic(args: &DemoOptions) -> Result<()> {
     let mut plant = Plant::new(problem.clone(), plant_config.clone())?;
     println!("capture  model rounds  true G      excess     mean ΔE00");
     let trace =
-        closed_loop::run_observed(problem, &mut plant, &start, &config, |r, shown, plant| {
+        closed_loop::run_observed(problem, &mut plant, start, &config, |r, shown, plant| {
             let de = patch_delta_e(problem.target(), &plant.true_response(shown, r.capture))
                 .map_or(f64::NAN, |d| d.mean);
             println!(
@@ -475,28 +520,7 @@ fn synthetic(args: &DemoOptions) -> Result<()> {
         de.max,
         patch_delta_e(problem.target(), &problem.response(&best.x))?.mean
     );
-    // The paper's rule on the same room, for comparison.
-    let mut plant = Plant::new(problem.clone(), plant_config)?;
-    let paper = closed_loop::run(
-        problem,
-        &mut plant,
-        &start,
-        &LoopConfig::new(StepRule::paper(), 60),
-    )?;
-    let to = |t: &closed_loop::Trace| {
-        t.records
-            .iter()
-            .find(|r| best.excess(r.true_objective) <= 0.01)
-            .map_or("never".into(), |r| r.capture.to_string())
-    };
-    println!(
-        "captures to 1% excess: paper's fixed step {}, momentum with model rounds {}",
-        to(&paper),
-        to(&trace)
-    );
-    agents_over_grpc(problem, &best, args)?;
-    println!("demo finished in {:.2} s", t0.elapsed().as_secs_f64());
-    Ok(())
+    Ok(trace)
 }
 
 /// The same room run by the real agents: a camera agent and one node agent per ten nodes, in

@@ -126,38 +126,7 @@ pub fn metrics(report: &Report) -> Value {
     let presets: serde_json::Map<String, Value> = report
         .presets
         .iter()
-        .map(|p| {
-            let r = &p.result;
-            let charts: serde_json::Map<String, Value> = p
-                .per_chart()
-                .into_iter()
-                .map(|(c, de, conv)| {
-                    (
-                        report.chart_names.get(c).cloned().unwrap_or(c.to_string()),
-                        json!({ "mean_de00": de, "conventional_mean_de00": conv }),
-                    )
-                })
-                .collect();
-            (
-                p.name.clone(),
-                json!({
-                    "captures": r.captures,
-                    "settled": r.settled,
-                    "final_excess": r.final_excess,
-                    "G": r.g,
-                    "G_star": r.g_star,
-                    "true_excess": r.true_excess,
-                    "mean_de00": mean(&r.de00),
-                    "max_de00": max(&r.de00),
-                    "conventional_mean_de00": mean(&r.conventional_de00),
-                    "conventional_max_de00": max(&r.conventional_de00),
-                    "true_optimum_mean_de00": r.best_mean_de00,
-                    "patches": r.de00.len(),
-                    "seconds": r.seconds,
-                    "charts": charts,
-                }),
-            )
-        })
+        .map(|p| (p.name.clone(), preset_metrics(report, p)))
         .collect();
     let rules: serde_json::Map<String, Value> = report
         .rules
@@ -186,57 +155,103 @@ pub fn metrics(report: &Report) -> Value {
         "wall_seconds": report.wall_seconds,
     });
     if let Some(h) = &report.hot_join {
-        m["hot_join"] = json!({
-            "leaving": h.leaving,
-            "joining": h.joining,
-            "leave_at": h.churn.leave_at,
-            "join_at": h.churn.join_at,
-            "calibration_captures": h.calibration_captures,
-            "captures": h.result.captures,
-            "final_excess": h.result.final_excess,
-            "true_excess": h.result.true_excess,
-            "mean_de00": mean(&h.result.de00),
-            "trace": h.result.trace,
-        });
+        m["hot_join"] = hot_join_metrics(h);
     }
     if let Some(pm) = &report.pm {
-        let by_condition = |v: &[f64; 3]| -> Value {
-            crate::pm::CONDITIONS
-                .iter()
-                .zip(v)
-                .map(|(c, x)| ((*c).to_string(), json!(x)))
-                .collect::<serde_json::Map<_, _>>()
-                .into()
-        };
-        m["ansi_contrast"] = by_condition(&pm.ansi_contrast);
-        m["rms_contrast"] = pm
-            .rms_contrast
-            .iter()
-            .map(|(t, v)| (t.clone(), by_condition(v)))
-            .collect::<serde_json::Map<_, _>>()
-            .into();
-        m["pm_decoded_share"] = json!(pm.decoded_share);
+        pm_metrics(pm, &mut m);
     }
     if let Some(s) = &report.shadows {
-        m["penumbra_mm"] = s
-            .kinds
-            .iter()
-            .map(|k| (k.kind.clone(), json!(k.penumbra_mm)))
-            .collect::<serde_json::Map<_, _>>()
-            .into();
-        m["peak_radiance_ratio"] = json!({
-            "standard_over_large_aperture": s.peak_radiance_ratio,
-            "standard_pupil_mm": crate::shadow::STANDARD_PUPIL_MM,
-        });
-        // Peak emitted radiance per unit desk irradiance (sr⁻¹ · m²/m²), each kind.
-        m["peak_radiance_per_irradiance"] = s
-            .kinds
-            .iter()
-            .map(|k| (k.kind.clone(), json!(k.radiance_per_irradiance)))
-            .collect::<serde_json::Map<_, _>>()
-            .into();
+        shadow_metrics(s, &mut m);
     }
     m
+}
+
+/// One preset's figures, and its mean ΔE00 per chart.
+fn preset_metrics(report: &Report, p: &PresetOutcome) -> Value {
+    let r = &p.result;
+    let charts: serde_json::Map<String, Value> = p
+        .per_chart()
+        .into_iter()
+        .map(|(c, de, conv)| {
+            (
+                report.chart_names.get(c).cloned().unwrap_or(c.to_string()),
+                json!({ "mean_de00": de, "conventional_mean_de00": conv }),
+            )
+        })
+        .collect();
+    json!({
+        "captures": r.captures,
+        "settled": r.settled,
+        "final_excess": r.final_excess,
+        "G": r.g,
+        "G_star": r.g_star,
+        "true_excess": r.true_excess,
+        "mean_de00": mean(&r.de00),
+        "max_de00": max(&r.de00),
+        "conventional_mean_de00": mean(&r.conventional_de00),
+        "conventional_max_de00": max(&r.conventional_de00),
+        "true_optimum_mean_de00": r.best_mean_de00,
+        "patches": r.de00.len(),
+        "seconds": r.seconds,
+        "charts": charts,
+    })
+}
+
+/// The hot join: who left and joined when, and how the room recovered.
+fn hot_join_metrics(h: &HotJoin) -> Value {
+    json!({
+        "leaving": h.leaving,
+        "joining": h.joining,
+        "leave_at": h.churn.leave_at,
+        "join_at": h.churn.join_at,
+        "calibration_captures": h.calibration_captures,
+        "captures": h.result.captures,
+        "final_excess": h.result.final_excess,
+        "true_excess": h.result.true_excess,
+        "mean_de00": mean(&h.result.de00),
+        "trace": h.result.trace,
+    })
+}
+
+/// Projection mapping: ANSI and RMS contrast per condition, and the decoded share.
+fn pm_metrics(pm: &crate::pm::PmResult, m: &mut Value) {
+    let by_condition = |v: &[f64; 3]| -> Value {
+        crate::pm::CONDITIONS
+            .iter()
+            .zip(v)
+            .map(|(c, x)| ((*c).to_string(), json!(x)))
+            .collect::<serde_json::Map<_, _>>()
+            .into()
+    };
+    m["ansi_contrast"] = by_condition(&pm.ansi_contrast);
+    m["rms_contrast"] = pm
+        .rms_contrast
+        .iter()
+        .map(|(t, v)| (t.clone(), by_condition(v)))
+        .collect::<serde_json::Map<_, _>>()
+        .into();
+    m["pm_decoded_share"] = json!(pm.decoded_share);
+}
+
+/// Shadows: penumbra per projector kind and the peak radiance each needs.
+fn shadow_metrics(s: &crate::shadow::ShadowComparison, m: &mut Value) {
+    m["penumbra_mm"] = s
+        .kinds
+        .iter()
+        .map(|k| (k.kind.clone(), json!(k.penumbra_mm)))
+        .collect::<serde_json::Map<_, _>>()
+        .into();
+    m["peak_radiance_ratio"] = json!({
+        "standard_over_large_aperture": s.peak_radiance_ratio,
+        "standard_pupil_mm": crate::shadow::STANDARD_PUPIL_MM,
+    });
+    // Peak emitted radiance per unit desk irradiance (sr⁻¹ · m²/m²), each kind.
+    m["peak_radiance_per_irradiance"] = s
+        .kinds
+        .iter()
+        .map(|k| (k.kind.clone(), json!(k.radiance_per_irradiance)))
+        .collect::<serde_json::Map<_, _>>()
+        .into();
 }
 
 fn channel(v: &[LinearRgb], c: usize) -> Vec<f64> {
@@ -390,6 +405,13 @@ pub fn write(dir: &Path, report: &Report) -> Result<()> {
     };
     save("metrics.json", &metrics(report))?;
     save("problem.json", &problem(report))?;
+    write_plots(dir, report)?;
+    let path = dir.join("index.html");
+    std::fs::write(&path, html(report)).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The convergence plots of every rule, the hot join's and the shadow profiles.
+fn write_plots(dir: &Path, report: &Report) -> Result<()> {
     let series = |f: fn(&TracePoint) -> (f64, f64)| -> Vec<(&str, Vec<(f64, f64)>)> {
         report
             .rules
@@ -461,12 +483,31 @@ pub fn write(dir: &Path, report: &Report) -> Result<()> {
             false,
         )?;
     }
-    let path = dir.join("index.html");
-    std::fs::write(&path, html(report)).with_context(|| format!("writing {}", path.display()))
+    Ok(())
 }
 
+/// The demo's page: calibration, the lighting reproduction per preset, projection mapping,
+/// shadows, the hot join and the convergence of each rule, in that order.
 fn html(report: &Report) -> String {
     let mut h = String::new();
+    html_head(&mut h, report);
+    calibration_section(&mut h, report);
+    reproduction_section(&mut h, report);
+    if let Some(pm) = &report.pm {
+        pm_section(&mut h, pm);
+    }
+    if let Some(s) = &report.shadows {
+        shadow_section(&mut h, s);
+    }
+    if let Some(j) = &report.hot_join {
+        hot_join_section(&mut h, j);
+    }
+    convergence_section(&mut h, report);
+    h
+}
+
+/// The page's head, style and introduction.
+fn html_head(h: &mut String, report: &Report) {
     let _ = write!(
         h,
         "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>roomlight: {room}</title>\
@@ -483,6 +524,10 @@ took {wall:.1} s (seed {seed}).</p>",
         wall = report.wall_seconds,
         seed = report.seed
     );
+}
+
+/// What calibration did, line by line, and its captures.
+fn calibration_section(h: &mut String, report: &Report) {
     h.push_str("<h2>Calibration</h2><ul>");
     for line in &report.calibration {
         let _ = write!(h, "<li>{}</li>", escape(line));
@@ -492,6 +537,10 @@ took {wall:.1} s (seed {seed}).</p>",
         "</ul><p>{} captures in all.</p>",
         report.calibration_captures
     );
+}
+
+/// Per preset: the figures against the simulator's truth, the three pictures and each chart.
+fn reproduction_section(h: &mut String, report: &Report) {
     h.push_str(
         "<h2>Lighting reproduction</h2><table><tr><th>preset</th><th>captures</th>\
 <th>mean ΔE00</th><th>max ΔE00</th><th>conventional mean ΔE00</th><th>true optimum mean ΔE00</th>\
@@ -543,74 +592,85 @@ slightly non-linear, so that reference can be beaten (negative values).</p>",
         }
         h.push_str("</table>");
     }
-    if let Some(pm) = &report.pm {
-        let _ = write!(
-            h,
-            "<h2>Projection mapping</h2><p>The texture projector under three lightings: a dark \
+}
+
+/// The texture projector under three lightings: contrast and pictures.
+fn pm_section(h: &mut String, pm: &crate::pm::PmResult) {
+    let _ = write!(
+        h,
+        "<h2>Projection mapping</h2><p>The texture projector under three lightings: a dark \
 room, the LED preset, and the projectors' lighting (first preset). ANSI contrast of a 4×4 checker \
 on a 200 mm board in place of the bust: dark {:.0}:1, LED {:.0}:1, projector lighting {:.0}:1 \
 (the paper measured 180:1, 30:1 and 65:1).</p><table><tr><th>texture</th><th>RMS dark</th>\
 <th>RMS LED</th><th>RMS projector</th></tr>",
-            pm.ansi_contrast[0], pm.ansi_contrast[1], pm.ansi_contrast[2]
-        );
-        for (t, v) in &pm.rms_contrast {
-            let _ = write!(
-                h,
-                "<tr><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td></tr>",
-                escape(t),
-                v[0],
-                v[1],
-                v[2]
-            );
-        }
-        h.push_str("</table><div class=\"row\" style=\"flex-wrap:wrap\">");
-        for (file, caption) in &pm.images {
-            let _ = write!(
-                h,
-                "<figure style=\"flex:0 0 24%\"><img src=\"{}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>",
-                escape(file),
-                c = escape(caption)
-            );
-        }
-        h.push_str("</div>");
-    }
-    if let Some(s) = &report.shadows {
+        pm.ansi_contrast[0], pm.ansi_contrast[1], pm.ansi_contrast[2]
+    );
+    for (t, v) in &pm.rms_contrast {
         let _ = write!(
             h,
-            "<h2>Large aperture against a standard projector</h2><p>A hand-sized box 200 mm over \
+            "<tr><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td></tr>",
+            escape(t),
+            v[0],
+            v[1],
+            v[2]
+        );
+    }
+    h.push_str("</table><div class=\"row\" style=\"flex-wrap:wrap\">");
+    for (file, caption) in &pm.images {
+        let _ = write!(
+            h,
+            "<figure style=\"flex:0 0 24%\"><img src=\"{}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>",
+            escape(file),
+            c = escape(caption)
+        );
+    }
+    h.push_str("</div>");
+}
+
+/// The large aperture's penumbra against a standard projector's, and the glare.
+fn shadow_section(h: &mut String, s: &crate::shadow::ShadowComparison) {
+    let _ = write!(
+        h,
+        "<h2>Large aperture against a standard projector</h2><p>A hand-sized box 200 mm over \
 the desk under the large-aperture projector, then under a standard (pinhole) projector in the \
 same place. Penumbra (10% to 90% of the open desk's direct irradiance): {}. For the same desk \
 irradiance a standard projector with a {:.0} mm exit pupil emits {:.0}× the peak radiance of the \
 large aperture (glare).</p><img src=\"shadow.svg\" alt=\"shadow profiles\">",
-            s.kinds
-                .iter()
-                .map(|k| format!("{} {:.0} mm", escape(&k.kind), k.penumbra_mm))
-                .collect::<Vec<_>>()
-                .join(", "),
-            crate::shadow::STANDARD_PUPIL_MM,
-            s.peak_radiance_ratio
-        );
-    }
-    if let Some(j) = &report.hot_join {
-        let _ = write!(
-            h,
-            "<h2>A projector leaves, an unmeasured one joins</h2><p>On the first preset, default rule: \
+        s.kinds
+            .iter()
+            .map(|k| format!("{} {:.0} mm", escape(&k.kind), k.penumbra_mm))
+            .collect::<Vec<_>>()
+            .join(", "),
+        crate::shadow::STANDARD_PUPIL_MM,
+        s.peak_radiance_ratio
+    );
+}
+
+/// A projector leaves, an unmeasured one joins hot.
+fn hot_join_section(h: &mut String, j: &HotJoin) {
+    let _ = write!(
+        h,
+        "<h2>A projector leaves, an unmeasured one joins</h2><p>On the first preset, default rule: \
 {} is switched off after {} captures; {}, dark until then and unknown to the camera agent, joins after {}. \
 The camera agent measures it hot ({} captures: its nodes at black, then each alone at white, while the \
 others keep their values), sends everyone <i>s</i> anew, and the room converges without the leaver: \
 after {} captures in all, excess {:.1e} over the measured model's optimum (true {:.1e}), mean ΔE00 {:.2}.</p>\
 <img src=\"hot-join.svg\" alt=\"excess through the leave and the hot join\">",
-            escape(&j.leaving),
-            j.churn.leave_at,
-            escape(&j.joining),
-            j.churn.join_at,
-            j.calibration_captures,
-            j.result.captures,
-            j.result.final_excess,
-            j.result.true_excess,
-            mean(&j.result.de00)
-        );
-    }
+        escape(&j.leaving),
+        j.churn.leave_at,
+        escape(&j.joining),
+        j.churn.join_at,
+        j.calibration_captures,
+        j.result.captures,
+        j.result.final_excess,
+        j.result.true_excess,
+        mean(&j.result.de00)
+    );
+}
+
+/// Each rule from the conventional start until the camera agent reports it settled; the plots
+/// and the data files.
+fn convergence_section(h: &mut String, report: &Report) {
     h.push_str("<h2>Convergence</h2><p>On the first preset, from the conventional start, each rule until the \
 camera agent reports that G no longer moves beyond its noise (or the capture cap).</p>\
 <table><tr><th>rule</th><th>captures</th><th>seconds</th><th>true excess</th><th>mean ΔE00</th></tr>");
@@ -631,5 +691,4 @@ camera agent reports that G no longer moves beyond its noise (or the capture cap
 <img src=\"de00-captures.svg\" alt=\"ΔE00 against captures\">\
 <p>Data: <a href=\"metrics.json\">metrics.json</a>, <a href=\"problem.json\">problem.json</a>.</p></body></html>",
     );
-    h
 }

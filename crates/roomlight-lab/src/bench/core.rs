@@ -135,6 +135,21 @@ impl Case {
 /// Runs the core benchmark and prints the table.
 pub fn core(quick: bool, json: Option<&Path>, seed: u64) -> Result<()> {
     let budget = if quick { 150 } else { 400 };
+    let mut rows = Vec::new();
+    for case in &cases(quick, seed) {
+        rows.extend(bench_case(case, budget, seed)?);
+    }
+    print_table(&rows);
+    if let Some(path) = json {
+        std::fs::write(path, serde_json::to_string_pretty(&rows)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// The synthetic rooms of 10, 100 and 1000 nodes (up to 100 with `quick`), and without
+/// `quick` two harder rooms of 100.
+fn cases(quick: bool, seed: u64) -> Vec<Case> {
     let mut cases: Vec<Case> = [10, 100, 1000]
         .into_iter()
         .filter(|&n| !quick || n <= 100)
@@ -153,74 +168,73 @@ pub fn core(quick: bool, json: Option<&Path>, seed: u64) -> Result<()> {
         noisy.noise_scale = 1.0;
         cases.push(noisy);
     }
+    cases
+}
+
+/// Every rule on one room from the conventional start: prints the room's line and the time of
+/// one distributed round, returns a row per rule.
+fn bench_case(case: &Case, budget: usize, seed: u64) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
-    for case in &cases {
-        let nodes = case.config.nodes;
-        let room = synthetic_room(&case.config)
-            .with_context(|| format!("building the synthetic room {}", case.name))?;
-        let problem = &room.problem;
-        let t0 = Instant::now();
-        let best = optimum(problem).with_context(|| format!("optimum of {nodes} nodes"))?;
-        let t_opt = t0.elapsed().as_secs_f64();
-        let start = conventional_start(problem, &room.charts, LinearRgb::splat(0.5))?;
-        let kept: usize = problem.columns().iter().map(|c| c.len()).sum();
-        println!(
-            "{}: {nodes} nodes, {} patches: {kept} attenuation entries kept ({:.2}% of dense), G* = {:.4e} (KKT residual {:.1e}, {:.2} s), conventional excess {:.3}",
-            case.name,
-            problem.patches(),
-            100.0 * kept as f64 / (nodes * problem.patches()) as f64,
-            best.objective,
-            best.kkt_residual,
-            t_opt,
-            best.excess(problem.objective(&start)),
-        );
-        for (name, mut config) in rules(problem, budget) {
-            config.stop_at_true_objective =
-                Some(best.objective + 1e-6 * best.objective.max(1e-9 * best.objective_black));
-            let plant_config = PlantConfig {
-                noise_scale: case.noise_scale,
-                seed,
-                ..PlantConfig::default()
-            };
-            let mut plant = Plant::new(problem.clone(), plant_config)?;
-            let trace = closed_loop::run(problem, &mut plant, &start, &config)?;
-            let last = trace.last().context("no capture recorded")?;
-            let to = |frac: f64| {
-                trace
-                    .records
-                    .iter()
-                    .find(|r| best.excess(r.true_objective) <= frac)
-                    .map(|r| r.capture)
-            };
-            let de = patch_delta_e(
-                problem.target(),
-                &plant.true_response(&trace.shown, last.capture),
-            )?;
-            rows.push(Row {
-                case: case.name.clone(),
-                rule: name.to_string(),
-                captures_to_1pct: to(0.01),
-                captures_to_0_1pct: to(0.001),
-                final_excess: best.excess(last.true_objective),
-                mean_de00: de.mean,
-                us_per_node_update: us_per_node_update(problem, config.rule, &start)?,
-                model_rounds: last.model_rounds,
-                captures: last.capture,
-            });
-        }
-        let (round_ms, round_mb) = full_round(problem, &start)?;
-        let support: f64 = kept as f64 / nodes as f64;
-        println!(
-            "  one distributed round of {nodes} nodes (mean support {support:.0} patches): {round_ms:.3} ms, peak resident growth {}",
-            super::memory::mb(round_mb)
-        );
+    let nodes = case.config.nodes;
+    let room = synthetic_room(&case.config)
+        .with_context(|| format!("building the synthetic room {}", case.name))?;
+    let problem = &room.problem;
+    let t0 = Instant::now();
+    let best = optimum(problem).with_context(|| format!("optimum of {nodes} nodes"))?;
+    let t_opt = t0.elapsed().as_secs_f64();
+    let start = conventional_start(problem, &room.charts, LinearRgb::splat(0.5))?;
+    let kept: usize = problem.columns().iter().map(|c| c.len()).sum();
+    println!(
+        "{}: {nodes} nodes, {} patches: {kept} attenuation entries kept ({:.2}% of dense), G* = {:.4e} (KKT residual {:.1e}, {:.2} s), conventional excess {:.3}",
+        case.name,
+        problem.patches(),
+        100.0 * kept as f64 / (nodes * problem.patches()) as f64,
+        best.objective,
+        best.kkt_residual,
+        t_opt,
+        best.excess(problem.objective(&start)),
+    );
+    for (name, mut config) in rules(problem, budget) {
+        config.stop_at_true_objective =
+            Some(best.objective + 1e-6 * best.objective.max(1e-9 * best.objective_black));
+        let plant_config = PlantConfig {
+            noise_scale: case.noise_scale,
+            seed,
+            ..PlantConfig::default()
+        };
+        let mut plant = Plant::new(problem.clone(), plant_config)?;
+        let trace = closed_loop::run(problem, &mut plant, &start, &config)?;
+        let last = trace.last().context("no capture recorded")?;
+        let to = |frac: f64| {
+            trace
+                .records
+                .iter()
+                .find(|r| best.excess(r.true_objective) <= frac)
+                .map(|r| r.capture)
+        };
+        let de = patch_delta_e(
+            problem.target(),
+            &plant.true_response(&trace.shown, last.capture),
+        )?;
+        rows.push(Row {
+            case: case.name.clone(),
+            rule: name.to_string(),
+            captures_to_1pct: to(0.01),
+            captures_to_0_1pct: to(0.001),
+            final_excess: best.excess(last.true_objective),
+            mean_de00: de.mean,
+            us_per_node_update: us_per_node_update(problem, config.rule, &start)?,
+            model_rounds: last.model_rounds,
+            captures: last.capture,
+        });
     }
-    print_table(&rows);
-    if let Some(path) = json {
-        std::fs::write(path, serde_json::to_string_pretty(&rows)?)
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(())
+    let (round_ms, round_mb) = full_round(problem, &start)?;
+    let support: f64 = kept as f64 / nodes as f64;
+    println!(
+        "  one distributed round of {nodes} nodes (mean support {support:.0} patches): {round_ms:.3} ms, peak resident growth {}",
+        super::memory::mb(round_mb)
+    );
+    Ok(rows)
 }
 
 fn print_table(rows: &[Row]) {

@@ -86,6 +86,38 @@ pub fn write(dir: &Path, outcome: &Outcome) -> Result<()> {
 }
 
 fn html(outcome: &Outcome, figures: &str) -> String {
+    let rows = record_rows(outcome);
+    let failed = failed_section(outcome);
+    let sparsity: String = outcome
+        .sparsity
+        .iter()
+        .map(|s| format!("<li>{}</li>", escape(&s.line())))
+        .collect();
+    let scaling = scaling_section(outcome);
+    format!(
+        "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>roomlight bench</title>\
+<style>body{{font-family:sans-serif;max-width:1400px;margin:2em auto;color:#222}}\
+img{{max-width:100%}}table{{border-collapse:collapse;margin:1em 0;font-size:90%}}\
+td,th{{border:1px solid #ccc;padding:3px 6px;text-align:right}}th{{background:#f4f4f4}}\
+td:first-child,td:nth-child(2){{text-align:left}}tr.bad{{background:#fdd}}\
+.row{{display:flex;gap:6px}}.row img{{flex:1;min-width:0}}</style></head><body>\
+<h1>roomlight bench: speed against error</h1>\
+<p>Every rule from the conventional start, through the camera agent and the node agents on loopback gRPC. \
+Excess is (G − G*)/G* on the model the agents run (its optimum by a convex solver); ΔE00 is against the LED \
+target on the simulator's noiseless truth. Figures are medians over repeated runs with different camera noise \
+(range in brackets); captures are counted from the start (capture 0); after a projector leaves and another \
+joins, captures to a level count from the join. Compute is the node updates timed alone, messages the rest \
+of the wall time after the simulated camera. Timings come from one shared machine: compare them as ratios.</p>\
+<table><tr><th>case</th><th>rule</th><th>captures to 1%</th><th>to 0.1%</th><th>final excess</th>\
+<th>mean ΔE00</th><th>max ΔE00</th><th>compute µs/round</th><th>message ms/round</th><th>capture ms</th>\
+<th>bytes/round</th><th>diverged</th><th>repeats</th></tr>{rows}</table>{failed}\
+<h2>Model only what the scene needs</h2><ul>{sparsity}</ul>{scaling}\
+<h2>Curves (medians over the repeats)</h2>{figures}</body></html>"
+    )
+}
+
+/// One table row per record, diverged runs marked.
+fn record_rows(outcome: &Outcome) -> String {
     let mut rows = String::new();
     for r in &outcome.records {
         let _ = write!(
@@ -112,6 +144,11 @@ fn html(outcome: &Outcome, figures: &str) -> String {
             r.repeats,
         );
     }
+    rows
+}
+
+/// The cases that could not run and why; empty when every case ran.
+fn failed_section(outcome: &Outcome) -> String {
     let mut failed = String::new();
     for (case, why) in &outcome.failed {
         let _ = write!(
@@ -124,11 +161,11 @@ fn html(outcome: &Outcome, figures: &str) -> String {
     if !failed.is_empty() {
         failed = format!("<h2>Cases that could not run</h2><ul>{failed}</ul>");
     }
-    let sparsity: String = outcome
-        .sparsity
-        .iter()
-        .map(|s| format!("<li>{}</li>", escape(&s.line())))
-        .collect();
+    failed
+}
+
+/// How cost grows with the nodes (the scaling run's table and exponents); empty without one.
+fn scaling_section(outcome: &Outcome) -> String {
     let mut scaling = String::new();
     if !scaling_points(outcome).is_empty() {
         let mut rows = String::new();
@@ -170,24 +207,5 @@ the camera agent's per-node state and the streams included).</p>\
             fit(|p| p.rss_kb_per_node.unwrap_or(0.0))
         );
     }
-    format!(
-        "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>roomlight bench</title>\
-<style>body{{font-family:sans-serif;max-width:1400px;margin:2em auto;color:#222}}\
-img{{max-width:100%}}table{{border-collapse:collapse;margin:1em 0;font-size:90%}}\
-td,th{{border:1px solid #ccc;padding:3px 6px;text-align:right}}th{{background:#f4f4f4}}\
-td:first-child,td:nth-child(2){{text-align:left}}tr.bad{{background:#fdd}}\
-.row{{display:flex;gap:6px}}.row img{{flex:1;min-width:0}}</style></head><body>\
-<h1>roomlight bench: speed against error</h1>\
-<p>Every rule from the conventional start, through the camera agent and the node agents on loopback gRPC. \
-Excess is (G − G*)/G* on the model the agents run (its optimum by a convex solver); ΔE00 is against the LED \
-target on the simulator's noiseless truth. Figures are medians over repeated runs with different camera noise \
-(range in brackets); captures are counted from the start (capture 0); after a projector leaves and another \
-joins, captures to a level count from the join. Compute is the node updates timed alone, messages the rest \
-of the wall time after the simulated camera. Timings come from one shared machine: compare them as ratios.</p>\
-<table><tr><th>case</th><th>rule</th><th>captures to 1%</th><th>to 0.1%</th><th>final excess</th>\
-<th>mean ΔE00</th><th>max ΔE00</th><th>compute µs/round</th><th>message ms/round</th><th>capture ms</th>\
-<th>bytes/round</th><th>diverged</th><th>repeats</th></tr>{rows}</table>{failed}\
-<h2>Model only what the scene needs</h2><ul>{sparsity}</ul>{scaling}\
-<h2>Curves (medians over the repeats)</h2>{figures}</body></html>"
-    )
+    scaling
 }
