@@ -19,13 +19,10 @@ use super::rig::WireRig;
 use super::{Shared, Survey};
 use crate::hardware::Camera;
 use roomlight_calib::attenuation::Attenuation;
-use roomlight_calib::graycode::Manifest;
-use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::procedure::{
-    Decoded, Event, Hot, Placed, Procedure, ProcedureError, Settings, Setup, coding, coding_groups,
-    place,
+    Event, Hot, Placed, Procedure, ProcedureError, Settings, Setup, place,
 };
-use roomlight_calib::rig::{Frame, Projector, Rig, RigError};
+use roomlight_calib::rig::{Frame, Rig, RigError};
 use roomlight_core::conventional::conventional_value;
 use roomlight_core::{AttenuationColumn, LinearRgb, ModelError, Problem};
 
@@ -183,13 +180,7 @@ async fn over_the_wire(
     }
     let dark = procedure.dark(&live).await?;
     let whites = procedure.whites(&live).await?;
-    let mut decoded = procedure.code(&live, &dark, &whites).await?;
-    disown(&live, &dark, &whites, &settings, &mut decoded);
-    for d in &mut decoded {
-        let (p, corr) = (&d.projector, &mut d.corr);
-        let manifest = Manifest::with_coding(p.width, p.height, coding(p))?;
-        d.second = procedure.second_pass(p, &manifest, corr).await?;
-    }
+    let decoded = procedure.structured_light(&live, &dark, &whites).await?;
     let measured = procedure.responses(decoded, &live, &dark, &whites).await?;
     drop(whites);
     let (to_place, nodes) = (setup.clone(), settings.nodes);
@@ -231,51 +222,6 @@ async fn over_the_wire(
         measurable,
         captures: procedure.captures(),
     })
-}
-
-/// The agent's adaptation until the procedure does it (roomlight-calib's `structured_light`,
-/// helper of issue 16's procedure): a projector coded together with others decodes only the
-/// camera pixels its white raises most, but its correspondence's direct light there is the
-/// others' (all were shown at once), which the second-pass plan takes for its own reached but
-/// unknown pixels. Over the wire that cost a second pass of every member of a group, nothing
-/// taken (the apart room: 130 captures together against 93 one after the other). Its direct
-/// light is zeroed where another member of its group raises the pixel more.
-fn disown(
-    projectors: &[Projector],
-    dark: &LinearImage,
-    whites: &[LinearImage],
-    settings: &Settings,
-    decoded: &mut [Decoded],
-) {
-    let black = dark.intensity();
-    let gains: Vec<Vec<f32>> = whites
-        .iter()
-        .map(|w| {
-            w.intensity()
-                .iter()
-                .zip(&black)
-                .map(|(a, b)| a - b)
-                .collect()
-        })
-        .collect();
-    for group in coding_groups(projectors, dark, whites, settings) {
-        for &k in group.iter().filter(|_| group.len() > 1) {
-            let Some(d) = decoded
-                .iter_mut()
-                .find(|d| d.projector.id == projectors[k].id)
-            else {
-                continue;
-            };
-            for (i, direct) in d.corr.direct.iter_mut().enumerate() {
-                let theirs = group
-                    .iter()
-                    .any(|&o| o != k && gains[o].get(i) > gains[k].get(i));
-                if theirs {
-                    *direct = 0.0;
-                }
-            }
-        }
-    }
 }
 
 /// What the attached projectors segmented before give each camera pixel (those in `batch` are
