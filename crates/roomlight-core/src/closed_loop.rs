@@ -8,7 +8,7 @@
 //!
 //! It knows nothing of messages or agents: a round here is a loop over the nodes.
 
-use crate::aggregator::ErrorAggregator;
+use crate::aggregator::{ErrorAggregator, RoundSummary};
 use crate::model::{ModelError, PatchId, Problem, check_len};
 use crate::rgb::LinearRgb;
 use crate::round::Controller;
@@ -272,15 +272,7 @@ pub fn run_observed(
     config: &LoopConfig,
     mut observe: impl FnMut(&CaptureRecord, &[LinearRgb], &Plant),
 ) -> Result<Trace, LoopError> {
-    check_len("start values", start.len(), model.nodes())?;
-    check_len("plant nodes", plant.truth().nodes(), model.nodes())?;
-    check_len("plant patches", plant.truth().patches(), model.patches())?;
-    if config.delay > 0 && config.model_rounds > 0 {
-        return Err(LoopError::DelayWithModelRounds {
-            delay: config.delay,
-            model_rounds: config.model_rounds,
-        });
-    }
+    check_inputs(model, plant, start, config)?;
     let mut nodes = build_nodes(model, config.rule, start)?;
     let mut controller = Controller::new(model.noise().to_vec(), config.model_rounds);
     let mut stale: VecDeque<(Vec<LinearRgb>, bool)> = VecDeque::new();
@@ -291,19 +283,7 @@ pub fn run_observed(
     let mut stop = StopReason::Budget;
     for capture in 1..=config.max_captures {
         let shown: Vec<LinearRgb> = nodes.iter().map(NodeState::shown).collect();
-        let measured = plant.capture(&shown, capture);
-        let errors: Vec<LinearRgb> = model
-            .target()
-            .iter()
-            .zip(&measured)
-            .map(|(&r, &y)| r - y)
-            .collect();
-        // The nodes gone by now are the loop's live projectors changing (departures are final).
-        let gone = (0..nodes.len())
-            .filter(|&n| !plant.present(n, capture))
-            .count();
-        controller.live(gone as u64);
-        let summary = controller.measured(errors)?;
+        let summary = measure(model, plant, &shown, capture, &mut controller)?;
         let record = CaptureRecord {
             capture,
             model_rounds,
@@ -313,22 +293,8 @@ pub fn run_observed(
         };
         observe(&record, &shown, plant);
         records.push(record);
-        if let Some(goal) = config.stop_at_true_objective
-            && records
-                .last()
-                .is_some_and(|r: &CaptureRecord| r.true_objective <= goal)
-        {
-            stop = StopReason::Reached;
-            break;
-        }
-        let settled = capture > 1 + config.delay && max_step < HALF_CODE_STEP;
-        if config.stop_when_settled && settled {
-            stop = StopReason::Settled;
-            break;
-        }
-        // The one settle rule, as the camera agent applies it.
-        if config.stop_when_settled && controller.settled() {
-            stop = StopReason::NoiseFloor;
+        if let Some(reason) = stopped(config, &records, capture, max_step, &controller) {
+            stop = reason;
             break;
         }
         if capture == config.max_captures {
@@ -346,21 +312,11 @@ pub fn run_observed(
         let Some((errors, restart)) = stale.pop_front() else {
             continue;
         };
-        max_step = distributed_round(&mut nodes, &active, &errors, restart, &mut controller)?;
-        node_updates += active.iter().filter(|&&a| a).count();
-        while let Some(summary) = controller.predicted() {
-            let errors = controller.errors().to_vec();
-            let step = distributed_round(
-                &mut nodes,
-                &active,
-                &errors,
-                summary.restart,
-                &mut controller,
-            )?;
-            max_step = f64::max(max_step, step);
-            model_rounds += 1;
-            node_updates += active.iter().filter(|&&a| a).count();
-        }
+        let (step, rounds, updates) =
+            node_rounds(&mut nodes, &active, &errors, restart, &mut controller)?;
+        max_step = step;
+        model_rounds += rounds;
+        node_updates += updates;
     }
     Ok(Trace {
         records,
@@ -368,6 +324,99 @@ pub fn run_observed(
         stop,
         node_updates,
     })
+}
+
+/// The loop's inputs agree with each other: one start value per node, a plant of the model's
+/// size, and not both stale errors and model rounds.
+fn check_inputs(
+    model: &Problem,
+    plant: &Plant,
+    start: &[LinearRgb],
+    config: &LoopConfig,
+) -> Result<(), LoopError> {
+    check_len("start values", start.len(), model.nodes())?;
+    check_len("plant nodes", plant.truth().nodes(), model.nodes())?;
+    check_len("plant patches", plant.truth().patches(), model.patches())?;
+    if config.delay > 0 && config.model_rounds > 0 {
+        return Err(LoopError::DelayWithModelRounds {
+            delay: config.delay,
+            model_rounds: config.model_rounds,
+        });
+    }
+    Ok(())
+}
+
+/// Capture `capture` of what the nodes show, through the plant: the controller takes its
+/// errors against the model's target and how many nodes are gone by now.
+fn measure(
+    model: &Problem,
+    plant: &mut Plant,
+    shown: &[LinearRgb],
+    capture: usize,
+    controller: &mut Controller,
+) -> Result<RoundSummary, LoopError> {
+    let measured = plant.capture(shown, capture);
+    let errors: Vec<LinearRgb> = model
+        .target()
+        .iter()
+        .zip(&measured)
+        .map(|(&r, &y)| r - y)
+        .collect();
+    // The nodes gone by now are the loop's live projectors changing (departures are final).
+    let gone = (0..shown.len())
+        .filter(|&n| !plant.present(n, capture))
+        .count();
+    controller.live(gone as u64);
+    Ok(controller.measured(errors)?)
+}
+
+/// Why the loop ends after capture `capture`, if it does: the oracle's objective reached,
+/// every node settled, or `G` at its noise floor.
+fn stopped(
+    config: &LoopConfig,
+    records: &[CaptureRecord],
+    capture: usize,
+    max_step: f64,
+    controller: &Controller,
+) -> Option<StopReason> {
+    if let Some(goal) = config.stop_at_true_objective
+        && records
+            .last()
+            .is_some_and(|r: &CaptureRecord| r.true_objective <= goal)
+    {
+        return Some(StopReason::Reached);
+    }
+    let settled = capture > 1 + config.delay && max_step < HALF_CODE_STEP;
+    if config.stop_when_settled && settled {
+        return Some(StopReason::Settled);
+    }
+    // The one settle rule, as the camera agent applies it.
+    if config.stop_when_settled && controller.settled() {
+        return Some(StopReason::NoiseFloor);
+    }
+    None
+}
+
+/// The nodes' round on `errors`, then the model rounds the controller asks for: the largest
+/// step, the model rounds run and the node updates computed.
+fn node_rounds(
+    nodes: &mut [NodeState],
+    active: &[bool],
+    errors: &[LinearRgb],
+    restart: bool,
+    controller: &mut Controller,
+) -> Result<(f64, usize, usize), LoopError> {
+    let mut max_step = distributed_round(nodes, active, errors, restart, controller)?;
+    let mut model_rounds = 0;
+    let mut node_updates = active.iter().filter(|&&a| a).count();
+    while let Some(summary) = controller.predicted() {
+        let errors = controller.errors().to_vec();
+        let step = distributed_round(nodes, active, &errors, summary.restart, controller)?;
+        max_step = f64::max(max_step, step);
+        model_rounds += 1;
+        node_updates += active.iter().filter(|&&a| a).count();
+    }
+    Ok((max_step, model_rounds, node_updates))
 }
 
 /// One node state per column of `model`, each given `s` on its own support and its start value.
