@@ -55,7 +55,8 @@ pub struct Attenuation {
     pub dense: Vec<Vec<LinearRgb>>,
     /// Standard deviation of each `p_{n,i}` from the patch noise.
     pub sigma: Vec<Vec<LinearRgb>>,
-    /// False for patches left out of some capture (saturated, out of the image).
+    /// False for patches left out of some capture (saturated, out of the image) or crossed by
+    /// an edge (see `usable`).
     pub usable: Vec<bool>,
 }
 
@@ -96,12 +97,7 @@ pub fn solve(
     let patches = black.len();
     let all: Vec<&[PatchSample]> = captures.iter().map(|c| c.as_slice()).collect();
     check_captures("attenuation captures", &all, patches)?;
-    let usable: Vec<bool> = (0..patches)
-        .map(|i| {
-            black[i].status == PatchStatus::Ok
-                && captures.iter().all(|c| c[i].status == PatchStatus::Ok)
-        })
-        .collect();
+    let usable = usable(scheme, black, captures);
     let mut dense = vec![vec![LinearRgb::ZERO; patches]; nodes];
     let mut sigma = vec![vec![LinearRgb::ZERO; patches]; nodes];
     match scheme {
@@ -144,6 +140,31 @@ pub fn solve(
         sigma,
         usable,
     })
+}
+
+/// Which patches every capture measured and none found crossed by an edge. An edge through a
+/// patch (a node boundary, a frustum or shadow edge) shows wherever the light on either side of
+/// it differs: with Hadamard rows, in at least two captures (any two S-matrix columns differ in
+/// (n+1)/2 rows, and a projector is on in as many). A single flag among them is one capture's
+/// noise crossing the test, which made the model's patches (and G* with them, threefold in the
+/// quick demo) depend on the seed; such a patch stays in, decided once for the session. One
+/// node at a time, an edge may show in one capture only, so there any flag leaves it out.
+fn usable(scheme: Scheme, black: &[PatchSample], captures: &[Vec<PatchSample>]) -> Vec<bool> {
+    let flags_allowed = match scheme {
+        Scheme::OneAtATime => 0,
+        Scheme::Hadamard => 1,
+    };
+    let measured = |s: &PatchSample| matches!(s.status, PatchStatus::Ok | PatchStatus::NonUniform);
+    (0..black.len())
+        .map(|i| {
+            let all = std::iter::once(&black[i]).chain(captures.iter().map(|c| &c[i]));
+            let flags = all
+                .clone()
+                .filter(|s| s.status == PatchStatus::NonUniform)
+                .count();
+            all.clone().all(measured) && flags <= flags_allowed
+        })
+        .collect()
 }
 
 impl Attenuation {

@@ -70,7 +70,7 @@ impl Default for SampleConfig {
 /// One patch's measurement.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PatchSample {
-    /// Trimmed mean (linear camera values); zero unless the status is `Ok`.
+    /// Trimmed mean (linear camera values); zero unless the status is `Ok` or `NonUniform`.
     pub mean: LinearRgb,
     /// Standard error of the mean per channel: the patch's noise `σ`.
     pub std_error: LinearRgb,
@@ -272,7 +272,10 @@ fn sample_patch(
     } else {
         PatchStatus::Ok
     };
-    if status == PatchStatus::Ok {
+    // A non-uniform patch keeps its mean: the box is the same in every capture, so the mean is
+    // still what this patch measures; whether one capture's flag is an edge or noise is for the
+    // caller to judge across captures (see `attenuation::solve`).
+    if matches!(status, PatchStatus::Ok | PatchStatus::NonUniform) {
         let (mean, sample_se, pixels) = trimmed(&mut values);
         // With a handful of pixels the sample spread is itself noisy: never report less than
         // the camera's noise model gives for this many pixels.
