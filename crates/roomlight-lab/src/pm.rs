@@ -279,7 +279,7 @@ pub fn run(
     let board_room = Room::build(evaluation_scene(base, true, true)?)
         .context("building the room with the contrast board")?;
     let board_mask: Vec<bool> = board_room.pixels().iter().map(|p| p.target).collect();
-    let board_regions = cal.regions_with_mask(&board_mask)?;
+    let board_regions = cal.regions_with_mask(room, &board_mask)?;
     let mut result = PmResult {
         ansi_contrast: [0.0; 3],
         rms_contrast: Vec::new(),
