@@ -1,0 +1,1 @@
+//! The bodies of `roomlight hw …`: listing outputs, showing an image, identifying.
