@@ -62,6 +62,43 @@ enum Command {
     /// `--json`, an HTML page with `--out`), scaling over loopback, calibration and the
     /// simulator — and with `--out DIR` every bench's tables in DIR/results.md.
     Bench(BenchArgs),
+    /// Real hardware: the outputs a projector can be on, an image or the identify pattern on one.
+    Hw(HwArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct HwArgs {
+    /// The X display (default: $DISPLAY).
+    #[arg(long, global = true)]
+    x_display: Option<String>,
+    #[command(subcommand)]
+    which: HwCommand,
+}
+
+#[derive(Debug, Subcommand)]
+enum HwCommand {
+    /// One line per output: its name, then resolution and position.
+    Displays,
+    /// Shows an image on an output until SIGINT or SIGTERM.
+    Show {
+        /// The output: a name (`HDMI-1`), an index, or a geometry `WxH+X+Y`.
+        #[arg(long)]
+        output: roomlight_hw::OutputSelector,
+        /// A PNG of the output's size.
+        file: PathBuf,
+        /// Scale an image of another size to the output instead of refusing it.
+        #[arg(long)]
+        scale: bool,
+    },
+    /// The identify pattern (projector id, output, resolution, grid, corner marks) on an
+    /// output, or on every output, until SIGINT or SIGTERM.
+    Identify {
+        #[arg(long)]
+        output: Option<roomlight_hw::OutputSelector>,
+        /// The projector id shown.
+        #[arg(long, default_value = "unnamed")]
+        projector: String,
+    },
 }
 
 /// Options of the demo.
@@ -194,6 +231,25 @@ fn main() -> Result<()> {
         Command::Optimum { model } => procs::optimum(&model),
         Command::Graycode { which } => graycode_cmd::run(which),
         Command::Bench(args) => bench(args),
+        Command::Hw(args) => hw(args),
+    }
+}
+
+fn hw(args: HwArgs) -> Result<()> {
+    let x = args.x_display.as_deref();
+    match args.which {
+        HwCommand::Displays => {
+            print!("{}", roomlight_hw::cli::displays(x)?);
+            Ok(())
+        }
+        HwCommand::Show {
+            output,
+            file,
+            scale,
+        } => roomlight_hw::cli::show(x, &output, &file, scale),
+        HwCommand::Identify { output, projector } => {
+            roomlight_hw::cli::identify(x, output.as_ref(), &projector)
+        }
     }
 }
 
