@@ -3,7 +3,7 @@
 //! processes can drive the rendered room as they would real projectors and a real camera.
 
 use anyhow::{Context, Result};
-use roomlight_agent::hardware::Pattern;
+use roomlight_agent::hardware::{Assignment, Pattern};
 use roomlight_proto::v1;
 use roomlight_sim::{CameraNoise, Frame, ProjectorImage, Room};
 use std::sync::{Arc, Mutex, PoisonError};
@@ -327,32 +327,39 @@ pub struct FrameSpec {
 }
 
 impl FrameSpec {
-    /// The 8-bit image for node values `x` (nodes without a value are black).
-    pub fn image(&self, x: &std::collections::HashMap<u32, roomlight_core::LinearRgb>) -> Vec<u8> {
-        let mut light = vec![roomlight_core::LinearRgb::ZERO; (self.width * self.height) as usize];
-        for (node, weights) in &self.nodes {
-            let Some(&v) = x.get(node) else { continue };
-            for &(i, w) in weights {
-                if let Some(l) = light.get_mut(i as usize) {
-                    *l += v * f64::from(w);
-                }
-            }
+    /// What the node agent's display draws with: the assignment the camera agent would send.
+    pub fn assignment(self) -> Assignment {
+        Assignment {
+            width: self.width,
+            height: self.height,
+            response: self.response,
+            nodes: self.nodes,
         }
-        light
-            .into_iter()
-            .flat_map(|l| {
-                self.response
-                    .to_code(l)
-                    .map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)
-            })
-            .collect()
     }
+}
+
+/// The 8-bit image of node values `x` (nodes without a value are black) drawn with
+/// `assignment` ([`Assignment::draw`], as every display that draws pixels).
+fn values_image(
+    assignment: &Assignment,
+    x: &std::collections::HashMap<u32, roomlight_core::LinearRgb>,
+) -> Vec<u8> {
+    let values: Vec<(u32, roomlight_core::LinearRgb)> = x.iter().map(|(&n, &v)| (n, v)).collect();
+    assignment
+        .draw(&values)
+        .into_iter()
+        .flat_map(|c| c.map(byte))
+        .collect()
+}
+
+/// A code in [0, 1] as an 8-bit value.
+fn byte(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
 /// The 8-bit image of a whole-frame calibration pattern at `width`×`height`, black where its
 /// mask is false ([`Pattern::codes`], as every display that draws pixels).
 fn pattern_image(pattern: &Pattern, width: u32, height: u32) -> Vec<u8> {
-    let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     match pattern.codes(width, height) {
         Ok(codes) => codes.into_iter().flat_map(|c| c.map(byte)).collect(),
         // Too large to code, or a mask of another size: dark (the camera agent's decode then
@@ -373,12 +380,13 @@ pub fn rendered_display(
     client: Client,
     projector: String,
     (width, height): (u32, u32),
-    mut spec: Option<FrameSpec>,
+    spec: Option<FrameSpec>,
     cancel: CancellationToken,
 ) -> roomlight_agent::remote::QueuedDisplay {
     use roomlight_agent::remote::Update;
     let mut values = std::collections::HashMap::new();
     let mut pattern: Option<Pattern> = None;
+    let mut assignment = spec.map(FrameSpec::assignment);
     roomlight_agent::remote::QueuedDisplay::spawn(cancel, Some((width, height)), move |batch| {
         for update in batch {
             match update {
@@ -394,20 +402,12 @@ pub fn rendered_display(
                         a.height
                     );
                 }
-                Update::Assign(a) => {
-                    spec = Some(FrameSpec {
-                        projector: projector.clone(),
-                        width,
-                        height,
-                        response: a.response,
-                        nodes: a.nodes,
-                    });
-                }
+                Update::Assign(a) => assignment = Some(*a),
             }
         }
-        let rgb8 = match (&pattern, &spec) {
+        let rgb8 = match (&pattern, &assignment) {
             (Some(p), _) => pattern_image(p, width, height),
-            (None, Some(spec)) => spec.image(&values),
+            (None, Some(a)) => values_image(a, &values),
             (None, None) => vec![0; (width * height * 3) as usize],
         };
         let request = v1::ShowImageRequest {

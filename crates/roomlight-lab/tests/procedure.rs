@@ -6,19 +6,15 @@
 use roomlight_calib::charts::SampleConfig;
 use roomlight_calib::graycode::Correspondence;
 use roomlight_calib::nodes::{Partition, add_claim, dilate, partition_of_unity};
-use roomlight_calib::procedure::{Event, Placed, Procedure, Settings, Setup, Stage};
-use roomlight_calib::rig::{Frame, ProjectorKind, Rig, block_on};
+use roomlight_calib::procedure::{Decoded, Event, Placed, Procedure, Settings, Setup, Stage};
+use roomlight_calib::rig::{Frame, Projector, ProjectorKind, Rig, block_on};
 use roomlight_core::LinearRgb;
 use roomlight_lab::pipeline::{SimRig, chart_corners};
-use roomlight_sim::{CameraNoise, Room, Scene, scenes};
+use roomlight_sim::{CameraNoise, Room, scenes};
 use std::sync::{Arc, Mutex};
+use support::{apart_scene, small_scene};
 
-/// The small room seen by a 640×480 camera (enough pixels per patch).
-fn small_scene() -> Scene {
-    let mut scene = scenes::small().expect("scene");
-    scene.camera.resolution = [640, 480];
-    scene
-}
+mod support;
 
 /// The simulated room as a rig with only `live` projectors, captures exposed through `noise`.
 fn rig<'a>(room: &'a Room, noise: &'a mut CameraNoise, live: &[&str]) -> SimRig<'a> {
@@ -180,6 +176,19 @@ fn frames_of<'p>(placed: &'p [Placed], on: &[u32], rest: LinearRgb) -> Vec<(&'p 
         .collect()
 }
 
+/// Every live projector of the procedure's rig through its black offset, whites and structured
+/// light: the projectors and what they decoded.
+fn structured_light(procedure: &mut Procedure<'_, SimRig<'_>>) -> (Vec<Projector>, Vec<Decoded>) {
+    let live = procedure.rig().projectors();
+    let decoded = block_on(async {
+        let dark = procedure.dark(&live).await?;
+        let whites = procedure.whites(&live).await?;
+        procedure.structured_light(&live, &dark, &whites).await
+    })
+    .expect("structured light");
+    (live, decoded)
+}
+
 #[test]
 fn bring_up_decodes_segments_and_measures_the_small_room() {
     let room = Room::build(small_scene()).expect("room");
@@ -269,22 +278,6 @@ fn bring_up_decodes_segments_and_measures_the_small_room() {
     }
 }
 
-/// The small room with its two standard luminaires turned apart, one onto each chart, so that
-/// their footprints do not overlap.
-fn apart_scene() -> Scene {
-    let mut scene = small_scene();
-    scene.projectors.truncate(2);
-    scene.objects.retain(|o| !o.target);
-    let left = &mut scene.projectors[0];
-    left.look_at_mm = [400.0, 600.0, 0.0];
-    left.fov_deg = 40.0;
-    let right = &mut scene.projectors[1];
-    right.position_mm = [1500.0, 300.0, 1100.0];
-    right.look_at_mm = [1100.0, 1200.0, 700.0];
-    right.fov_deg = 35.0;
-    scene
-}
-
 #[test]
 fn projectors_whose_footprints_do_not_overlap_are_coded_in_one_pass() {
     let room = Room::build(apart_scene()).expect("room");
@@ -292,13 +285,7 @@ fn projectors_whose_footprints_do_not_overlap_are_coded_in_one_pass() {
     let mut rig = rig(&room, &mut noise, &["left", "right"]);
     let (events, progress) = recorder();
     let mut procedure = Procedure::new(&mut rig, Settings::default(), progress);
-    let live = procedure.rig().projectors();
-    let decoded = block_on(async {
-        let dark = procedure.dark(&live).await?;
-        let whites = procedure.whites(&live).await?;
-        procedure.structured_light(&live, &dark, &whites).await
-    })
-    .expect("structured light");
+    let (live, decoded) = structured_light(&mut procedure);
     let events = events.lock().expect("events").clone();
     assert!(
         events.contains(&Event::Grouped {
@@ -340,13 +327,7 @@ fn a_second_pass_decodes_the_labs_grazing_face() {
     let mut rig = rig(&room, &mut noise, &["floor-right"]);
     let (events, progress) = recorder();
     let mut procedure = Procedure::new(&mut rig, Settings::default(), progress);
-    let live = procedure.rig().projectors();
-    let decoded = block_on(async {
-        let dark = procedure.dark(&live).await?;
-        let whites = procedure.whites(&live).await?;
-        procedure.structured_light(&live, &dark, &whites).await
-    })
-    .expect("structured light");
+    let (live, decoded) = structured_light(&mut procedure);
     drop(procedure);
     let pass = decoded[0].second.expect("a second pass");
     assert!(pass.taken > 0, "{pass:?}");

@@ -262,29 +262,35 @@ mod tests {
         assert!(read(gray(row, 40, xor)).is_err(), "bit 40");
     }
 
+    /// A 5×2 projector's mask: 10 pixels, two bytes; pixels 0, 3 and 9 shown.
+    const MASK: [u8; 2] = [0b0000_1001, 0b0000_0010];
+    const SHOWN: [usize; 3] = [0, 3, 9];
+
+    fn white() -> v1::show::Pattern {
+        v1::show::Pattern::Uniform(v1::Uniform {
+            code: Some(to_rgb(LinearRgb::splat(1.0))),
+        })
+    }
+
+    /// Codes compared exactly, as bits: white is 1.0 and black 0.0, nothing in between.
+    fn bits(codes: Vec<[f32; 3]>) -> Vec<[u32; 3]> {
+        codes.into_iter().map(|c| c.map(f32::to_bits)).collect()
+    }
+
+    const BLACK: [f32; 3] = [0.0; 3];
+
     /// A mask is one bit per projector pixel, least significant first, and reaches the display
-    /// as sent: the pattern shows where its bit is 1 and black elsewhere. A mask of another
-    /// length, one for a display of unknown size, and one with node values are refused with a
-    /// message that says what was expected.
+    /// as sent: the pattern shows where its bit is 1 and black elsewhere, and only on a display
+    /// of its own size.
     #[test]
     fn a_masked_pattern_reaches_the_display_masked() {
-        use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
-        // A 5×2 projector: 10 pixels, two bytes; pixels 0, 3 and 9 shown.
-        let mask = [0b0000_1001, 0b0000_0010];
-        let white = v1::show::Pattern::Uniform(v1::Uniform {
-            code: Some(to_rgb(LinearRgb::splat(1.0))),
-        });
-        let Ok(Wire::Frame(pattern)) = pattern_from_wire(white.clone(), &mask, Some((5, 2))) else {
+        let Ok(Wire::Frame(pattern)) = pattern_from_wire(white(), &MASK, Some((5, 2))) else {
             panic!("a well-formed mask is taken");
         };
-        // Codes compared exactly, as bits: white is 1.0 and black 0.0, nothing in between.
-        let bits = |codes: Vec<[f32; 3]>| -> Vec<[u32; 3]> {
-            codes.into_iter().map(|c| c.map(f32::to_bits)).collect()
-        };
-        let (white_px, black_px) = ([1.0f32; 3].map(f32::to_bits), [0.0f32; 3].map(f32::to_bits));
+        let (white_px, black_px) = ([1.0f32; 3].map(f32::to_bits), BLACK.map(f32::to_bits));
         let codes = bits(pattern.codes(5, 2).expect("codes"));
         let lit: Vec<usize> = (0..10).filter(|&i| codes[i] == white_px).collect();
-        assert_eq!(lit, vec![0, 3, 9]);
+        assert_eq!(lit, SHOWN);
         assert!(
             codes
                 .iter()
@@ -292,14 +298,22 @@ mod tests {
                 .all(|(i, c)| lit.contains(&i) || *c == black_px),
             "black where the mask is 0: {codes:?}"
         );
-        // A structured pattern keeps its stripes where shown and is black elsewhere.
+        // The display draws the mask for its own size only.
+        assert!(pattern.codes(4, 2).is_err(), "a 10-pixel mask on 8 pixels");
+    }
+
+    /// A structured pattern keeps its stripes where its mask shows it and is black elsewhere.
+    #[test]
+    fn a_masked_structured_pattern_keeps_its_stripes_where_shown() {
+        use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+        let black_px = BLACK.map(f32::to_bits);
         let bit = v1::show::Pattern::Gray(v1::GrayBit {
             axis: v1::Axis::Column as i32,
             bit: 0,
             inverse: false,
             coding: v1::Coding::Gray as i32,
         });
-        let Ok(Wire::Frame(masked)) = pattern_from_wire(bit.clone(), &mask, Some((5, 2))) else {
+        let Ok(Wire::Frame(masked)) = pattern_from_wire(bit.clone(), &MASK, Some((5, 2))) else {
             panic!("a masked Gray bit");
         };
         let Ok(Wire::Frame(whole)) = pattern_from_wire(bit, &[], Some((5, 2))) else {
@@ -321,17 +335,17 @@ mod tests {
             bits(whole.codes(5, 2).expect("whole")),
         );
         for i in 0..10 {
-            let expected = if [0, 3, 9].contains(&i) {
-                w[i]
-            } else {
-                black_px
-            };
+            let expected = if SHOWN.contains(&i) { w[i] } else { black_px };
             assert_eq!(m[i], expected, "pixel {i}");
         }
-        // The display draws the mask for its own size only.
-        assert!(pattern.codes(4, 2).is_err(), "a 10-pixel mask on 8 pixels");
+    }
+
+    /// A mask of another length, one for a display of unknown size, and one with node values
+    /// are refused with a message that says what was expected.
+    #[test]
+    fn malformed_masks_are_refused() {
         let refused = |mask: &[u8], resolution, says: &str| {
-            let e = match pattern_from_wire(white.clone(), mask, resolution) {
+            let e = match pattern_from_wire(white(), mask, resolution) {
                 Err(e) => e,
                 Ok(_) => panic!("{mask:?} for {resolution:?} should be refused"),
             };
@@ -343,10 +357,10 @@ mod tests {
             "expected 2 (one bit per pixel of the 5×2 projector)",
         );
         refused(&[0xff; 3], Some((5, 2)), "a mask of 3 bytes; expected 2");
-        refused(&mask, None, "unknown resolution");
+        refused(&MASK, None, "unknown resolution");
         let nodes = v1::show::Pattern::Nodes(v1::NodeValues::default());
         assert!(
-            pattern_from_wire(nodes, &mask, Some((5, 2)))
+            pattern_from_wire(nodes, &MASK, Some((5, 2)))
                 .is_err_and(|e| e.contains("with node values")),
             "a mask with node values"
         );
