@@ -27,8 +27,14 @@ use x11rb::wrapper::ConnectionExt as _;
 /// What a display is doing now, for logs and (later) the console.
 #[derive(Debug, Clone, PartialEq)]
 pub enum DisplayState {
-    /// The window is up on `output`.
-    Showing { output: Output, since: Instant },
+    /// The window is up on `output`; `losses` times it was lost before, the last time for
+    /// `last_loss` (a loss shorter than one look at the state still shows here).
+    Showing {
+        output: Output,
+        since: Instant,
+        losses: u32,
+        last_loss: Option<String>,
+    },
     /// The window or its output is gone; it is being opened again with backoff.
     Lost {
         since: Instant,
@@ -72,6 +78,8 @@ impl WindowHandle {
         let (state_tx, state) = watch::channel(DisplayState::Showing {
             output: chosen.clone(),
             since: Instant::now(),
+            losses: 0,
+            last_loss: None,
         });
         let worker = Worker {
             display: display.map(str::to_string),
@@ -83,6 +91,7 @@ impl WindowHandle {
             frame: Frame::black(chosen.width, chosen.height),
             waiting: Vec::new(),
             dirty: true,
+            losses: 0,
         };
         std::thread::Builder::new()
             .name(format!("window {}", chosen.name))
@@ -128,6 +137,7 @@ struct Worker {
     frame: Frame,
     waiting: Vec<oneshot::Sender<()>>,
     dirty: bool,
+    losses: u32,
 }
 
 impl Worker {
@@ -187,10 +197,17 @@ impl Worker {
                             let _ = w.send(());
                         }
                     }
-                    if !matches!(*self.state.borrow(), DisplayState::Showing { .. }) {
+                    let was_lost = match &*self.state.borrow() {
+                        DisplayState::Lost { reason, .. } => Some(reason.clone()),
+                        DisplayState::Showing { .. } => None,
+                    };
+                    if let Some(reason) = was_lost {
+                        self.losses += 1;
                         self.state.send_replace(DisplayState::Showing {
                             output: self.output.clone(),
                             since: Instant::now(),
+                            losses: self.losses,
+                            last_loss: Some(reason),
                         });
                     }
                 }

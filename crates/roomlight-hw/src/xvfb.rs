@@ -7,6 +7,12 @@ use crate::output::Geometry;
 use crate::x11::X11;
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
+use std::sync::{Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+/// One Xvfb starts at a time in a process: two choosing a display number together can both
+/// take one whose files a killed server left behind, and then share it.
+static STARTING: Mutex<()> = Mutex::new(());
 use x11rb::connection::Connection;
 use x11rb::protocol::randr::{ConnectionExt as _, MonitorInfo};
 use x11rb::protocol::xproto::ConnectionExt as _;
@@ -23,6 +29,7 @@ impl Xvfb {
     /// picks itself (`-displayfd`). Fails, saying that `.ci/run` installs it, when Xvfb is not
     /// on PATH.
     pub fn start(width: u32, height: u32) -> Result<Self, HwError> {
+        let _one_at_a_time = STARTING.lock().unwrap_or_else(PoisonError::into_inner);
         let mut child = Command::new("Xvfb")
             .args(["-displayfd", "1", "-screen", "0"])
             .arg(format!("{width}x{height}x24"))
@@ -116,7 +123,20 @@ impl Xvfb {
 }
 
 impl Drop for Xvfb {
+    /// SIGTERM first, so that Xvfb removes its lock file and socket; SIGKILL if it has not
+    /// ended within a second.
     fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .stderr(Stdio::null())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(1);
+        while Instant::now() < deadline {
+            if !matches!(self.child.try_wait(), Ok(None)) {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
