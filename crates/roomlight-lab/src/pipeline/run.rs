@@ -2,16 +2,19 @@
 //! projector leaving, another joining), the trace against the truth, bytes per round.
 
 use anyhow::{Context, Result, bail};
-use roomlight_agent::camera::{self, CameraConfig, RoomModel};
+use roomlight_agent::AgentError;
+use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
 use roomlight_agent::node::{self, NodeConfig};
-use roomlight_core::metrics::patch_delta_e;
-use roomlight_core::optimum::optimum;
+use roomlight_core::metrics::{PatchDeltaE, patch_delta_e};
+use roomlight_core::optimum::{Optimum, optimum};
 use roomlight_core::{LinearRgb, StepRule};
 use roomlight_sim::scene::ProjectorKind;
 use roomlight_sim::{CameraNoise, Room};
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
 use super::*;
@@ -174,60 +177,13 @@ pub fn run_agents(
     options: RunOptions,
     bar: &indicatif::ProgressBar,
 ) -> Result<RunResult> {
-    let nodes_of = |projector: usize| -> Vec<usize> {
-        (0..cal.regions.len())
-            .filter(|&n| cal.regions[n].projector == projector)
-            .collect()
-    };
-    let name_of = |projector: usize| -> Result<String> {
-        room.projectors()
-            .get(projector)
-            .map(|p| p.name.clone())
-            .with_context(|| format!("churn: the room has no projector {projector}"))
-    };
-    // With a projector leaving, the room it leaves behind is the reference: its optimum is what
-    // the others can reach without it.
-    let (gone, joining) = match options.churn {
-        Some(c) => {
-            if c.join_at >= options.max_captures || c.leave_at >= options.max_captures {
-                bail!(
-                    "churn at captures {} and {} does not fit a budget of {} captures",
-                    c.leave_at,
-                    c.join_at,
-                    options.max_captures
-                );
-            }
-            let (gone, joining) = (nodes_of(c.leaving), nodes_of(c.joining));
-            if gone.is_empty() || joining.is_empty() || c.leaving == c.joining {
-                bail!(
-                    "churn: projectors {} and {} must be two luminaires with nodes",
-                    name_of(c.leaving)?,
-                    name_of(c.joining)?
-                );
-            }
-            (gone, joining)
-        }
-        None => (Vec::new(), Vec::new()),
-    };
+    let churn = ChurnPlan::new(room, cal, &options)?;
     let mut initial = model.conventional.clone();
-    for &n in &joining {
+    for &n in &churn.joining {
         initial[n] = LinearRgb::ZERO;
     }
-    let hw = SimHardware {
-        room: room.clone(),
-        frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
-        corners: transport.corners.clone(),
-        config: transport.config,
-        shown: Arc::new(Mutex::new(initial.clone())),
-        patches: Arc::new(model.patches.clone()),
-        noise: Arc::new(Mutex::new(CameraNoise::with_seed(room, options.seed))),
-        log: Arc::new(Mutex::new(Vec::new())),
-        latency: options.latency,
-        delayed: Arc::new(Mutex::new(VecDeque::new())),
-    };
-    let best = optimum(&model.problem.without_nodes(&gone))?;
-    let true_best = optimum(&truth.problem.without_nodes(&gone))?;
-    let de_conv = patch_delta_e(&truth.target, &hw.noiseless(&initial)?)?;
+    let hw = sim_hardware(room, cal, model, transport, &options, &initial);
+    let reference = Reference::new(model, truth, &hw, &churn, &initial)?;
     let owners = cal.owners(room);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -235,11 +191,196 @@ pub fn run_agents(
         .build()?;
     let t0 = Instant::now();
     let mut steady = PerRound::default();
-    let last = runtime.block_on(async {
+    let session = Session {
+        model,
+        truth,
+        options,
+        churn: &churn,
+        hw: &hw,
+        best: &reference.best,
+        bar,
+    };
+    let last = runtime.block_on(session.drive(&owners, &mut steady))?;
+    report(model, truth, &hw, &reference, &last, t0, &steady)
+}
+
+/// The nodes and agent names a churn moves, checked against the budget and the calibration
+/// once, before any agent starts.
+struct ChurnPlan {
+    /// Nodes of the projector that leaves: the reference room is the one without them.
+    gone: Vec<usize>,
+    /// Nodes of the projector that joins: dark until its agent starts.
+    joining: Vec<usize>,
+    /// The leaving projector's agent id.
+    leaving_id: Option<String>,
+    /// The joining projector's agent id.
+    joining_id: Option<String>,
+}
+
+impl ChurnPlan {
+    fn new(room: &Room, cal: &Calibrated, options: &RunOptions) -> Result<Self> {
+        let nodes_of = |projector: usize| -> Vec<usize> {
+            (0..cal.regions.len())
+                .filter(|&n| cal.regions[n].projector == projector)
+                .collect()
+        };
+        let name_of = |projector: usize| -> Result<String> {
+            room.projectors()
+                .get(projector)
+                .map(|p| p.name.clone())
+                .with_context(|| format!("churn: the room has no projector {projector}"))
+        };
+        // With a projector leaving, the room it leaves behind is the reference: its optimum is
+        // what the others can reach without it.
+        let Some(c) = options.churn else {
+            return Ok(Self {
+                gone: Vec::new(),
+                joining: Vec::new(),
+                leaving_id: None,
+                joining_id: None,
+            });
+        };
+        if c.join_at >= options.max_captures || c.leave_at >= options.max_captures {
+            bail!(
+                "churn at captures {} and {} does not fit a budget of {} captures",
+                c.leave_at,
+                c.join_at,
+                options.max_captures
+            );
+        }
+        let (gone, joining) = (nodes_of(c.leaving), nodes_of(c.joining));
+        if gone.is_empty() || joining.is_empty() || c.leaving == c.joining {
+            bail!(
+                "churn: projectors {} and {} must be two luminaires with nodes",
+                name_of(c.leaving)?,
+                name_of(c.joining)?
+            );
+        }
+        Ok(Self {
+            gone,
+            joining,
+            leaving_id: Some(name_of(c.leaving)?),
+            joining_id: Some(name_of(c.joining)?),
+        })
+    }
+}
+
+/// The simulated projectors and camera both agents talk to, showing `initial` at the start.
+fn sim_hardware(
+    room: &Arc<Room>,
+    cal: &Calibrated,
+    model: &Model,
+    transport: &Transport,
+    options: &RunOptions,
+    initial: &[LinearRgb],
+) -> SimHardware {
+    SimHardware {
+        room: room.clone(),
+        frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
+        corners: transport.corners.clone(),
+        config: transport.config,
+        shown: Arc::new(Mutex::new(initial.to_vec())),
+        patches: Arc::new(model.patches.clone()),
+        noise: Arc::new(Mutex::new(CameraNoise::with_seed(room, options.seed))),
+        log: Arc::new(Mutex::new(Vec::new())),
+        latency: options.latency,
+        delayed: Arc::new(Mutex::new(VecDeque::new())),
+    }
+}
+
+/// What the run is measured against: the optima of the room left behind (measured model and
+/// truth) and the conventional start's ΔE00.
+struct Reference {
+    best: Optimum,
+    true_best: Optimum,
+    de_conv: PatchDeltaE,
+}
+
+impl Reference {
+    fn new(
+        model: &Model,
+        truth: &Truth,
+        hw: &SimHardware,
+        churn: &ChurnPlan,
+        initial: &[LinearRgb],
+    ) -> Result<Self> {
+        Ok(Self {
+            best: optimum(&model.problem.without_nodes(&churn.gone))?,
+            true_best: optimum(&truth.problem.without_nodes(&churn.gone))?,
+            de_conv: patch_delta_e(&truth.target, &hw.noiseless(initial)?)?,
+        })
+    }
+}
+
+/// What the async part of a run reads: the room, the options, the churn and the hardware.
+struct Session<'a> {
+    model: &'a Model,
+    truth: &'a Truth,
+    options: RunOptions,
+    churn: &'a ChurnPlan,
+    hw: &'a SimHardware,
+    best: &'a Optimum,
+    bar: &'a indicatif::ProgressBar,
+}
+
+/// A node agent's cancellation token and task.
+type NodeTask = (CancellationToken, JoinHandle<Result<(), AgentError>>);
+
+impl Session<'_> {
+    /// Starts the camera agent and the node agents, runs the rounds until the camera agent
+    /// stops the run, then stops and joins every agent; returns the last status.
+    async fn drive(
+        &self,
+        owners: &HashMap<String, Vec<u32>>,
+        steady: &mut PerRound,
+    ) -> Result<RoomStatus> {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let endpoint = format!("http://{}", listener.local_addr()?);
         let cancel = CancellationToken::new();
-        let config = CameraConfig {
+        // A projector joining hot is measured by the camera agent when it joins.
+        let hot = match (self.options.churn.filter(|c| c.hot), &self.churn.joining_id) {
+            (Some(_), Some(id)) => [id.clone()].into(),
+            _ => Default::default(),
+        };
+        let (status, camera_task) = camera::serve(
+            self.camera_config(),
+            RoomModel {
+                problem: self.model.problem.clone(),
+                owners: owners.clone(),
+                start: Some(self.model.conventional.clone()),
+                hot,
+                survey: None,
+            },
+            self.hw.clone(),
+            listener,
+            cancel.clone(),
+        );
+        let mut node_tasks: HashMap<_, _> = owners
+            .keys()
+            .filter(|id| Some(*id) != self.churn.joining_id.as_ref())
+            .map(|id| self.spawn_node(&endpoint, &cancel, id))
+            .collect();
+        let outcome = tokio::time::timeout(
+            Duration::from_secs(120),
+            self.rounds(status, &endpoint, &cancel, &mut node_tasks, steady),
+        )
+        .await;
+        cancel.cancel();
+        for (_, (_, task)) in node_tasks {
+            let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
+        }
+        let _ = tokio::time::timeout(Duration::from_secs(5), camera_task).await;
+        outcome.with_context(|| {
+            format!(
+                "the agents neither stopped nor took {} captures within 120 s",
+                self.options.max_captures
+            )
+        })?
+    }
+
+    fn camera_config(&self) -> CameraConfig {
+        let options = &self.options;
+        CameraConfig {
             room: "lab".into(),
             token: "demo".into(),
             heartbeat: Duration::from_millis(500),
@@ -252,112 +393,117 @@ pub fn run_agents(
                 0
             },
             model_out: None,
+        }
+    }
+
+    fn spawn_node(
+        &self,
+        endpoint: &str,
+        cancel: &CancellationToken,
+        id: &str,
+    ) -> (String, NodeTask) {
+        let config = NodeConfig {
+            endpoint: endpoint.to_string(),
+            room: "lab".into(),
+            token: "demo".into(),
+            projector_id: id.to_string(),
+            kind: roomlight_proto::v1::ProjectorKind::Standard,
+            rule: self.options.rule,
+            start: LinearRgb::splat(0.5),
+            state_file: None,
         };
-        // A projector joining hot is measured by the camera agent when it joins.
-        let hot = match options.churn.filter(|c| c.hot) {
-            Some(c) => [name_of(c.joining)?].into(),
-            None => Default::default(),
-        };
-        let (mut status, camera_task) = camera::serve(
-            config,
-            RoomModel {
-                problem: model.problem.clone(),
-                owners: owners.clone(),
-                start: Some(model.conventional.clone()),
-                hot,
-                survey: None,
-            },
-            hw.clone(),
-            listener,
-            cancel.clone(),
-        );
-        let spawn = |id: &str| {
-            let config = NodeConfig {
-                endpoint: endpoint.clone(),
-                room: "lab".into(),
-                token: "demo".into(),
-                projector_id: id.to_string(),
-                kind: roomlight_proto::v1::ProjectorKind::Standard,
-                rule: options.rule,
-                start: LinearRgb::splat(0.5),
-                state_file: None,
-            };
-            let token = cancel.child_token();
-            let task = tokio::spawn(node::run(config, hw.clone(), token.clone()));
-            (id.to_string(), (token, task))
-        };
-        let (leaving, joining) = match options.churn {
-            Some(c) => (Some(name_of(c.leaving)?), Some(name_of(c.joining)?)),
-            None => (None, None),
-        };
-        let mut node_tasks: HashMap<_, _> = owners
-            .keys()
-            .filter(|id| Some(*id) != joining.as_ref())
-            .map(|id| spawn(id))
-            .collect();
-        let (mut left, mut joined) = (false, joining.is_none());
-        let outcome = tokio::time::timeout(Duration::from_secs(120), async {
-            loop {
-                status.changed().await?;
-                let s = status.borrow().clone();
-                steady.add(&s);
-                if !bar.is_hidden() {
-                    // The live line: ΔE00 against the truth costs a render, so only when shown.
-                    let de = hw
-                        .noiseless(&hw.shown())
-                        .and_then(|v| Ok(patch_delta_e(&truth.target, &v)?.mean))
-                        .unwrap_or(f64::NAN);
-                    bar.set_position(s.captures);
-                    bar.set_message(format!(
-                        "round {} · G {:.3e} · excess {:.1e} · ΔE00 {de:.2}",
-                        s.round,
-                        s.measured_objective,
-                        best.excess(s.measured_objective)
-                    ));
-                }
-                if let (Some(c), Some(id)) = (options.churn, &leaving)
-                    && !left
-                    && s.captures >= c.leave_at
-                {
-                    // The projector is switched off: its agent stops, its light is gone.
-                    if let Some((token, task)) = node_tasks.remove(id) {
-                        token.cancel();
-                        let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
-                    }
-                    let mut shown = hw.shown.lock().unwrap_or_else(PoisonError::into_inner);
-                    for &n in &gone {
-                        shown[n] = LinearRgb::ZERO;
-                    }
-                    left = true;
-                }
-                if let (Some(c), Some(id)) = (options.churn, &joining)
-                    && !joined
-                    && s.captures >= c.join_at
-                {
-                    let (id, handles) = spawn(id);
-                    node_tasks.insert(id, handles);
-                    joined = true;
-                }
-                let settled_or_done =
-                    s.settled && options.stop_when_settled || s.captures >= options.max_captures;
-                if s.live_projectors == node_tasks.len() && joined && settled_or_done {
-                    return Ok::<_, anyhow::Error>(s);
-                }
+        let token = cancel.child_token();
+        let task = tokio::spawn(node::run(config, self.hw.clone(), token.clone()));
+        (id.to_string(), (token, task))
+    }
+
+    /// Follows the camera agent's status: the live line, the churn at its captures, and the
+    /// stop (every agent live, the joiner in, settled or out of captures).
+    async fn rounds(
+        &self,
+        mut status: watch::Receiver<RoomStatus>,
+        endpoint: &str,
+        cancel: &CancellationToken,
+        node_tasks: &mut HashMap<String, NodeTask>,
+        steady: &mut PerRound,
+    ) -> Result<RoomStatus> {
+        let options = self.options;
+        let (mut left, mut joined) = (false, self.churn.joining_id.is_none());
+        loop {
+            status.changed().await?;
+            let s = status.borrow().clone();
+            steady.add(&s);
+            self.show_progress(&s);
+            if let (Some(c), Some(id)) = (options.churn, &self.churn.leaving_id)
+                && !left
+                && s.captures >= c.leave_at
+            {
+                self.leave(node_tasks, id).await;
+                left = true;
             }
-        })
-        .await;
-        cancel.cancel();
-        for (_, (_, task)) in node_tasks {
+            if let (Some(c), Some(id)) = (options.churn, &self.churn.joining_id)
+                && !joined
+                && s.captures >= c.join_at
+            {
+                let (id, handles) = self.spawn_node(endpoint, cancel, id);
+                node_tasks.insert(id, handles);
+                joined = true;
+            }
+            let settled_or_done =
+                s.settled && options.stop_when_settled || s.captures >= options.max_captures;
+            if s.live_projectors == node_tasks.len() && joined && settled_or_done {
+                return Ok(s);
+            }
+        }
+    }
+
+    fn show_progress(&self, s: &RoomStatus) {
+        if self.bar.is_hidden() {
+            return;
+        }
+        // The live line: ΔE00 against the truth costs a render, so only when shown.
+        let hw = self.hw;
+        let de = hw
+            .noiseless(&hw.shown())
+            .and_then(|v| Ok(patch_delta_e(&self.truth.target, &v)?.mean))
+            .unwrap_or(f64::NAN);
+        self.bar.set_position(s.captures);
+        self.bar.set_message(format!(
+            "round {} · G {:.3e} · excess {:.1e} · ΔE00 {de:.2}",
+            s.round,
+            s.measured_objective,
+            self.best.excess(s.measured_objective)
+        ));
+    }
+
+    /// The projector is switched off: its agent stops, its light is gone.
+    async fn leave(&self, node_tasks: &mut HashMap<String, NodeTask>, id: &str) {
+        if let Some((token, task)) = node_tasks.remove(id) {
+            token.cancel();
             let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
         }
-        let _ = tokio::time::timeout(Duration::from_secs(5), camera_task).await;
-        outcome.with_context(|| {
-            format!(
-                "the agents neither stopped nor took {} captures within 120 s",
-                options.max_captures
-            )
-        })?
-    })?;
+        let mut shown = self.hw.shown.lock().unwrap_or_else(PoisonError::into_inner);
+        for &n in &self.churn.gone {
+            shown[n] = LinearRgb::ZERO;
+        }
+    }
+}
+
+/// The run's values against the truth, from what the agents left shown and the capture log.
+fn report(
+    model: &Model,
+    truth: &Truth,
+    hw: &SimHardware,
+    reference: &Reference,
+    last: &RoomStatus,
+    t0: Instant,
+    steady: &PerRound,
+) -> Result<RunResult> {
+    let Reference {
+        best,
+        true_best,
+        de_conv,
+    } = reference;
     let end = Instant::now();
     let x = hw
         .shown
@@ -408,7 +554,7 @@ pub fn run_agents(
         true_excess: true_best.excess(truth.objective(&final_values)),
         x,
         de00: de.per_patch,
-        conventional_de00: de_conv.per_patch,
+        conventional_de00: de_conv.per_patch.clone(),
         best_mean_de00: de_best.mean,
         seconds: t0.elapsed().as_secs_f64(),
         capture_seconds,
@@ -429,7 +575,7 @@ pub struct PerRound {
 }
 
 impl PerRound {
-    pub fn add(&mut self, s: &camera::RoomStatus) {
+    pub fn add(&mut self, s: &RoomStatus) {
         let b = s.bytes_in + s.bytes_out;
         self.all_bytes += b;
         if self.first_round.is_some() {
