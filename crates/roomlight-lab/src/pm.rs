@@ -14,7 +14,7 @@ use roomlight_core::LinearRgb;
 use roomlight_core::metrics::{GrayImage, Rect, ansi_contrast, luminance, rms_contrast};
 use roomlight_sim::room::PngEncoding;
 use roomlight_sim::scene::{ObjectSpec, ProjectorRole, Scene, ShapeKind};
-use roomlight_sim::{CameraNoise, Capture, Frame, ProjectorImage, Room};
+use roomlight_sim::{CameraNoise, Capture, Frame, NodeRegion, ProjectorImage, Room};
 use std::path::Path;
 
 /// The three lightings.
@@ -286,11 +286,59 @@ pub fn run(
         images: Vec::new(),
         decoded_share: 0.0,
     };
+    let lights = Lights {
+        cal,
+        x,
+        preset,
+        texture_k,
+    };
     for board in [true, false] {
         let eval = Room::build(evaluation_scene(base, board, false)?)
             .context("building the evaluation view")?;
-        let mut noise = CameraNoise::with_seed(&eval, seed);
-        let corr = decode_texture(&eval, texture_k, &mut noise)?;
+        let regions = if board { &board_regions } else { &cal.regions };
+        let mut view = View::new(&eval, &lights, regions, seed)?;
+        if board {
+            board_contrast(&mut view, dir, &mut result, &mut say)?;
+        } else {
+            bust_contrast(&mut view, dir, &mut result, &mut say)?;
+        }
+    }
+    Ok(result)
+}
+
+/// What every evaluation view lights the room with: the luminaires' result for the preset,
+/// and which projector carries the texture.
+struct Lights<'a> {
+    cal: &'a Calibrated,
+    x: &'a [LinearRgb],
+    preset: usize,
+    texture_k: usize,
+}
+
+/// One evaluation camera's view (board or bust) with the texture projector decoded onto it;
+/// its noise is drawn in the same order as the captures are taken.
+struct View<'a> {
+    eval: &'a Room,
+    lights: &'a Lights<'a>,
+    luminaires: FrameBuilder,
+    noise: CameraNoise,
+    corr: Correspondence,
+    /// The target's camera pixels.
+    mask: Vec<bool>,
+    width: u32,
+    /// Share of the target's camera pixels the decode reached.
+    share: f64,
+}
+
+impl<'a> View<'a> {
+    fn new(
+        eval: &'a Room,
+        lights: &'a Lights<'a>,
+        regions: &[NodeRegion],
+        seed: u64,
+    ) -> Result<Self> {
+        let mut noise = CameraNoise::with_seed(eval, seed);
+        let corr = decode_texture(eval, lights.texture_k, &mut noise)?;
         let mask: Vec<bool> = eval.pixels().iter().map(|p| p.target).collect();
         let width = eval.scene().camera.resolution[0];
         let reached = mask
@@ -299,73 +347,136 @@ pub fn run(
             .filter(|(m, c)| **m && c.is_some())
             .count();
         let share = reached as f64 / mask.iter().filter(|m| **m).count().max(1) as f64;
-        let regions = if board { &board_regions } else { &cal.regions };
-        let n = eval.projectors().len();
         // The lightings, texture projector black.
-        let luminaires = FrameBuilder::new(&eval, regions, cal.responses.clone());
-        let lighting = |condition: usize| -> Vec<Frame> {
-            match condition {
-                2 => luminaires.frames(x),
-                _ => vec![Frame::Black; n],
-            }
+        let luminaires = FrameBuilder::new(eval, regions, lights.cal.responses.clone());
+        Ok(Self {
+            eval,
+            lights,
+            luminaires,
+            noise,
+            corr,
+            mask,
+            width,
+            share,
+        })
+    }
+
+    /// The frames of a lighting (dark, LED, projector) with `img` on the texture projector.
+    fn with_texture(&self, condition: usize, img: ProjectorImage) -> Vec<Frame> {
+        let mut frames = match condition {
+            2 => self.luminaires.frames(self.lights.x),
+            _ => vec![Frame::Black; self.eval.projectors().len()],
         };
-        let leds = |condition: usize| (condition == 1).then_some(preset);
-        let shoot =
-            |frames: &[Frame], condition: usize, noise: &mut CameraNoise| -> Result<Capture> {
-                Ok(noise.expose(&eval.render(frames, leds(condition))?))
-            };
-        let with_texture = |condition: usize, img: ProjectorImage| {
-            let mut frames = lighting(condition);
-            frames[texture_k] = Frame::Linear(img);
-            frames
-        };
-        if board {
-            let Some(rect) = inner_rect(&mask, width) else {
-                bail!("the board is not visible to the evaluation camera");
-            };
-            // The 4×4 checker, white at the top left, defined on the board's rectangle.
-            let cell = |i: usize| -> Option<f64> {
-                let (u, v) = ((i as u32 % width) as f64, (i as u32 / width) as f64);
-                let (s, t) = ((u - rect.x) / rect.width, (v - rect.y) / rect.height);
-                ((0.0..1.0).contains(&s) && (0.0..1.0).contains(&t)).then(|| {
-                    let (a, b) = ((s * 4.0) as u32, (t * 4.0) as u32);
-                    if (a + b) % 2 == 0 { 1.0 } else { 0.0 }
-                })
-            };
-            let checker = warp(&corr, |i| if mask[i] { cell(i) } else { None });
-            for (condition, label) in CONDITIONS.iter().enumerate() {
-                let cap = shoot(
-                    &with_texture(condition, checker.clone()),
-                    condition,
-                    &mut noise,
-                )?;
-                let l: Vec<f32> = lum(&cap).iter().map(|&v| v as f32).collect();
-                let a = ansi_contrast(
-                    GrayImage {
-                        width: cap.width as usize,
-                        height: cap.height as usize,
-                        pixels: &l,
-                    },
-                    rect,
-                    true,
-                )?;
-                result.ansi_contrast[condition] = a.ratio;
-                let file = format!("pm-checker-{label}.png");
-                save(&cap, dir, &file)?;
-                result
-                    .images
-                    .push((file, format!("checker, {label}: ANSI {:.0}:1", a.ratio)));
+        frames[self.lights.texture_k] = Frame::Linear(img);
+        frames
+    }
+
+    fn shoot(&mut self, frames: &[Frame], condition: usize) -> Result<Capture> {
+        let leds = (condition == 1).then_some(self.lights.preset);
+        Ok(self.noise.expose(&self.eval.render(frames, leds)?))
+    }
+}
+
+/// ANSI contrast of a 4×4 checker projected on the board under each lighting.
+fn board_contrast(
+    view: &mut View<'_>,
+    dir: &Path,
+    result: &mut PmResult,
+    say: &mut impl FnMut(String),
+) -> Result<()> {
+    let width = view.width;
+    let Some(rect) = inner_rect(&view.mask, width) else {
+        bail!("the board is not visible to the evaluation camera");
+    };
+    // The 4×4 checker, white at the top left, defined on the board's rectangle.
+    let cell = |i: usize| -> Option<f64> {
+        let (u, v) = ((i as u32 % width) as f64, (i as u32 / width) as f64);
+        let (s, t) = ((u - rect.x) / rect.width, (v - rect.y) / rect.height);
+        ((0.0..1.0).contains(&s) && (0.0..1.0).contains(&t)).then(|| {
+            let (a, b) = ((s * 4.0) as u32, (t * 4.0) as u32);
+            if (a + b) % 2 == 0 { 1.0 } else { 0.0 }
+        })
+    };
+    let mask = &view.mask;
+    let checker = warp(&view.corr, |i| if mask[i] { cell(i) } else { None });
+    for (condition, label) in CONDITIONS.iter().enumerate() {
+        let frames = view.with_texture(condition, checker.clone());
+        let cap = view.shoot(&frames, condition)?;
+        let l: Vec<f32> = lum(&cap).iter().map(|&v| v as f32).collect();
+        let a = ansi_contrast(
+            GrayImage {
+                width: cap.width as usize,
+                height: cap.height as usize,
+                pixels: &l,
+            },
+            rect,
+            true,
+        )?;
+        result.ansi_contrast[condition] = a.ratio;
+        let file = format!("pm-checker-{label}.png");
+        save(&cap, dir, &file)?;
+        result
+            .images
+            .push((file, format!("checker, {label}: ANSI {:.0}:1", a.ratio)));
+    }
+    say(format!(
+        "ANSI contrast on the board: dark {:.0}:1, LED {:.0}:1, projector lighting {:.0}:1",
+        result.ansi_contrast[0], result.ansi_contrast[1], result.ansi_contrast[2]
+    ));
+    Ok(())
+}
+
+/// Projection mapping on the bust: RMS contrast of each compensated texture under each
+/// lighting.
+fn bust_contrast(
+    view: &mut View<'_>,
+    dir: &Path,
+    result: &mut PmResult,
+    say: &mut impl FnMut(String),
+) -> Result<()> {
+    result.decoded_share = view.share;
+    let comp = Compensation::measure(view)?;
+    for condition in 0..3 {
+        let rms = textures_under(view, &comp, condition, dir, &mut result.images)?;
+        for (t, r) in TEXTURES.iter().zip(rms) {
+            match result.rms_contrast.iter_mut().find(|(n, _)| n == t) {
+                Some((_, v)) => v[condition] = r,
+                None => {
+                    let mut v = [0.0; 3];
+                    v[condition] = r;
+                    result.rms_contrast.push(((*t).to_string(), v));
+                }
             }
-            say(format!(
-                "ANSI contrast on the board: dark {:.0}:1, LED {:.0}:1, projector lighting {:.0}:1",
-                result.ansi_contrast[0], result.ansi_contrast[1], result.ansi_contrast[2]
-            ));
-            continue;
         }
-        result.decoded_share = share;
-        // Compensation: the gain of the texture projector per camera pixel (white − black in
-        // the dark) and the ambient per condition; the texture asks for k·T + the brightest
-        // ambient, so every pixel can reach it where the gain allows.
+    }
+    say(format!(
+        "projection mapping on the bust ({:.0}% of it decoded): RMS contrast {}",
+        100.0 * view.share,
+        result
+            .rms_contrast
+            .iter()
+            .map(|(t, v)| format!("{t} {:.2}/{:.2}/{:.2}", v[0], v[1], v[2]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    Ok(())
+}
+
+/// Compensation: the gain of the texture projector per camera pixel (white − black in the
+/// dark); the texture asks for k·T + the brightest ambient, so every pixel can reach it where
+/// the gain allows.
+struct Compensation {
+    gain: Vec<f64>,
+    /// The 10th percentile of the gain on the bust.
+    k: f64,
+    /// The bust's bounding box in the camera: x0, y0, x1, y1.
+    bounds: (u32, u32, u32, u32),
+    black: ProjectorImage,
+}
+
+impl Compensation {
+    fn measure(view: &mut View<'_>) -> Result<Self> {
+        let corr = &view.corr;
         let white = ProjectorImage {
             width: corr.projector_width,
             height: corr.projector_height,
@@ -375,91 +486,88 @@ pub fn run(
             pixels: vec![[0.0; 3]; white.pixels.len()],
             ..white.clone()
         };
-        let lit = lum(&shoot(&with_texture(0, white), 0, &mut noise)?);
-        let dark = lum(&shoot(&with_texture(0, black.clone()), 0, &mut noise)?);
+        let frames = view.with_texture(0, white);
+        let lit = lum(&view.shoot(&frames, 0)?);
+        let frames = view.with_texture(0, black.clone());
+        let dark = lum(&view.shoot(&frames, 0)?);
         let gain: Vec<f64> = lit
             .iter()
             .zip(&dark)
             .map(|(a, b)| (a - b).max(0.0))
             .collect();
-        let (x0, y0, x1, y1) =
-            bounds(&mask, width).context("the bust is not visible to the evaluation camera")?;
-        let percentile = |v: &mut Vec<f64>, q: f64| -> f64 {
-            v.sort_by(f64::total_cmp);
-            v.get(((v.len() as f64 - 1.0) * q) as usize)
-                .copied()
-                .unwrap_or(0.0)
-        };
+        let bounds = bounds(&view.mask, view.width)
+            .context("the bust is not visible to the evaluation camera")?;
         let mut g: Vec<f64> = gain
             .iter()
-            .zip(&mask)
+            .zip(&view.mask)
             .filter(|(_, m)| **m)
             .map(|(g, _)| *g)
             .collect();
         let k = percentile(&mut g, 0.1);
-        for condition in 0..3 {
-            let ambient = lum(&shoot(
-                &with_texture(condition, black.clone()),
-                condition,
-                &mut noise,
-            )?);
-            let mut a: Vec<f64> = ambient
-                .iter()
-                .zip(&mask)
-                .filter(|(_, m)| **m)
-                .map(|(a, _)| *a)
-                .collect();
-            let floor = percentile(&mut a, 0.9);
-            let mut rms = Vec::new();
-            for name in TEXTURES {
-                let img = warp(&corr, |i| {
-                    if !mask[i] {
-                        return None;
-                    }
-                    let (u, v) = (i as u32 % width, i as u32 / width);
-                    let s = f64::from(u - x0) / f64::from((x1 - x0).max(1));
-                    let t = f64::from(v - y0) / f64::from((y1 - y0).max(1));
-                    let want = k * texture(name, s, t) + floor;
-                    // Zero gain (unreached): nothing to do there.
-                    (gain[i] > 0.0).then(|| (want - ambient[i]) / gain[i])
-                });
-                let cap = shoot(&with_texture(condition, img), condition, &mut noise)?;
-                let l: Vec<f64> = lum(&cap)
-                    .iter()
-                    .zip(&mask)
-                    .filter(|(_, m)| **m)
-                    .map(|(l, _)| *l)
-                    .collect();
-                rms.push(rms_contrast(&l)?);
-                let file = format!("pm-{name}-{}.png", CONDITIONS[condition]);
-                save(&cap, dir, &file)?;
-                result
-                    .images
-                    .push((file, format!("{name}, {}", CONDITIONS[condition])));
-            }
-            for (t, r) in TEXTURES.iter().zip(rms) {
-                match result.rms_contrast.iter_mut().find(|(n, _)| n == t) {
-                    Some((_, v)) => v[condition] = r,
-                    None => {
-                        let mut v = [0.0; 3];
-                        v[condition] = r;
-                        result.rms_contrast.push(((*t).to_string(), v));
-                    }
-                }
-            }
-        }
-        say(format!(
-            "projection mapping on the bust ({:.0}% of it decoded): RMS contrast {}",
-            100.0 * share,
-            result
-                .rms_contrast
-                .iter()
-                .map(|(t, v)| format!("{t} {:.2}/{:.2}/{:.2}", v[0], v[1], v[2]))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ));
+        Ok(Self {
+            gain,
+            k,
+            bounds,
+            black,
+        })
     }
-    Ok(result)
+}
+
+fn percentile(v: &mut [f64], q: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(((v.len() as f64 - 1.0) * q) as usize)
+        .copied()
+        .unwrap_or(0.0)
+}
+
+/// Every texture, compensated for this lighting's ambient, captured and saved; their RMS
+/// contrasts on the bust in `TEXTURES` order.
+fn textures_under(
+    view: &mut View<'_>,
+    comp: &Compensation,
+    condition: usize,
+    dir: &Path,
+    images: &mut Vec<(String, String)>,
+) -> Result<Vec<f64>> {
+    let (x0, y0, x1, y1) = comp.bounds;
+    let (k, gain, width) = (comp.k, &comp.gain, view.width);
+    let frames = view.with_texture(condition, comp.black.clone());
+    let ambient = lum(&view.shoot(&frames, condition)?);
+    let mut a: Vec<f64> = ambient
+        .iter()
+        .zip(&view.mask)
+        .filter(|(_, m)| **m)
+        .map(|(a, _)| *a)
+        .collect();
+    let floor = percentile(&mut a, 0.9);
+    let mut rms = Vec::new();
+    for name in TEXTURES {
+        let mask = &view.mask;
+        let img = warp(&view.corr, |i| {
+            if !mask[i] {
+                return None;
+            }
+            let (u, v) = (i as u32 % width, i as u32 / width);
+            let s = f64::from(u - x0) / f64::from((x1 - x0).max(1));
+            let t = f64::from(v - y0) / f64::from((y1 - y0).max(1));
+            let want = k * texture(name, s, t) + floor;
+            // Zero gain (unreached): nothing to do there.
+            (gain[i] > 0.0).then(|| (want - ambient[i]) / gain[i])
+        });
+        let frames = view.with_texture(condition, img);
+        let cap = view.shoot(&frames, condition)?;
+        let l: Vec<f64> = lum(&cap)
+            .iter()
+            .zip(&view.mask)
+            .filter(|(_, m)| **m)
+            .map(|(l, _)| *l)
+            .collect();
+        rms.push(rms_contrast(&l)?);
+        let file = format!("pm-{name}-{}.png", CONDITIONS[condition]);
+        save(&cap, dir, &file)?;
+        images.push((file, format!("{name}, {}", CONDITIONS[condition])));
+    }
+    Ok(rms)
 }
 
 fn save(c: &Capture, dir: &Path, file: &str) -> Result<()> {
