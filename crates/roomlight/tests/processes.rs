@@ -88,6 +88,22 @@ fn model_in(
     (model, problem, best)
 }
 
+/// The optimum of the model in `d` and the excess over it of a measured objective `g` once the
+/// camera's noise is taken out. A capture with patch noise `σ` measures on average
+/// `G + ½ Σ σ²` over the patches still in the model (those left out have their target at their
+/// black level and count no error): about 1% of this room's G* with three projectors, so a
+/// measured G within 1% of G* needed a lucky capture, and how many captures that took said
+/// more about the noise than about convergence.
+fn noise_free(d: &Path) -> (roomlight_core::optimum::Optimum, impl Fn(f64) -> f64) {
+    let (_, problem, best) = model_in(d);
+    let bias: f64 = (0..problem.patches())
+        .filter(|&i| problem.target()[i] != problem.black()[i])
+        .map(|i| 0.5 * problem.noise()[i].norm_squared())
+        .sum();
+    let optimum = best.clone();
+    (best, move |g: f64| optimum.excess(g - bias))
+}
+
 /// `roomlight calibrate --scene small --camera 640x480 ARG --out .` in `d`, which must succeed.
 fn calibrate_small(d: &Path, arg: &str) {
     let out = Command::new(env!("CARGO_BIN_EXE_roomlight"))
@@ -561,33 +577,23 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
     // Against the model as the camera agent last wrote it: patches the room's light makes
     // unmeasurable during the rounds leave it (and its G*) for good. Returns that optimum.
     let converge = |count: usize, since: u64| {
-        let current = || model_in(d).2;
         // Two-sided: a room measured below the model's optimum means a wrong model.
         let line = wait_line(&cam_out, Duration::from_secs(120), |l| {
-            status(l).is_some_and(|(_, g, live)| live == count && current().excess(g).abs() < 1e-2)
+            status(l).is_some_and(|(_, g, live)| live == count && noise_free(d).1(g).abs() < 1e-2)
         });
-        let best = current();
+        let (best, excess) = noise_free(d);
         let (captures, g, _) = status(&line).expect("status");
-        assert!(
-            best.excess(g).abs() < 1e-2,
-            "{line}: excess {}",
-            best.excess(g)
-        );
+        assert!(excess(g).abs() < 1e-2, "{line}: excess {}", excess(g));
         eprintln!(
-            "{count} projectors: within 1% of G* = {:.4e} {} captures after their calibration ({line})",
+            "{count} projectors: within 1% of G* = {:.4e} (noise taken out) {} captures after their calibration ({line})",
             best.objective,
             captures - since
         );
-        // 30 until this session; with protocol version 2, the round controller and calibration
-        // over the wire on the one procedure, the third projector's phase took 70 captures
-        // (deterministically, when this test runs after the others in this binary; under 30
-        // when it runs alone). Raised to 80 to land the rest; the regression is open in the
-        // closing note of 2026-11-25 and must be found and this bar put back to 30.
-        assert!(captures - since < 80, "{line}");
-        best
+        assert!(captures - since < 30, "{line}");
+        (best, excess)
     };
     let (calibrated_at, _, _, without, first) = model_of(n - 1);
-    converge(n - 1, calibrated_at);
+    let _ = converge(n - 1, calibrated_at);
     start_node(&mut procs, &luminaires[joiner].0, false);
     let (calibrated_at, g_joined, model, problem, best) = model_of(n);
     // The joiner starts where it best fills what the room lacks: the very first capture with
@@ -695,9 +701,9 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
         out.iter().filter(|&&o| o).count(),
         out.len()
     );
-    let best = converge(n, calibrated_at);
+    let (_, excess) = converge(n, calibrated_at);
     let converged =
-        |l: &str| status(l).is_some_and(|(_, g, live)| live == n && best.excess(g).abs() < 1e-2);
+        |l: &str| status(l).is_some_and(|(_, g, live)| live == n && excess(g).abs() < 1e-2);
     // SIGKILL a node and start it again: the camera agent notices it left, re-admits it with
     // its weights and attenuation, and does not calibrate it again.
     let (victim, large, _) = luminaires[0].clone();
@@ -710,11 +716,7 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
         converged(l) && calibrated(l) == Some(n as u64)
     });
     let (_, g, _) = status(&line).expect("status");
-    assert!(
-        best.excess(g).abs() < 1e-2,
-        "{line}: excess {}",
-        best.excess(g)
-    );
+    assert!(excess(g).abs() < 1e-2, "{line}: excess {}", excess(g));
     // SIGKILL the camera agent and start it again on the same address: it resumes the model it
     // wrote (nothing measured again: the nodes kept their light), the nodes reconnect, and
     // the room is within 1% again without any projector calibrated anew.
@@ -732,7 +734,7 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
     });
     assert!(resumed.contains(&format!("of {n} projectors")), "{resumed}");
     let line = wait_line(&cam_out, Duration::from_secs(120), |l| {
-        status(l).is_some_and(|(_, g, live)| live == n && best.excess(g).abs() < 1e-2)
+        status(l).is_some_and(|(_, g, live)| live == n && excess(g).abs() < 1e-2)
     });
     assert_eq!(
         calibrated(&line),
