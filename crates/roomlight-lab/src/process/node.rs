@@ -1,5 +1,6 @@
-//! `roomlight node` on simulated hardware: the projector a node agent drives — the synthetic
-//! room's node values, or a rendered room's projector drawing its nodes' weights.
+//! `roomlight node`: the projector a node agent drives — the synthetic room's node values, a
+//! rendered room's projector drawing its nodes' weights, or a real window on an output
+//! (roomlight-hw).
 
 use anyhow::{Context, Result, bail};
 use roomlight_agent::node::{self, NodeConfig};
@@ -19,7 +20,14 @@ pub enum NodeDisplay {
     /// A rendered room's projector calibrated over the wire: it shows the camera agent's
     /// patterns and draws the weights it is sent.
     OverTheWire,
+    /// A real projector: a fullscreen window on an output (no simulator).
+    Window(roomlight_hw::WindowSpec),
 }
+
+/// Backoff between attempts to open a window display at start: from 200 ms, doubling, at
+/// most 5 s.
+const OPEN_FIRST: std::time::Duration = std::time::Duration::from_millis(200);
+const OPEN_MAX: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// Connects the display at `hardware` and runs the node agent until `cancel`.
 pub async fn run_node(
@@ -28,9 +36,43 @@ pub async fn run_node(
     display: &NodeDisplay,
     cancel: CancellationToken,
 ) -> Result<()> {
+    if let NodeDisplay::Window(spec) = display {
+        let Some(window) = open_window(spec, &config.projector_id, &cancel).await else {
+            return Ok(());
+        };
+        node::run(config, window, cancel).await?;
+        return Ok(());
+    }
     let display = connect(hardware, display, &config.projector_id, &cancel).await?;
     node::run(config, display, cancel).await?;
     Ok(())
+}
+
+/// Opens the window display, retrying with backoff (logged) until it opens: a projector
+/// switched on after its node agent, or an X session that starts later, is waited for. `None`
+/// once cancelled.
+async fn open_window(
+    spec: &roomlight_hw::WindowSpec,
+    projector: &str,
+    cancel: &CancellationToken,
+) -> Option<roomlight_hw::WindowDisplay> {
+    let mut backoff = OPEN_FIRST;
+    loop {
+        match roomlight_hw::WindowDisplay::open(spec, projector) {
+            Ok(window) => {
+                tracing::info!(output = %window.output_name(), "window display open");
+                return Some(window);
+            }
+            Err(e) => {
+                tracing::warn!(output = %spec.output, error = %e, ?backoff, "window display not available; retrying")
+            }
+        }
+        tokio::select! {
+            () = cancel.cancelled() => return None,
+            () = tokio::time::sleep(backoff) => {}
+        }
+        backoff = (backoff * 2).min(OPEN_MAX);
+    }
 }
 
 async fn connect(
@@ -45,6 +87,7 @@ async fn connect(
             .with_context(|| format!("connecting to the rendered room at {hardware}"))
     };
     match display {
+        NodeDisplay::Window(_) => bail!("a window display is opened by run_node"),
         NodeDisplay::Synthetic => remote_display(hardware.to_string(), cancel.clone())
             .await
             .with_context(|| format!("connecting to the display at {hardware}")),

@@ -74,6 +74,28 @@ enum Kind {
     LargeAperture,
 }
 
+/// What the projector is: `display = { kind = "window", output = "HDMI-1", settle_ms = 80 }`
+/// for a real one, or the simulator (`kind = "sim"`, the default) reached through `hardware`.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+enum DisplayFile {
+    Sim,
+    Window {
+        /// A name (`HDMI-1`), an index, or a geometry `WxH+X+Y` (`roomlight hw displays`).
+        output: String,
+        /// How long the projector takes to show a frame the X server has, in milliseconds.
+        #[serde(default = "settle_ms_default")]
+        settle_ms: u64,
+        /// The X display (`:0`); `$DISPLAY` when absent.
+        #[serde(default)]
+        x_display: Option<String>,
+    },
+}
+
+fn settle_ms_default() -> u64 {
+    80
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct NodeFile {
@@ -87,7 +109,11 @@ struct NodeFile {
     /// How long to look for the camera agent over mDNS, in seconds.
     #[serde(default = "mdns_wait_default")]
     mdns_wait_s: u64,
-    hardware: Hardware,
+    /// The simulator's endpoint; absent for a window display.
+    #[serde(default)]
+    hardware: Option<Hardware>,
+    #[serde(default)]
+    display: Option<DisplayFile>,
     /// A rendered room: this projector's frame file (`roomlight calibrate` writes it).
     #[serde(default)]
     frame: Option<PathBuf>,
@@ -131,7 +157,7 @@ pub struct NodeSetup {
     pub camera: CameraLocation,
     pub mdns: MdnsConfig,
     pub mdns_wait: Duration,
-    /// The endpoint of the display's `roomlight sim` process.
+    /// The endpoint of the display's `roomlight sim` process (empty for a window display).
     pub hardware: String,
     pub display: NodeDisplay,
     room: String,
@@ -154,7 +180,7 @@ impl NodeFile {
     fn check(&self, path: &Path) -> Result<()> {
         check_nonempty(path, "room", &self.room)?;
         check_nonempty(path, "projector", &self.projector)?;
-        check_nonempty(path, "hardware.sim", self.hardware.endpoint())?;
+        self.check_display(path)?;
         match &self.camera {
             Written::Address(a) => check_nonempty(path, "camera", a)?,
             Written::Mdns(Some(room)) => check_nonempty(path, "camera.mdns", room)?,
@@ -193,6 +219,40 @@ impl NodeFile {
         Ok(())
     }
 
+    /// A window display stands alone; the simulator needs its endpoint.
+    fn check_display(&self, path: &Path) -> Result<()> {
+        let Some(DisplayFile::Window {
+            output, settle_ms, ..
+        }) = &self.display
+        else {
+            let Some(hardware) = &self.hardware else {
+                bail!(
+                    "{}: hardware is missing (the simulator's endpoint), or give a real \
+                     display = {{ kind = \"window\", output = \"HDMI-1\" }}",
+                    path.display()
+                );
+            };
+            return check_nonempty(path, "hardware.sim", hardware.endpoint());
+        };
+        if self.hardware.is_some() || self.frame.is_some() || self.rendered {
+            bail!(
+                "{}: display.kind = \"window\" drives a real projector: no hardware, frame or \
+                 rendered",
+                path.display()
+            );
+        }
+        output
+            .parse::<roomlight_hw::OutputSelector>()
+            .with_context(|| format!("{}: display.output", path.display()))?;
+        check(
+            path,
+            "display.settle_ms",
+            *settle_ms,
+            0..=10_000,
+            "milliseconds",
+        )
+    }
+
     fn into_setup(self, path: &Path) -> Result<NodeSetup> {
         let rule = match self.rule {
             Rule::Safe => StepRule::Safe { theta: self.theta },
@@ -205,12 +265,29 @@ impl NodeFile {
             Written::Address(a) => CameraLocation::Address(a),
             Written::Mdns(room) => CameraLocation::Mdns(room.unwrap_or_else(|| self.room.clone())),
         };
-        let display = match (self.frame, self.rendered) {
-            (Some(frame), _) => NodeDisplay::Frame(frame),
-            (None, true) => NodeDisplay::OverTheWire,
-            (None, false) => NodeDisplay::Synthetic,
+        let display = match (self.display, self.frame, self.rendered) {
+            (
+                Some(DisplayFile::Window {
+                    output,
+                    settle_ms,
+                    x_display,
+                }),
+                ..,
+            ) => NodeDisplay::Window(roomlight_hw::WindowSpec {
+                x_display,
+                output: output
+                    .parse()
+                    .with_context(|| format!("{}: display.output", path.display()))?,
+                settle: Duration::from_millis(settle_ms),
+            }),
+            (_, Some(frame), _) => NodeDisplay::Frame(frame),
+            (_, None, true) => NodeDisplay::OverTheWire,
+            (_, None, false) => NodeDisplay::Synthetic,
         };
-        let Hardware::Sim(hardware) = self.hardware;
+        let hardware = match self.hardware {
+            Some(Hardware::Sim(endpoint)) => endpoint,
+            None => String::new(),
+        };
         Ok(NodeSetup {
             camera,
             mdns: MdnsConfig {

@@ -154,3 +154,97 @@ fn sources_that_contradict_each_other_are_refused() {
     );
     assert!(e.contains("n.toml") && e.contains("not both"), "{e}");
 }
+
+const WINDOW_NODE: &str = "room = \"r\"\ntoken = \"t\"\ncamera = \"http://127.0.0.1:1\"\n\
+                           projector = \"p0\"\n";
+
+#[test]
+fn a_window_display_is_read_and_checked() {
+    let (_dir, path) = file(
+        "w.toml",
+        &format!(
+            "{WINDOW_NODE}display = {{ kind = \"window\", output = \"HDMI-1\", settle_ms = 80 }}\n"
+        ),
+    );
+    let node = load_node(&path).expect("a window display");
+    let NodeDisplay::Window(spec) = node.display else {
+        panic!("{:?}", node.display)
+    };
+    assert_eq!(
+        spec.output,
+        roomlight_hw::OutputSelector::Name("HDMI-1".into())
+    );
+    assert_eq!(spec.settle, std::time::Duration::from_millis(80));
+    assert_eq!(spec.x_display, None);
+
+    let (_dir, path) = file(
+        "g.toml",
+        &format!(
+            "{WINDOW_NODE}display = {{ kind = \"window\", output = \"320x240+320+0\", x_display = \":3\" }}\n"
+        ),
+    );
+    let node = load_node(&path).expect("by geometry, settle by default");
+    let NodeDisplay::Window(spec) = node.display else {
+        panic!("{:?}", node.display)
+    };
+    assert!(matches!(
+        spec.output,
+        roomlight_hw::OutputSelector::Geometry(_)
+    ));
+    assert_eq!(spec.settle, std::time::Duration::from_millis(80));
+    assert_eq!(spec.x_display.as_deref(), Some(":3"));
+
+    let err = node_err(
+        "s.toml",
+        &format!(
+            "{WINDOW_NODE}display = {{ kind = \"window\", output = \"A\", settle_ms = 60000 }}\n"
+        ),
+    );
+    assert!(
+        err.contains("s.toml") && err.contains("display.settle_ms = 60000"),
+        "{err}"
+    );
+    let err = node_err(
+        "u.toml",
+        &format!("{WINDOW_NODE}display = {{ kind = \"window\", output = \"A\", vsync = true }}\n"),
+    );
+    assert!(err.contains("u.toml") && err.contains("vsync"), "{err}");
+    let err = node_err(
+        "k.toml",
+        &format!("{WINDOW_NODE}display = {{ kind = \"beamer\" }}\n"),
+    );
+    assert!(err.contains("k.toml") && err.contains("beamer"), "{err}");
+    let err = node_err(
+        "h.toml",
+        &format!(
+            "{WINDOW_NODE}hardware = {{ sim = \"http://127.0.0.1:1\" }}\n\
+             display = {{ kind = \"window\", output = \"A\" }}\n"
+        ),
+    );
+    assert!(
+        err.contains("h.toml") && err.contains("no hardware"),
+        "{err}"
+    );
+    let err = node_err("m.toml", WINDOW_NODE);
+    assert!(
+        err.contains("m.toml") && err.contains("hardware is missing"),
+        "{err}"
+    );
+    let err = node_err(
+        "o.toml",
+        &format!("{WINDOW_NODE}display = {{ kind = \"window\", output = \"0x0+1+1\" }}\n"),
+    );
+    assert!(
+        err.contains("o.toml") && err.contains("display.output"),
+        "{err}"
+    );
+
+    let (_dir, path) = file(
+        "sim.toml",
+        &format!("{NODE}display = {{ kind = \"sim\" }}\n"),
+    );
+    assert!(matches!(
+        load_node(&path).expect("sim").display,
+        NodeDisplay::Synthetic
+    ));
+}
