@@ -4,3 +4,59 @@
 //! curves, saturation and under-exposure masks, dark frames). It must not know rounds, the
 //! wire, or the calibration procedure: the camera agent drives it through
 //! `roomlight_agent::hardware::Camera`.
+
+pub mod adapter;
+pub mod cli;
+pub mod command;
+pub mod error;
+pub mod folder;
+pub mod frame;
+pub mod radiometry;
+pub mod spec;
+pub mod v4l2;
+
+pub use adapter::{Charts, HwCamera};
+pub use error::CameraError;
+pub use frame::{Frame, Samples};
+pub use radiometry::{Linearized, Radiometry, Response, calibrate_response};
+pub use spec::{CameraConfig, CameraSpec, V4l2Controls};
+
+use std::time::{Duration, Instant};
+
+/// A camera backend: one blocking capture at a time, each bounded by a deadline.
+pub trait Backend: Send {
+    /// The camera's spec string, used in every error and log line.
+    fn name(&self) -> &str;
+
+    /// The next frame exposed after this call, with the exposure actually used; a
+    /// `CameraError::Timeout` naming the camera when none comes before `deadline`.
+    fn capture(&mut self, deadline: Instant) -> Result<Frame, CameraError>;
+}
+
+/// Opens the backend a config names.
+pub fn open_backend(config: &CameraConfig) -> Result<Box<dyn Backend>, CameraError> {
+    Ok(match &config.spec {
+        CameraSpec::Folder(dir) => Box::new(folder::FolderBackend::new(
+            dir.clone(),
+            Duration::from_millis(config.settle_ms),
+            config.max_pixels,
+        )),
+        CameraSpec::Command(cmd) => Box::new(command::CommandBackend::new(
+            cmd.clone(),
+            config.max_pixels,
+        )?),
+        CameraSpec::V4l2(path) => {
+            let controls = config.v4l2.as_ref().ok_or_else(|| CameraError::Spec {
+                spec: config.spec.to_string(),
+                reason: "a v4l2 camera needs its manual controls".into(),
+            })?;
+            Box::new(v4l2::V4l2Backend::open(path.clone(), controls)?)
+        }
+        CameraSpec::Gphoto2(_) => {
+            return Err(CameraError::Spec {
+                spec: config.spec.to_string(),
+                reason: "the gphoto2 backend is not written yet".into(),
+            });
+        }
+    })
+}

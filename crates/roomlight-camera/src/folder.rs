@@ -1,0 +1,140 @@
+//! `folder:DIR`: a capture is the next new image file in a folder — for cameras operated by
+//! hand (or tethering software that saves each shot) and for tests. Files present when the
+//! capture was asked are ignored; a new file counts once it is complete: its size has stayed
+//! the same for `settle` and it decodes (a file renamed into place is complete at once; hidden
+//! and `.part`/`.tmp` files are never taken). inotify through `notify` wakes the wait; a poll
+//! every 50 ms covers file systems without events. It must not know radiometry.
+
+use crate::Backend;
+use crate::error::CameraError;
+use crate::frame::{Frame, decode_file};
+use notify::Watcher;
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+const POLL: Duration = Duration::from_millis(50);
+const IMAGE_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "tif", "tiff"];
+
+/// Waits for new image files in a folder.
+#[derive(Debug)]
+pub struct FolderBackend {
+    name: String,
+    dir: PathBuf,
+    settle: Duration,
+    max_pixels: u64,
+}
+
+/// What is known of a candidate file: its size and since when it has had it.
+#[derive(Debug)]
+struct Seen {
+    len: u64,
+    since: Instant,
+    /// The last decode error at this size, kept for the timeout's message.
+    failed: Option<CameraError>,
+}
+
+impl FolderBackend {
+    pub fn new(dir: PathBuf, settle: Duration, max_pixels: u64) -> Self {
+        Self {
+            name: format!("folder:{}", dir.display()),
+            dir,
+            settle,
+            max_pixels,
+        }
+    }
+
+    fn images(&self) -> Result<Vec<(PathBuf, u64)>, CameraError> {
+        let gone = |e: std::io::Error| CameraError::Gone {
+            camera: self.name.clone(),
+            reason: e.to_string(),
+        };
+        let mut out = Vec::new();
+        for entry in std::fs::read_dir(&self.dir).map_err(gone)? {
+            let entry = entry.map_err(gone)?;
+            let path = entry.path();
+            if is_image_name(&path) {
+                // A file deleted between the listing and here is simply not a candidate.
+                if let Ok(meta) = entry.metadata()
+                    && meta.is_file()
+                {
+                    out.push((path, meta.len()));
+                }
+            }
+        }
+        out.sort();
+        Ok(out)
+    }
+}
+
+fn is_image_name(path: &Path) -> bool {
+    let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+        return false;
+    };
+    !name.starts_with('.')
+        && path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
+impl Backend for FolderBackend {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn capture(&mut self, deadline: Instant) -> Result<Frame, CameraError> {
+        let started = Instant::now();
+        let (tx, rx) = std::sync::mpsc::channel();
+        // Watching before listing: a file written in between is an event, not lost. Without
+        // inotify (a network file system, limits reached) the poll below still finds it.
+        let watcher = notify::recommended_watcher(move |_event| {
+            let _ = tx.send(());
+        })
+        .and_then(|mut w| {
+            w.watch(&self.dir, notify::RecursiveMode::NonRecursive)?;
+            Ok(w)
+        });
+        if let Err(e) = &watcher {
+            tracing::debug!(camera = %self.name, "no file events ({e}); polling");
+        }
+        let before: HashSet<PathBuf> = self.images()?.into_iter().map(|(p, _)| p).collect();
+        let mut candidates: HashMap<PathBuf, Seen> = HashMap::new();
+        loop {
+            let now = Instant::now();
+            for (path, len) in self.images()? {
+                if before.contains(&path) {
+                    continue;
+                }
+                let seen = candidates.entry(path.clone()).or_insert(Seen {
+                    len,
+                    since: now,
+                    failed: None,
+                });
+                if seen.len != len {
+                    *seen = Seen {
+                        len,
+                        since: now,
+                        failed: None,
+                    };
+                }
+                if len > 0 && seen.failed.is_none() && now - seen.since >= self.settle {
+                    match decode_file(&path, self.max_pixels) {
+                        Ok(frame) => return Ok(frame),
+                        Err(e) => seen.failed = Some(e),
+                    }
+                }
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                // A file that arrived but never decoded says more than "nothing came".
+                let failed = candidates.into_values().filter_map(|s| s.failed).next();
+                return Err(failed.unwrap_or(CameraError::Timeout {
+                    camera: self.name.clone(),
+                    after: now - started,
+                }));
+            }
+            let _ = rx.recv_timeout(POLL.min(deadline - now));
+        }
+    }
+}

@@ -1,0 +1,114 @@
+//! What a backend delivers (`Frame`: the camera's own codes, 8- or 16-bit RGB, with the
+//! exposure actually used) and the one bounded decoder every image from outside goes through:
+//! its size is checked from the header, before any pixel is decoded. It must not know response
+//! curves (radiometry.rs turns frames into linear light).
+
+use crate::error::CameraError;
+use std::path::Path;
+
+/// A frame's samples, row-major RGB.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Samples {
+    /// 8-bit codes through the camera's response (sRGB/JPEG/video).
+    Rgb8(Vec<[u8; 3]>),
+    /// 16-bit values, linear as they are (16-bit PNG, RAW developed linear).
+    Rgb16(Vec<[u16; 3]>),
+}
+
+/// One capture as the camera delivered it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    pub samples: Samples,
+    /// The exposure actually used in seconds, when the camera reports it.
+    pub exposure_s: Option<f64>,
+}
+
+impl Frame {
+    /// An 8-bit frame, checked to be `width · height` pixels.
+    pub fn rgb8(width: u32, height: u32, pixels: Vec<[u8; 3]>) -> Option<Self> {
+        (pixels.len() == width as usize * height as usize).then_some(Self {
+            width,
+            height,
+            samples: Samples::Rgb8(pixels),
+            exposure_s: None,
+        })
+    }
+}
+
+/// Decodes an image file into a frame, refusing it before decoding when it has more than
+/// `max_pixels` pixels; every error names the file.
+pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
+    let bad = |reason: String| CameraError::Decode {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let open = || {
+        image::ImageReader::open(path)
+            .map_err(|e| bad(format!("cannot open: {e}")))?
+            .with_guessed_format()
+            .map_err(|e| bad(format!("cannot read: {e}")))
+    };
+    let (width, height) = open()?
+        .into_dimensions()
+        .map_err(|e| bad(format!("no image header: {e}")))?;
+    let pixels = u64::from(width) * u64::from(height);
+    if pixels > max_pixels {
+        return Err(bad(format!(
+            "{width}×{height} = {pixels} pixels, more than the {max_pixels} allowed; refused \
+             before decoding"
+        )));
+    }
+    let mut reader = open()?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(width);
+    limits.max_image_height = Some(height);
+    // RGBA16 is the widest layout a decoder allocates, plus the conversion's copy.
+    limits.max_alloc = Some(pixels.saturating_mul(16).max(1 << 20));
+    reader.limits(limits);
+    let image = reader
+        .decode()
+        .map_err(|e| bad(format!("cannot decode: {e}")))?;
+    let samples = if image.color().bytes_per_pixel() / image.color().channel_count() >= 2 {
+        Samples::Rgb16(image.to_rgb16().pixels().map(|p| p.0).collect())
+    } else {
+        Samples::Rgb8(image.to_rgb8().pixels().map(|p| p.0).collect())
+    };
+    Ok(Frame {
+        width,
+        height,
+        samples,
+        exposure_s: None,
+    })
+}
+
+/// Writes a frame as PNG (8- or 16-bit as it came), for `roomlight hw capture`.
+pub fn save_png(frame: &Frame, path: &Path) -> Result<(), CameraError> {
+    let bad = |e: image::ImageError| CameraError::Decode {
+        path: path.to_path_buf(),
+        reason: format!("cannot write: {e}"),
+    };
+    match &frame.samples {
+        Samples::Rgb8(p) => {
+            let raw = p.iter().flatten().copied().collect();
+            image::RgbImage::from_raw(frame.width, frame.height, raw)
+                .map(|i| i.save(path).map_err(bad))
+        }
+        Samples::Rgb16(p) => {
+            let raw = p.iter().flatten().copied().collect();
+            image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_raw(
+                frame.width,
+                frame.height,
+                raw,
+            )
+            .map(|i| i.save(path).map_err(bad))
+        }
+    }
+    .unwrap_or_else(|| {
+        Err(CameraError::Decode {
+            path: path.to_path_buf(),
+            reason: "a frame whose pixels do not fill it".into(),
+        })
+    })
+}

@@ -1,0 +1,139 @@
+//! Radiometry round trips: codes through a known curve and back, masks, dark frames, the
+//! camera adapter over a fake backend, and a response recovered from synthetic exposures.
+
+use roomlight_calib::image_io::LinearImage;
+use roomlight_camera::radiometry::calibrate_response;
+use roomlight_camera::{Backend, CameraError, Frame, HwCamera, Radiometry, Response, Samples};
+use std::time::{Duration, Instant};
+
+#[test]
+fn srgb_codes_round_trip_to_linear() {
+    let table = Response::Srgb.table();
+    for z in 0..=255u8 {
+        let linear = table[usize::from(z)];
+        // The forward sRGB curve, written independently.
+        let c = if linear <= 0.003_130_8 {
+            12.92 * linear
+        } else {
+            1.055 * linear.powf(1.0 / 2.4) - 0.055
+        };
+        assert_eq!((c * 255.0).round() as u8, z);
+    }
+    let g = Response::Gamma(2.0).table();
+    assert!((g[128] - (128.0f32 / 255.0).powi(2)).abs() < 1e-6);
+}
+
+#[test]
+fn saturated_and_underexposed_pixels_are_masked_and_dark_frames_subtracted() {
+    let frame = Frame::rgb8(
+        4,
+        1,
+        vec![[0, 10, 10], [10, 10, 10], [250, 10, 10], [249, 20, 30]],
+    )
+    .expect("frame");
+    let r = Radiometry::new(&Response::Gamma(1.0), 250, 0);
+    let l = r.linearize(&frame, "test").expect("linear");
+    assert_eq!(l.usable, vec![false, true, false, true]);
+    assert!((l.saturation - 250.0 / 255.0).abs() < 1e-6);
+    let dark = LinearImage {
+        width: 4,
+        height: 1,
+        pixels: vec![[1.0 / 255.0; 3]; 4],
+    };
+    let l = r
+        .clone()
+        .with_dark_frame(dark)
+        .linearize(&frame, "test")
+        .expect("linear");
+    assert!((l.image.pixels[1][0] - 9.0 / 255.0).abs() < 1e-6);
+    let wrong = LinearImage::new(2, 2);
+    let err = r
+        .with_dark_frame(wrong)
+        .linearize(&frame, "cam")
+        .expect_err("size");
+    assert!(err.to_string().contains("dark frame of 2×2"), "{err}");
+    // 16-bit is linear as it is.
+    let deep = Frame {
+        width: 1,
+        height: 1,
+        samples: Samples::Rgb16(vec![[65535 / 2, 0, 1000]]),
+        exposure_s: None,
+    };
+    let l = Radiometry::new(&Response::Srgb, 250, 0)
+        .linearize(&deep, "deep")
+        .expect("linear");
+    assert!((l.image.pixels[0][0] - 0.5).abs() < 1e-4);
+    assert_eq!(l.usable, vec![false], "a channel at zero is clipped black");
+}
+
+/// A static scene of radiances spread over three decades, shot through `curve`.
+fn exposures(curve: impl Fn(f64) -> f64) -> Vec<(Frame, f64)> {
+    let n = 400u32;
+    let radiance =
+        |i: u32, c: usize| 10f64.powf(-3.0 + 3.0 * f64::from(i) / f64::from(n) + 0.1 * c as f64);
+    [0.25, 1.0, 4.0, 16.0, 64.0]
+        .iter()
+        .map(|&t| {
+            let pixels = (0..n)
+                .map(|i| {
+                    std::array::from_fn(|c| {
+                        let x = (radiance(i, c) * t / 64.0).min(1.0);
+                        (255.0 * curve(x)).round() as u8
+                    })
+                })
+                .collect();
+            (Frame::rgb8(n, 1, pixels).expect("frame"), t)
+        })
+        .collect()
+}
+
+#[test]
+fn a_known_response_is_recovered_from_exposures() {
+    let gamma = 2.2;
+    let shots = exposures(|x| x.powf(1.0 / gamma));
+    let frames: Vec<(&Frame, f64)> = shots.iter().map(|(f, t)| (f, *t)).collect();
+    let Response::Table(table) = calibrate_response(&frames, 60, 10.0).expect("response") else {
+        panic!("a table");
+    };
+    // The curve's scale is free: compare shapes, relative to code 128. Tolerance: 6 % over
+    // codes 20-240 (quantisation alone is ±2.5 % at code 20).
+    let mut worst = 0.0f64;
+    for z in 20..=240usize {
+        let truth = (z as f64 / 128.0).powf(gamma);
+        let got = f64::from(table[z]) / f64::from(table[128]);
+        worst = worst.max((got / truth - 1.0).abs());
+    }
+    assert!(worst < 0.06, "worst relative error {worst}");
+}
+
+/// A backend that hands out one prepared frame, or times out.
+struct Fake(Option<Frame>);
+
+impl Backend for Fake {
+    fn name(&self) -> &str {
+        "fake:1"
+    }
+    fn capture(&mut self, _deadline: Instant) -> Result<Frame, CameraError> {
+        self.0.take().ok_or(CameraError::Timeout {
+            camera: "fake:1".into(),
+            after: Duration::ZERO,
+        })
+    }
+}
+
+#[tokio::test]
+async fn the_adapter_hands_the_agent_linear_images_and_timeouts() {
+    use roomlight_agent::hardware::Camera;
+    let frame = Frame::rgb8(2, 1, vec![[255, 255, 255], [188, 188, 188]]).expect("frame");
+    let radiometry = Radiometry::new(&Response::Srgb, 250, 0);
+    let mut camera = HwCamera::new(
+        Box::new(Fake(Some(frame))),
+        radiometry,
+        Duration::from_secs(1),
+    );
+    assert!((camera.limits().saturation - Response::Srgb.table()[250]).abs() < 1e-6);
+    let image = camera.capture_image().await.expect("image");
+    assert!((image.pixels[1][0] - 0.5).abs() < 0.01);
+    let err = camera.capture_image().await.expect_err("timeout");
+    assert!(err.to_string().contains("fake:1"), "{err}");
+}
