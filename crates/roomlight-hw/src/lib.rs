@@ -1,7 +1,7 @@
-//! roomlight's real devices: fullscreen display windows on chosen outputs, grabs of the
-//! screen, and (later, in `camera/`) camera backends, each adapted to roomlight-agent's
-//! `Display` and `Camera` traits. It must not know the wire, rounds or the calibration
-//! procedure: it shows what it is given and reports what the devices do.
+//! roomlight's real displays: fullscreen windows on chosen outputs, adapted to roomlight-agent's
+//! `Display` trait, and grabs of the screen. It must not know the wire, rounds or the
+//! calibration procedure: it shows what it is given and reports what the devices do. Cameras
+//! are roomlight-camera's (docs/architecture.md).
 //!
 //! - [`output`]: the X screen's outputs (RandR monitors), chosen by name, index or geometry.
 //! - [`window`]: a borderless, cursor-less window covering one output, on a thread of its own,
@@ -11,7 +11,6 @@
 //! - [`grab`]: what is on a region of the screen, read back (tests, the simulator chain).
 //! - [`xvfb`]: a virtual X server with outputs on regions of its screen, for tests.
 //! - [`cli`]: the bodies of `roomlight hw …`.
-//! - `camera/` (to come): camera backends behind the agents' `Camera` trait.
 //!
 //! Displays are X11 through x11rb, a pure-Rust client: nothing to install at build time and no
 //! C library at run time. Not winit + softbuffer: winit allows one event loop per process and
