@@ -2,9 +2,9 @@
 //! libv4l, no libclang). Opening sets manual exposure, gain and white balance and reads each
 //! back; a control that did not take (auto exposure still on) refuses the camera with the
 //! control's name. A capture first drains every frame already queued (exposed before it was
-//! asked), then waits for the next one with `poll` up to the deadline. Pixel formats: YUYV,
-//! RGB3, GREY and MJPG. It must not know radiometry. The control checks and the format
-//! conversions are plain functions so that they are tested without a device.
+//! asked) and discards the one in flight, then waits for the next with `poll` up to the
+//! deadline. Pixel formats: YUYV, RGB3, GREY and MJPG. It must not know radiometry. The control
+//! checks and the format conversions are plain functions, tested without a device.
 
 use crate::Backend;
 use crate::error::CameraError;
@@ -93,6 +93,14 @@ pub fn apply_controls(
     Ok(())
 }
 
+/// The pixel formats [`convert`] knows.
+pub const SUPPORTED: [PixelFormat; 4] = [
+    PixelFormat::YUYV,
+    PixelFormat::RGB3,
+    GREY,
+    PixelFormat::MJPG,
+];
+
 /// One buffer of a `format` frame as 8-bit RGB; `None` for a buffer of the wrong length or an
 /// unsupported format. YUYV is BT.601 limited range, as UVC cameras send it.
 pub fn convert(format: PixelFormat, width: u32, height: u32, data: &[u8]) -> Option<Vec<[u8; 3]>> {
@@ -169,7 +177,7 @@ impl V4l2Backend {
             negotiated.height(),
             negotiated.pixel_format(),
         );
-        if convert(format.2, 2, 1, &[0; 6]).is_none() && format.2 != PixelFormat::MJPG {
+        if !SUPPORTED.contains(&format.2) {
             return Err(CameraError::Spec {
                 spec: name,
                 reason: format!("pixel format {} not supported", format.2),
@@ -218,10 +226,13 @@ impl Backend for V4l2Backend {
             reason: e.to_string(),
         };
         // Frames already filled were exposed before this capture was asked: the projectors
-        // may not have shown the new frame yet.
+        // may not have shown the new frame yet. linuxvideo gives no buffer timestamps, so the
+        // frame being exposed at the request is discarded too: the first frame dequeued after
+        // the drain, whatever its content (one frame of latency, as a video camera has).
         while !self.stream.will_block().map_err(gone)? {
             self.stream.dequeue(|_| Ok(())).map_err(gone)?;
         }
+        let mut in_flight = true;
         loop {
             if !self.ready(deadline)? {
                 if Instant::now() >= deadline {
@@ -237,6 +248,9 @@ impl Backend for V4l2Backend {
                 .stream
                 .dequeue(|buf| Ok((!buf.is_error()).then(|| convert(f, w, h, &buf)).flatten()))
                 .map_err(gone)?;
+            if std::mem::take(&mut in_flight) {
+                continue;
+            }
             if let Some(pixels) = pixels {
                 return Ok(Frame {
                     width: w,

@@ -106,15 +106,18 @@ fn a_known_response_is_recovered_from_exposures() {
     assert!(worst < 0.06, "worst relative error {worst}");
 }
 
-/// A backend that hands out one prepared frame, or times out.
-struct Fake(Option<Frame>);
+/// A backend that hands out prepared frames in order, then times out.
+struct Fake(Vec<Frame>);
 
 impl Backend for Fake {
     fn name(&self) -> &str {
         "fake:1"
     }
     fn capture(&mut self, _deadline: Instant) -> Result<Frame, CameraError> {
-        self.0.take().ok_or(CameraError::Timeout {
+        if !self.0.is_empty() {
+            return Ok(self.0.remove(0));
+        }
+        Err(CameraError::Timeout {
             camera: "fake:1".into(),
             after: Duration::ZERO,
         })
@@ -127,7 +130,7 @@ async fn the_adapter_hands_the_agent_linear_images_and_timeouts() {
     let frame = Frame::rgb8(2, 1, vec![[255, 255, 255], [188, 188, 188]]).expect("frame");
     let radiometry = Radiometry::new(&Response::Srgb, 250, 0);
     let mut camera = HwCamera::new(
-        Box::new(Fake(Some(frame))),
+        Box::new(Fake(vec![frame])),
         radiometry,
         Duration::from_secs(1),
     );
@@ -136,4 +139,41 @@ async fn the_adapter_hands_the_agent_linear_images_and_timeouts() {
     assert!((image.pixels[1][0] - 0.5).abs() < 0.01);
     let err = camera.capture_image().await.expect_err("timeout");
     assert!(err.to_string().contains("fake:1"), "{err}");
+}
+
+#[tokio::test]
+async fn patches_are_sampled_at_the_charts_and_clipped_pixels_refuse_theirs() {
+    use roomlight_agent::hardware::Camera;
+    use roomlight_calib::charts::{ChartCorners, SampleConfig};
+    // One 6×4 chart filling a 60×40 image: patch k is the 10×10 block at column k % 6, row
+    // k / 6. Code 188 is linear 0.5 in sRGB.
+    let (w, h) = (60, 40);
+    let grey = Frame::rgb8(w, h, vec![[188; 3]; (w * h) as usize]).expect("frame");
+    let mut clipped = grey.clone();
+    if let Samples::Rgb8(p) = &mut clipped.samples {
+        p[(15 * w + 55) as usize] = [255, 188, 188]; // inside patch 11 (column 5, row 1)
+    }
+    let charts = roomlight_camera::Charts {
+        corners: std::sync::Arc::new(vec![ChartCorners {
+            name: "wall".into(),
+            corners: [[0.0, 0.0], [60.0, 0.0], [60.0, 40.0], [0.0, 40.0]],
+        }]),
+        patches: std::sync::Arc::new(vec![0, 11, 23]),
+        sample: SampleConfig::default(),
+    };
+    let radiometry = Radiometry::new(&Response::Srgb, 250, 0);
+    let mut camera = HwCamera::new(
+        Box::new(Fake(vec![grey, clipped])),
+        radiometry,
+        Duration::from_secs(1),
+    )
+    .with_charts(charts);
+    let patches = camera.capture().await.expect("patches");
+    assert_eq!(patches.len(), 3);
+    let half = Response::Srgb.table()[188];
+    for p in &patches {
+        assert!((p.0[0] - f64::from(half)).abs() < 1e-6, "{p:?}");
+    }
+    let err = camera.capture().await.expect_err("a clipped pixel");
+    assert!(err.to_string().contains("patch 11"), "{err}");
 }
