@@ -314,3 +314,47 @@ fn video_formats_convert_to_rgb() {
             .all(|p| p[0].abs_diff(200) <= 3 && p[2].abs_diff(50) <= 3)
     );
 }
+
+#[test]
+fn the_cli_capture_writes_the_frame_and_reports_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // A 16-bit source: written as it came, 16-bit.
+    let src = dir.path().join("deep.png");
+    image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_pixel(3, 2, image::Rgb([1000, 2, 65535]))
+        .save(&src)
+        .expect("16-bit png");
+    let out = dir.path().join("out.png");
+    let spec = format!("command:cp '{}' {{out}}", src.display());
+    let report =
+        roomlight_camera::cli::capture(&spec, &out, Duration::from_secs(10)).expect("capture");
+    assert_eq!((report.width, report.height, report.bits), (3, 2, 16));
+    assert!(report.to_string().contains("not reported"), "{report}");
+    let back = decode_file(&out, MAX).expect("written");
+    assert_eq!(back.samples, Samples::Rgb16(vec![[1000, 2, 65535]; 6]));
+    // A capture that times out is an error naming the camera.
+    let err = roomlight_camera::cli::capture(
+        &format!("folder:{}", dir.path().display()),
+        &out,
+        Duration::from_millis(200),
+    )
+    .expect_err("nothing new");
+    assert!(matches!(err, CameraError::Timeout { .. }), "{err}");
+    assert!(err.to_string().contains("folder:"), "{err}");
+    // A folder that does not exist is gone, named.
+    let missing = dir.path().join("missing");
+    let err = roomlight_camera::cli::capture(
+        &format!("folder:{}", missing.display()),
+        &out,
+        Duration::from_millis(200),
+    )
+    .expect_err("no folder");
+    assert!(
+        matches!(err, CameraError::Gone { .. }) && err.to_string().contains("missing"),
+        "{err}"
+    );
+    assert!(
+        roomlight_camera::cli::cameras()
+            .expect("list")
+            .contains("folder:DIR")
+    );
+}

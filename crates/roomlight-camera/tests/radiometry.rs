@@ -95,15 +95,16 @@ fn a_known_response_is_recovered_from_exposures() {
     let Response::Table(table) = calibrate_response(&frames, 60, 10.0).expect("response") else {
         panic!("a table");
     };
-    // The curve's scale is free: compare shapes, relative to code 128. Tolerance: 6 % over
-    // codes 20-240 (quantisation alone is ±2.5 % at code 20).
+    // The curve's scale is free: compare shapes, relative to code 128. Tolerance: 2 % over
+    // codes 20-240 (measured 0.58 %; quantisation alone is up to ±2.5 % on one pixel at code 20).
     let mut worst = 0.0f64;
     for z in 20..=240usize {
         let truth = (z as f64 / 128.0).powf(gamma);
         let got = f64::from(table[z]) / f64::from(table[128]);
         worst = worst.max((got / truth - 1.0).abs());
     }
-    assert!(worst < 0.06, "worst relative error {worst}");
+    eprintln!("response recovered: worst relative error {worst:.4} over codes 20-240");
+    assert!(worst < 0.02, "worst relative error {worst}");
 }
 
 /// A backend that hands out prepared frames in order, then times out.
