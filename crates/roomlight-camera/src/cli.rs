@@ -86,3 +86,30 @@ pub fn capture_config(config: &CameraConfig, out: &Path) -> Result<Report, Camer
         elapsed: started.elapsed(),
     })
 }
+
+/// `roomlight hw calibrate-response IMAGE=SECONDS...`: the camera's 8-bit response measured from
+/// images of one static scene at several exposures (`calibrate_response`, 100 pixels sampled,
+/// smoothness 10), returned as the line to put in the camera config:
+/// `response = { table = [...] }`. Each image is decoded through the bounded decoder.
+pub fn calibrate_response(
+    shots: &[(std::path::PathBuf, f64)],
+    max_pixels: u64,
+) -> Result<String, CameraError> {
+    let frames = shots
+        .iter()
+        .map(|(path, t)| Ok((crate::frame::decode_file(path, max_pixels)?, *t)))
+        .collect::<Result<Vec<_>, CameraError>>()?;
+    let refs: Vec<_> = frames.iter().map(|(f, t)| (f, *t)).collect();
+    let response = crate::radiometry::calibrate_response(&refs, 100, 10.0).map_err(|reason| {
+        CameraError::Radiometry {
+            camera: "calibrate-response".into(),
+            reason,
+        }
+    })?;
+    let table = match &response {
+        crate::radiometry::Response::Table(t) => t.clone(),
+        other => other.table().to_vec(),
+    };
+    let values: Vec<String> = table.iter().map(|v| format!("{v:.6}")).collect();
+    Ok(format!("response = {{ table = [{}] }}", values.join(", ")))
+}

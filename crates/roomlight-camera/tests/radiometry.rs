@@ -178,3 +178,36 @@ async fn patches_are_sampled_at_the_charts_and_clipped_pixels_refuse_theirs() {
     let err = camera.capture().await.expect_err("a clipped pixel");
     assert!(err.to_string().contains("patch 11"), "{err}");
 }
+
+#[test]
+fn the_cli_measures_a_response_from_files_and_prints_a_config_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let shots: Vec<(std::path::PathBuf, f64)> = exposures(|x| x.powf(1.0 / 2.2))
+        .into_iter()
+        .enumerate()
+        .map(|(k, (frame, t))| {
+            let Samples::Rgb8(p) = frame.samples else {
+                panic!("8-bit");
+            };
+            let raw = p.into_iter().flatten().collect();
+            let path = dir.path().join(format!("shot{k}.png"));
+            image::RgbImage::from_raw(frame.width, frame.height, raw)
+                .expect("image")
+                .save(&path)
+                .expect("save");
+            (path, t)
+        })
+        .collect();
+    let line = roomlight_camera::cli::calibrate_response(&shots, 1 << 20).expect("response");
+    #[derive(serde::Deserialize)]
+    struct Holder {
+        response: Response,
+    }
+    let parsed: Holder = toml::from_str(&line).expect("a config line");
+    parsed.response.validate().expect("valid");
+    let Response::Table(t) = parsed.response else {
+        panic!("a table");
+    };
+    let ratio = f64::from(t[200]) / f64::from(t[100]);
+    assert!((ratio / 2.0f64.powf(2.2) - 1.0).abs() < 0.02, "{ratio}");
+}
