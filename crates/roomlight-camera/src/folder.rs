@@ -17,7 +17,7 @@ const POLL: Duration = Duration::from_millis(50);
 const IMAGE_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "tif", "tiff"];
 
 /// Waits for new image files in a folder.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct FolderBackend {
     name: String,
     dir: PathBuf,
@@ -78,16 +78,26 @@ fn is_image_name(path: &Path) -> bool {
             .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
-impl Backend for FolderBackend {
-    fn name(&self) -> &str {
-        &self.name
-    }
+/// A capture asked for: the files present then are ignored, events are being watched.
+/// [`FolderBackend::capture`] arms and waits at once; arming first lets a caller ask for the
+/// capture before it causes the photograph (or, in tests, before writing the file).
+#[derive(Debug)]
+pub struct Armed {
+    backend: FolderBackend,
+    started: Instant,
+    before: HashSet<PathBuf>,
+    events: std::sync::mpsc::Receiver<()>,
+    /// Kept alive for the wait: dropping it stops the events.
+    _watcher: Option<notify::RecommendedWatcher>,
+}
 
-    fn capture(&mut self, deadline: Instant) -> Result<Frame, CameraError> {
+impl FolderBackend {
+    /// Lists the folder now; only files that appear after this count.
+    pub fn arm(&self) -> Result<Armed, CameraError> {
         let started = Instant::now();
-        let (tx, rx) = std::sync::mpsc::channel();
+        let (tx, events) = std::sync::mpsc::channel();
         // Watching before listing: a file written in between is an event, not lost. Without
-        // inotify (a network file system, limits reached) the poll below still finds it.
+        // inotify (a network file system, limits reached) the poll still finds it.
         let watcher = notify::recommended_watcher(move |_event| {
             let _ = tx.send(());
         })
@@ -98,12 +108,27 @@ impl Backend for FolderBackend {
         if let Err(e) = &watcher {
             tracing::debug!(camera = %self.name, "no file events ({e}); polling");
         }
-        let before: HashSet<PathBuf> = self.images()?.into_iter().map(|(p, _)| p).collect();
+        let before = self.images()?.into_iter().map(|(p, _)| p).collect();
+        Ok(Armed {
+            backend: self.clone(),
+            started,
+            before,
+            events,
+            _watcher: watcher.ok(),
+        })
+    }
+}
+
+impl Armed {
+    /// The first new file that is complete, decoded; a timeout naming the camera (or the
+    /// decode error of a file that never became readable) at `deadline`.
+    pub fn wait(self, deadline: Instant) -> Result<Frame, CameraError> {
+        let this = &self.backend;
         let mut candidates: HashMap<PathBuf, Seen> = HashMap::new();
         loop {
             let now = Instant::now();
-            for (path, len) in self.images()? {
-                if before.contains(&path) {
+            for (path, len) in this.images()? {
+                if self.before.contains(&path) {
                     continue;
                 }
                 let seen = candidates.entry(path.clone()).or_insert(Seen {
@@ -118,8 +143,8 @@ impl Backend for FolderBackend {
                         failed: None,
                     };
                 }
-                if len > 0 && seen.failed.is_none() && now - seen.since >= self.settle {
-                    match decode_file(&path, self.max_pixels) {
+                if len > 0 && seen.failed.is_none() && now - seen.since >= this.settle {
+                    match decode_file(&path, this.max_pixels) {
                         Ok(frame) => return Ok(frame),
                         Err(e) => seen.failed = Some(e),
                     }
@@ -130,11 +155,21 @@ impl Backend for FolderBackend {
                 // A file that arrived but never decoded says more than "nothing came".
                 let failed = candidates.into_values().filter_map(|s| s.failed).next();
                 return Err(failed.unwrap_or(CameraError::Timeout {
-                    camera: self.name.clone(),
-                    after: now - started,
+                    camera: this.name.clone(),
+                    after: now - self.started,
                 }));
             }
-            let _ = rx.recv_timeout(POLL.min(deadline - now));
+            let _ = self.events.recv_timeout(POLL.min(deadline - now));
         }
+    }
+}
+
+impl Backend for FolderBackend {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn capture(&mut self, deadline: Instant) -> Result<Frame, CameraError> {
+        self.arm()?.wait(deadline)
     }
 }
