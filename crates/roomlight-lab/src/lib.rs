@@ -1,13 +1,14 @@
 //! roomlight's experiments: the whole method on the simulated room (the demo pipeline:
 //! calibration from captures, then the real agents over loopback gRPC), projection-mapping
 //! evaluation, shadows, the demo's report, the rendered-room gRPC service the process commands
-//! serve, and the benches.
+//! serve, the benches, and structured light on photographs as files (`graycode_files`).
 //!
 //! It owns what is measured and how it is reported. It must not know the command line: the
 //! `roomlight` binary parses arguments and configuration and calls in here with plain options.
 
 pub mod bench;
 pub mod demo;
+pub mod graycode_files;
 pub mod pipeline;
 pub mod pm;
 pub mod process;

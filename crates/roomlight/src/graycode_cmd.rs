@@ -1,11 +1,10 @@
 //! `roomlight graycode generate|decode`: structured light on real photographs.
 
-use anyhow::{Context, Result, bail};
+use anyhow::Result;
 use clap::{Subcommand, ValueEnum};
-use roomlight_calib::graycode::{DecodeConfig, Manifest, decode};
-use roomlight_calib::image_io::{Depth, Encoding, LinearImage};
-use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use roomlight_calib::image_io::{Depth, Encoding};
+use roomlight_lab::graycode_files::{decode_folder, generate};
+use std::path::PathBuf;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum DepthArg {
@@ -56,7 +55,9 @@ pub enum GraycodeCommand {
 
 pub fn run(command: GraycodeCommand) -> Result<()> {
     match command {
-        GraycodeCommand::Generate { width, height, out } => generate(width, height, &out),
+        GraycodeCommand::Generate { width, height, out } => {
+            println!("{}", generate(width, height, &out)?);
+        }
         GraycodeCommand::Decode {
             patterns,
             captures,
@@ -69,102 +70,16 @@ pub fn run(command: GraycodeCommand) -> Result<()> {
                 DepthArg::Sixteen => Depth::Sixteen,
                 DepthArg::Any => Depth::Any,
             };
-            decode_folder(
-                &patterns,
-                &captures,
-                &out,
-                if linear {
-                    Encoding::Linear
-                } else {
-                    Encoding::Srgb
-                },
-                depth,
-            )
-        }
-    }
-}
-
-fn generate(width: u32, height: u32, out: &Path) -> Result<()> {
-    let manifest = Manifest::new(width, height)?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    for p in &manifest.patterns {
-        manifest
-            .pattern_image(p.pattern)
-            .save_png_srgb8(&out.join(&p.file))?;
-    }
-    let json = out.join("patterns.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&manifest)?)
-        .with_context(|| format!("writing {}", json.display()))?;
-    println!(
-        "{} patterns for a {width}x{height} projector in {}",
-        manifest.patterns.len(),
-        out.display()
-    );
-    Ok(())
-}
-
-fn decode_folder(
-    patterns: &Path,
-    captures: &Path,
-    out: &Path,
-    encoding: Encoding,
-    depth: Depth,
-) -> Result<()> {
-    let text = std::fs::read_to_string(patterns)
-        .with_context(|| format!("reading {}", patterns.display()))?;
-    let manifest: Manifest = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a pattern manifest", patterns.display()))?;
-    manifest.validate(&patterns.display().to_string())?;
-    // Every listed file must be there, and nothing else that looks like a capture.
-    let listed: Vec<&str> = manifest.patterns.iter().map(|p| p.file.as_str()).collect();
-    let entries = std::fs::read_dir(captures)
-        .with_context(|| format!("reading the folder {}", captures.display()))?;
-    for entry in entries {
-        let name = entry?.file_name().to_string_lossy().into_owned();
-        if name.to_ascii_lowercase().ends_with(".png") && !listed.contains(&name.as_str()) {
-            bail!(
-                "{}: extra file {name}: it is not in {}",
-                captures.display(),
-                patterns.display()
+            let encoding = if linear {
+                Encoding::Linear
+            } else {
+                Encoding::Srgb
+            };
+            println!(
+                "{}",
+                decode_folder(&patterns, &captures, &out, encoding, depth)?
             );
         }
     }
-    let mut images: HashMap<String, LinearImage> = HashMap::new();
-    let mut size = None;
-    for file in &listed {
-        let path = captures.join(file);
-        if !path.exists() {
-            bail!(
-                "{}: missing capture {file} listed in {}",
-                captures.display(),
-                patterns.display()
-            );
-        }
-        let img = LinearImage::load_png(&path, encoding, depth)?;
-        match size {
-            None => size = Some((img.width, img.height)),
-            Some((w, h)) => img.expect_size(w, h, &path.display().to_string())?,
-        }
-        images.insert((*file).to_string(), img);
-    }
-    let decoded = decode(&manifest, &DecodeConfig::default(), |p| {
-        images
-            .get(&p.file)
-            .ok_or_else(|| roomlight_calib::CalibError::File {
-                file: p.file.clone(),
-                problem: "missing".into(),
-            })
-    })?;
-    let data = decoded.to_png16();
-    image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_raw(decoded.width, decoded.height, data)
-        .context("map buffer")?
-        .save(out)
-        .with_context(|| format!("writing {}", out.display()))?;
-    println!(
-        "decoded {:.1}% of {} camera pixels into {}",
-        100.0 * decoded.decoded_share(),
-        decoded.map.len(),
-        out.display()
-    );
     Ok(())
 }
