@@ -152,8 +152,11 @@ fn default_timeout_s() -> f64 {
 fn default_saturated() -> u8 {
     250
 }
+/// The largest image a camera may deliver, in pixels, unless its config says otherwise.
+pub const MAX_PIXELS: u64 = 64 << 20;
+
 fn default_max_pixels() -> u64 {
-    64 << 20
+    MAX_PIXELS
 }
 fn default_settle_ms() -> u64 {
     200

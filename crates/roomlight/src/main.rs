@@ -62,7 +62,8 @@ enum Command {
     /// `--json`, an HTML page with `--out`), scaling over loopback, calibration and the
     /// simulator — and with `--out DIR` every bench's tables in DIR/results.md.
     Bench(BenchArgs),
-    /// Real hardware: the outputs a projector can be on, an image or the identify pattern on one.
+    /// Real hardware: the outputs a projector can be on, an image or the identify pattern on one;
+    /// the cameras, one capture, a camera's response curve.
     Hw(HwArgs),
 }
 
@@ -99,6 +100,36 @@ enum HwCommand {
         #[arg(long, default_value = "unnamed")]
         projector: String,
     },
+    /// One line per camera found (V4L2 devices), and the backends that need no discovery.
+    Cameras,
+    /// One capture written as PNG, with the exposure actually used; exits non-zero naming the
+    /// camera when it times out.
+    Capture {
+        /// `folder:DIR`, `command:CMD` (`{out}` is the file to write) or `v4l2:/dev/videoN`.
+        #[arg(long)]
+        camera: String,
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, default_value_t = 10.0)]
+        timeout_s: f64,
+    },
+    /// A camera's response curve from photographs of a static scene at several exposures
+    /// (`IMAGE=SECONDS` each); prints the `response` line for the camera config.
+    CalibrateResponse {
+        #[arg(required = true, value_parser = shot)]
+        shots: Vec<(PathBuf, f64)>,
+    },
+}
+
+/// `IMAGE=SECONDS`, the exposure finite and positive.
+fn shot(s: &str) -> Result<(PathBuf, f64), String> {
+    let (path, t) = s.rsplit_once('=').ok_or("expected IMAGE=SECONDS")?;
+    match t.parse::<f64>() {
+        Ok(t) if t.is_finite() && t > 0.0 => Ok((PathBuf::from(path), t)),
+        _ => Err(format!(
+            "{t:?}: expected an exposure in seconds, above zero"
+        )),
+    }
 }
 
 /// Options of the demo.
@@ -249,6 +280,33 @@ fn hw(args: HwArgs) -> Result<()> {
         } => roomlight_hw::cli::show(x, &output, &file, scale),
         HwCommand::Identify { output, projector } => {
             roomlight_hw::cli::identify(x, output.as_ref(), &projector)
+        }
+        HwCommand::Cameras => {
+            print!("{}", roomlight_camera::cli::cameras()?);
+            Ok(())
+        }
+        HwCommand::Capture {
+            camera,
+            out,
+            timeout_s,
+        } => {
+            if !(timeout_s.is_finite() && (0.001..=86_400.0).contains(&timeout_s)) {
+                anyhow::bail!("--timeout-s {timeout_s}: expected 0.001 to 86400 seconds");
+            }
+            let timeout = std::time::Duration::from_secs_f64(timeout_s);
+            println!(
+                "{}",
+                roomlight_camera::cli::capture(&camera, &out, timeout)?
+            );
+            Ok(())
+        }
+        HwCommand::CalibrateResponse { shots } => {
+            let max = roomlight_camera::spec::MAX_PIXELS;
+            println!(
+                "{}",
+                roomlight_camera::cli::calibrate_response(&shots, max)?
+            );
+            Ok(())
         }
     }
 }

@@ -688,3 +688,50 @@ fn bench_net_quick_writes_its_table() {
         "{run}"
     );
 }
+
+/// `roomlight hw capture` through the `command` backend: a real program writes the image, the
+/// capture is that image; a camera that hangs exits non-zero at the timeout, naming the camera;
+/// `hw calibrate-response` refuses an exposure that is not one.
+#[test]
+fn hw_capture_writes_the_cameras_image_and_times_out_naming_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let src = dir.path().join("photo.png");
+    let img = image::RgbImage::from_fn(8, 6, |x, y| image::Rgb([x as u8 * 30, y as u8 * 40, 7]));
+    img.save(&src).expect("png");
+    let out = dir.path().join("capture.png");
+    let camera = format!("command:cp {} {{out}}", src.display());
+    let printed = roomlight(&[
+        "hw",
+        "capture",
+        "--camera",
+        &camera,
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    assert!(printed.contains("8×6"), "{printed}");
+    let back = image::open(&out).expect("capture written").to_rgb8();
+    assert_eq!(back, img, "the capture is the camera's image");
+
+    let hung = Command::new(env!("CARGO_BIN_EXE_roomlight"))
+        .args([
+            "hw",
+            "capture",
+            "--camera",
+            "command:sleep 30",
+            "--timeout-s",
+            "0.5",
+        ])
+        .args(["--out", out.to_str().expect("utf-8")])
+        .output()
+        .expect("run roomlight");
+    let err = String::from_utf8_lossy(&hung.stderr);
+    assert!(!hung.status.success(), "a hung camera must fail");
+    assert!(err.contains("sleep 30"), "the camera is named: {err}");
+
+    let bad = Command::new(env!("CARGO_BIN_EXE_roomlight"))
+        .args(["hw", "calibrate-response", "a.png=0", "b.png=fast"])
+        .output()
+        .expect("run roomlight");
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("above zero"), "{err}");
+}
