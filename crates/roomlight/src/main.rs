@@ -267,6 +267,7 @@ fn main() -> Result<()> {
 }
 
 fn hw(args: HwArgs) -> Result<()> {
+    use roomlight_camera::cli as camera;
     let x = args.x_display.as_deref();
     match args.which {
         HwCommand::Displays => {
@@ -282,30 +283,24 @@ fn hw(args: HwArgs) -> Result<()> {
             roomlight_hw::cli::identify(x, output.as_ref(), &projector)
         }
         HwCommand::Cameras => {
-            print!("{}", roomlight_camera::cli::cameras()?);
+            print!("{}", camera::cameras()?);
             Ok(())
         }
         HwCommand::Capture {
-            camera,
+            camera: spec,
             out,
-            timeout_s,
+            timeout_s: t,
         } => {
-            if !(timeout_s.is_finite() && (0.001..=86_400.0).contains(&timeout_s)) {
-                anyhow::bail!("--timeout-s {timeout_s}: expected 0.001 to 86400 seconds");
+            if !(t.is_finite() && (0.001..=86_400.0).contains(&t)) {
+                anyhow::bail!("--timeout-s {t}: expected 0.001 to 86400 seconds");
             }
-            let timeout = std::time::Duration::from_secs_f64(timeout_s);
-            println!(
-                "{}",
-                roomlight_camera::cli::capture(&camera, &out, timeout)?
-            );
+            let report = camera::capture(&spec, &out, std::time::Duration::from_secs_f64(t))?;
+            println!("{report}");
             Ok(())
         }
         HwCommand::CalibrateResponse { shots } => {
             let max = roomlight_camera::spec::MAX_PIXELS;
-            println!(
-                "{}",
-                roomlight_camera::cli::calibrate_response(&shots, max)?
-            );
+            println!("{}", camera::calibrate_response(&shots, max)?);
             Ok(())
         }
     }

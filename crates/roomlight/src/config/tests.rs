@@ -194,6 +194,18 @@ fn a_window_display_is_read_and_checked() {
     assert_eq!(spec.settle, std::time::Duration::from_millis(80));
     assert_eq!(spec.x_display.as_deref(), Some(":3"));
 
+    let (_dir, path) = file(
+        "sim.toml",
+        &format!("{NODE}display = {{ kind = \"sim\" }}\n"),
+    );
+    assert!(matches!(
+        load_node(&path).expect("sim").display,
+        NodeDisplay::Synthetic
+    ));
+}
+
+#[test]
+fn a_bad_window_display_is_refused_naming_file_and_field() {
     let err = node_err(
         "s.toml",
         &format!(
@@ -238,13 +250,4 @@ fn a_window_display_is_read_and_checked() {
         err.contains("o.toml") && err.contains("display.output"),
         "{err}"
     );
-
-    let (_dir, path) = file(
-        "sim.toml",
-        &format!("{NODE}display = {{ kind = \"sim\" }}\n"),
-    );
-    assert!(matches!(
-        load_node(&path).expect("sim").display,
-        NodeDisplay::Synthetic
-    ));
 }
