@@ -248,6 +248,7 @@ enum BenchCommand {
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
+    procs::init_logs();
     match cli.command {
         Command::Demo(args) => demo::run(&DemoOptions {
             quick: args.quick,

@@ -97,7 +97,9 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
         .context("starting the runtime")
 }
 
-fn init_logs() {
+/// Logs to stderr, filtered by `RUST_LOG` (default: warnings), for every command: the agents'
+/// warnings show in a bench or the demo as they do in a camera or node agent.
+pub(crate) fn init_logs() {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
@@ -159,7 +161,6 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<()> {
 }
 
 pub fn sim(args: &SimArgs) -> Result<()> {
-    init_logs();
     let room = match &args.scene {
         Some(scene) => SimRoom::Rendered {
             scene: scene.clone(),
@@ -192,7 +193,6 @@ pub fn optimum(path: &Path) -> Result<()> {
 }
 
 pub fn camera(path: &Path) -> Result<()> {
-    init_logs();
     let process = config::load_camera(path)?;
     runtime()?.block_on(async {
         let cancel = CancellationToken::new();
@@ -202,7 +202,6 @@ pub fn camera(path: &Path) -> Result<()> {
 }
 
 pub fn node(path: &Path) -> Result<()> {
-    init_logs();
     let setup = config::load_node(path)?;
     let endpoint = match &setup.camera {
         CameraLocation::Address(address) => address.clone(),

@@ -691,6 +691,10 @@ async fn synthetic_run(
     agents.spawn_nodes(rule);
     let mut bytes = pipeline::PerRound::default();
     let expected = agents.agents;
+    // The rounds start with the first agent that joins (as in a room); the budget counts from
+    // the capture at which the last one has joined, so that a slow join (a loaded machine)
+    // cannot spend it on a partial room and end the run before the late nodes have moved.
+    let mut complete_at: Option<u64> = None;
     let outcome = tokio::time::timeout(Duration::from_secs(300), async {
         loop {
             agents.status.changed().await?;
@@ -703,8 +707,11 @@ async fn synthetic_run(
                 excess: agents.room.true_objective(),
                 mean_de00: de(&x)?,
             });
-            if s.captures >= budget && s.live_projectors == expected {
-                return Ok::<_, anyhow::Error>(s);
+            if s.live_projectors == expected {
+                let from = *complete_at.get_or_insert(s.captures);
+                if s.captures >= from + budget {
+                    return Ok::<_, anyhow::Error>(s);
+                }
             }
         }
     })
