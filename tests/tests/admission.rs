@@ -5,7 +5,7 @@
 use roomlight_agent::AgentError;
 use roomlight_agent::camera::Survey;
 use roomlight_core::LinearRgb;
-use roomlight_proto::convert::{pack_patches, pack_rgb};
+use roomlight_proto::convert::node_change;
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::v1;
 use roomlight_tests::{Sandbox, TOKEN, hello};
@@ -146,15 +146,8 @@ async fn a_duplicate_projector_is_refused_and_a_silent_one_leaves_within_two_sec
 
 /// A contribution whose values are not finite, for each of `nodes`.
 fn nan_contribution(round: u64, nodes: impl Iterator<Item = u32>) -> v1::NodeMessage {
-    let bad = v1::SparseRgb {
-        patches: pack_patches(&[0]),
-        values: pack_rgb(1, [LinearRgb([f64::NAN, 0.0, 0.0])]),
-    };
     let nodes = nodes
-        .map(|node| v1::NodeRgb {
-            node,
-            values: Some(bad.clone()),
-        })
+        .map(|node| node_change(node, LinearRgb([f64::NAN, 0.0, 0.0])))
         .collect();
     v1::NodeMessage {
         body: Some(v1::node_message::Body::Contribution(v1::Contribution {

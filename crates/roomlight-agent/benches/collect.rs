@@ -2,9 +2,9 @@
 //! supports of 16 patches), without the network:
 //! - `collect`: each node agent's one batched `Contribution` message as it arrives (protobuf
 //!   bytes) decoded, its entries checked at the boundary (owned by the sender through the node →
-//!   projector index, named once, 24 bytes a patch, finite), each node counted once in the
-//!   round's outstanding set, and its change subtracted from the predicted errors by the round
-//!   controller;
+//!   projector index, named once, a finite change of value), each node counted once in the
+//!   round's outstanding set, and its contribution `p_n Δx_n` formed from its column and
+//!   subtracted from the predicted errors by the round controller (protocol version 3);
 //! - `fan_out`: the errors of a round gathered on every node's support, one `Errors` message
 //!   per node agent, encoded.
 //!
@@ -15,7 +15,7 @@
 use prost::Message;
 use roomlight_core::LinearRgb;
 use roomlight_core::round::{Collection, Controller, Projectors, Received};
-use roomlight_proto::convert::{from_node_rgbs, sparse_from_iter, to_node_rgb};
+use roomlight_proto::convert::{from_node_changes, node_change, node_errors};
 use roomlight_proto::v1;
 use std::time::Duration;
 
@@ -77,9 +77,7 @@ fn contributions(room: &Room, round: u64) -> Vec<(String, Vec<u8>)> {
         .map(|(id, nodes)| {
             let nodes = nodes
                 .iter()
-                .map(|(n, support)| {
-                    to_node_rgb(*n, support, &vec![LinearRgb::splat(1e-3); support.len()])
-                })
+                .map(|(n, _)| node_change(*n, LinearRgb::splat(1e-3)))
                 .collect();
             let message = v1::Contribution { round, nodes };
             (id.clone(), message.encode_to_vec())
@@ -91,6 +89,13 @@ fn contributions(room: &Room, round: u64) -> Vec<(String, Vec<u8>)> {
 fn collect(bencher: divan::Bencher, nodes: usize) {
     let room = room(nodes);
     let arrived = contributions(&room, 1);
+    // Each node's column, as the camera agent's model holds it (indexed by node).
+    let columns: Vec<(Vec<u32>, Vec<LinearRgb>)> = room
+        .nodes
+        .iter()
+        .flat_map(|(_, nodes)| nodes.iter())
+        .map(|(_, support)| (support.clone(), vec![LinearRgb::splat(0.1); support.len()]))
+        .collect();
     bencher
         .with_inputs(|| {
             let mut controller = Controller::new(vec![LinearRgb::ZERO; room.patches], 1);
@@ -109,11 +114,13 @@ fn collect(bencher: divan::Bencher, nodes: usize) {
             for (projector, bytes) in &arrived {
                 let message = v1::Contribution::decode(bytes.as_slice()).expect("decodes");
                 let owns = |n: u32| projectors.owner(n) == Some(projector.as_str());
-                let batch = from_node_rgbs("contribution", message.nodes, owns).expect("bounded");
+                let batch = from_node_changes(message.nodes, owns).expect("bounded");
                 assert!(batch.refused.is_empty());
-                for entry in batch.entries {
-                    if round.receive(message.round, entry.node) == Received::Counted {
-                        let delta = entry.patches.into_iter().zip(entry.values);
+                for (node, change) in batch.entries {
+                    if round.receive(message.round, node) == Received::Counted {
+                        let (support, p) = &columns[node as usize];
+                        let delta = p.iter().map(|p| p.hadamard(change));
+                        let delta = support.iter().copied().zip(delta);
                         controller
                             .contribution(delta)
                             .expect("a valid contribution");
@@ -134,12 +141,9 @@ fn fan_out(bencher: divan::Bencher, nodes: usize) {
         for (_, nodes) in &room.nodes {
             let entries = nodes
                 .iter()
-                .map(|(n, support)| v1::NodeRgb {
-                    node: *n,
-                    values: Some(sparse_from_iter(
-                        support,
-                        support.iter().map(|&i| errors[i as usize]),
-                    )),
+                .map(|(n, support)| {
+                    let values = support.iter().map(|&i| errors[i as usize]);
+                    node_errors(*n, support.len(), values)
                 })
                 .collect();
             let message = v1::Errors {

@@ -135,9 +135,9 @@ async fn a_node_that_never_reads_is_dropped_and_the_rounds_go_on_for_the_others(
         let contributions = |round: u64| {
             let nodes = p1_nodes
                 .iter()
-                .map(|&node| v1::NodeRgb {
+                .map(|&node| v1::NodeChange {
                     node,
-                    values: Some(v1::SparseRgb::default()),
+                    change: Some(v1::Rgb::default()),
                 })
                 .collect();
             vec![message(v1::node_message::Body::Contribution(

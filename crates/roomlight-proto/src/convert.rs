@@ -3,7 +3,7 @@
 //! Everything a peer sends is checked here before any domain type exists: lengths, sorted
 //! patch ids, finite values, and for the batched per-round messages (one `Errors` and one
 //! `Contribution` per node agent per round) the node ids, each at most once and owned by the
-//! sender. It knows nothing of agents, rounds or streams: callers say which nodes a peer owns.
+//! sender, and each node's errors as long as its support. It knows nothing of agents, rounds or streams: callers say which nodes a peer owns.
 
 use crate::v1;
 use roomlight_core::{LinearRgb, PatchId};
@@ -33,6 +33,11 @@ pub enum ProtoError {
         index: usize,
         value: f64,
     },
+    /// Packed values are not whole triples.
+    #[error(
+        "{field}: {bytes} bytes of values, expected 24 per patch (three little-endian doubles)"
+    )]
+    RgbBytes { field: &'static str, bytes: usize },
     /// Packed patch ids are not whole little-endian u32s.
     #[error("{field}: {bytes} bytes of patch ids, expected 4 per patch (little-endian u32)")]
     PatchBytes { field: &'static str, bytes: usize },
@@ -125,16 +130,6 @@ pub fn from_sparse(
     Ok((patches, unpack_rgb(field, &sparse.values)?))
 }
 
-/// [`from_sparse`], taking the message apart instead of copying its patch ids.
-pub fn into_sparse(
-    field: &'static str,
-    sparse: v1::SparseRgb,
-) -> Result<(Vec<PatchId>, Vec<LinearRgb>), ProtoError> {
-    let patches = unpack_patches(field, &sparse)?;
-    let values = unpack_rgb(field, &sparse.values)?;
-    Ok((patches, values))
-}
-
 /// Packed triples back into values, every one finite (the length is checked by the caller).
 fn unpack_rgb(field: &'static str, packed: &[u8]) -> Result<Vec<LinearRgb>, ProtoError> {
     let mut values = Vec::with_capacity(packed.len() / RGB_BYTES);
@@ -195,39 +190,44 @@ fn unpack_patches(field: &'static str, sparse: &v1::SparseRgb) -> Result<Vec<Pat
     Ok(patches)
 }
 
-/// One node's entry of a batched message (its errors, or its contribution change), validated.
+/// A batched message's entries, read: the well-formed ones (node and what it carries), and
+/// each refused one with why.
 #[derive(Debug, Clone, PartialEq)]
-pub struct NodeVector {
-    pub node: u32,
-    pub patches: Vec<PatchId>,
-    pub values: Vec<LinearRgb>,
-}
-
-/// One node's entry, packed: `values` in the order of `patches`, the node's support.
-pub fn to_node_rgb(node: u32, patches: &[PatchId], values: &[LinearRgb]) -> v1::NodeRgb {
-    v1::NodeRgb {
-        node,
-        values: Some(to_sparse(patches, values)),
-    }
-}
-
-/// A batched message's entries, read: the well-formed ones, and each refused one with why.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Batch {
-    pub entries: Vec<NodeVector>,
+pub struct Batch<T> {
+    pub entries: Vec<(u32, T)>,
     /// Entries refused, each a [`ProtoError::Node`] naming the node and the reason.
     pub refused: Vec<ProtoError>,
 }
 
-/// Reads the entries of a batched `Errors` or `Contribution` message (`field` names which).
-/// Each entry is checked on its own — a node `owns` accepts, named once, its values a valid
-/// sparse vector — so that one malformed entry is refused with its reason while the others
-/// count. A message of more than [`MAX_BATCH_NODES`] entries is refused whole.
-pub fn from_node_rgbs(
+/// One node's errors, packed: `values` on its support, in its column's order.
+pub fn node_errors(
+    node: u32,
+    count: usize,
+    values: impl IntoIterator<Item = LinearRgb>,
+) -> v1::NodeErrors {
+    v1::NodeErrors {
+        node,
+        values: pack_rgb(count, values),
+    }
+}
+
+/// One node's change of value.
+pub fn node_change(node: u32, change: LinearRgb) -> v1::NodeChange {
+    v1::NodeChange {
+        node,
+        change: Some(to_rgb(change)),
+    }
+}
+
+/// Reads a batch entry by entry: a node `check` refuses, or named a second time, is refused
+/// with the reason and the others are kept. More than [`MAX_BATCH_NODES`] entries refuse the
+/// message whole.
+fn read_batch<E, T>(
     field: &'static str,
-    entries: Vec<v1::NodeRgb>,
-    mut owns: impl FnMut(u32) -> bool,
-) -> Result<Batch, ProtoError> {
+    entries: Vec<E>,
+    node_of: impl Fn(&E) -> u32,
+    mut check: impl FnMut(u32, E) -> Result<T, ProtoError>,
+) -> Result<Batch<T>, ProtoError> {
     if entries.len() > MAX_BATCH_NODES {
         return Err(ProtoError::TooLarge {
             field,
@@ -239,30 +239,20 @@ pub fn from_node_rgbs(
         entries: Vec::with_capacity(entries.len()),
         refused: Vec::new(),
     };
-    // Only owned nodes enter `seen`: a scan costs at most the projector's node count per entry.
+    // Only accepted nodes enter `seen`: a scan costs at most the projector's node count.
     let mut seen: Vec<u32> = Vec::with_capacity(entries.len());
     for entry in entries {
-        let node = entry.node;
+        let node = node_of(&entry);
         let checked = if seen.contains(&node) {
             Err(ProtoError::Duplicate { field, node })
-        } else if !owns(node) {
-            Err(ProtoError::NotOwned { field, node })
         } else {
-            seen.push(node);
-            entry
-                .values
-                .ok_or(ProtoError::Missing {
-                    message: field,
-                    field: "values",
-                })
-                .and_then(|sparse| into_sparse(field, sparse))
+            check(node, entry)
         };
         match checked {
-            Ok((patches, values)) => batch.entries.push(NodeVector {
-                node,
-                patches,
-                values,
-            }),
+            Ok(value) => {
+                seen.push(node);
+                batch.entries.push((node, value));
+            }
             Err(reason) => batch.refused.push(ProtoError::Node {
                 node,
                 reason: Box::new(reason),
@@ -270,6 +260,52 @@ pub fn from_node_rgbs(
         }
     }
     Ok(batch)
+}
+
+/// Reads the entries of an `Errors` message: a node `owns` accepts, named once, with whole
+/// triples of finite values (whether they match its support is the node's to judge).
+pub fn from_node_errors(
+    entries: Vec<v1::NodeErrors>,
+    owns: impl Fn(u32) -> bool,
+) -> Result<Batch<Vec<LinearRgb>>, ProtoError> {
+    let field = "errors";
+    read_batch(
+        field,
+        entries,
+        |e| e.node,
+        |node, e| {
+            if !owns(node) {
+                return Err(ProtoError::NotOwned { field, node });
+            }
+            if !e.values.len().is_multiple_of(RGB_BYTES) {
+                return Err(ProtoError::RgbBytes {
+                    field,
+                    bytes: e.values.len(),
+                });
+            }
+            unpack_rgb(field, &e.values)
+        },
+    )
+}
+
+/// Reads the entries of a `Contribution` message: a node `owns` accepts, named once, with a
+/// finite change.
+pub fn from_node_changes(
+    entries: Vec<v1::NodeChange>,
+    owns: impl Fn(u32) -> bool,
+) -> Result<Batch<LinearRgb>, ProtoError> {
+    let field = "contribution";
+    read_batch(
+        field,
+        entries,
+        |e| e.node,
+        |node, e| {
+            if !owns(node) {
+                return Err(ProtoError::NotOwned { field, node });
+            }
+            from_rgb(field, e.change.as_ref())
+        },
+    )
 }
 
 /// An RGB triple on the wire.

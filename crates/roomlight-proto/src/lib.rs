@@ -16,6 +16,8 @@ pub mod v1 {
 pub mod convert;
 pub mod refusal;
 
-/// The protocol version this build speaks. 2: `Errors` and `Contribution` carry every node of
-/// the node agent's projector, one message per node agent per round (1: one per node).
-pub const PROTOCOL_VERSION: u32 = 2;
+/// The protocol version this build speaks. 3: a node's errors travel without their patch ids
+/// (the node knows its support) and its contribution as its change of value `Δx_n` (the camera
+/// agent holds `p_n`); 2: `Errors` and `Contribution` carry every node of the node agent's
+/// projector, one message per node agent per round (1: one per node).
+pub const PROTOCOL_VERSION: u32 = 3;

@@ -28,7 +28,6 @@ use prost::Message;
 use registry::{Outbox, Registry};
 use roomlight_calib::charts::{COLUMNS, ChartCorners, ROWS, SampleConfig};
 use roomlight_core::{LinearRgb, Problem};
-use roomlight_proto::convert::NodeVector;
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::v1;
 use std::collections::{HashMap, HashSet};
@@ -135,12 +134,13 @@ pub struct RoomStatus {
     pub calibrated_hot: u64,
 }
 
-/// A node agent's contributions for a round, as its reader passed them on: one per node it
-/// owns, each a valid sparse vector (checked at the boundary by `roomlight_proto::convert`).
+/// A node agent's contributions for a round, as its reader passed them on: each node it owns
+/// and its finite change of value `Δx_n` (checked at the boundary by `roomlight_proto::convert`;
+/// the round loop forms `p_n Δx_n` from the model's column).
 #[derive(Debug)]
 struct Contribution {
     round: u64,
-    nodes: Vec<NodeVector>,
+    nodes: Vec<(u32, LinearRgb)>,
 }
 
 /// What the service, the readers and the round loop share.

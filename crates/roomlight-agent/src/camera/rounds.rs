@@ -12,7 +12,7 @@ use crate::hardware::Camera;
 use roomlight_core::LinearRgb;
 use roomlight_core::aggregator::{ErrorKind, RoundSummary};
 use roomlight_core::round::{Backoff, Collection, Controller, Next as NextRound, Received};
-use roomlight_proto::convert::sparse_from_iter;
+use roomlight_proto::convert::node_errors;
 use roomlight_proto::v1;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -244,25 +244,7 @@ impl<C: Camera> Rounds<C> {
                 () = changed => continue,
             };
             match received {
-                Ok(Some(c)) => {
-                    for entry in c.nodes {
-                        match collection.receive(c.round, entry.node) {
-                            Received::Counted => {
-                                let delta = entry.patches.into_iter().zip(entry.values);
-                                if let Err(e) = self.controller.contribution(delta) {
-                                    tracing::warn!(node = entry.node, error = %e, "contribution refused");
-                                }
-                            }
-                            Received::OtherRound => tracing::debug!(
-                                node = entry.node,
-                                round = c.round,
-                                expected = collection.round(),
-                                "out-of-order contribution ignored"
-                            ),
-                            Received::NotAwaited => {}
-                        }
-                    }
-                }
+                Ok(Some(c)) => self.count(&mut collection, c),
                 Ok(None) | Err(_) => {
                     tracing::warn!(
                         round = collection.round(),
@@ -271,6 +253,37 @@ impl<C: Camera> Rounds<C> {
                     );
                     return;
                 }
+            }
+        }
+    }
+}
+
+impl<C> Rounds<C> {
+    /// Counts one node agent's message: each awaited node's contribution `p_n Δx_n`, formed
+    /// from the model's column (the one the node was sent), goes to the controller.
+    fn count(&mut self, collection: &mut Collection, c: Contribution) {
+        let shared = self.shared.clone();
+        let live = shared.live();
+        let columns = live.problem.columns();
+        for (node, change) in c.nodes {
+            match collection.receive(c.round, node) {
+                Received::Counted => {
+                    let Some(column) = columns.get(node as usize) else {
+                        continue;
+                    };
+                    let delta = column.values().iter().map(|p| p.hadamard(change));
+                    let delta = column.support().iter().copied().zip(delta);
+                    if let Err(e) = self.controller.contribution(delta) {
+                        tracing::warn!(node, error = %e, "contribution refused");
+                    }
+                }
+                Received::OtherRound => tracing::debug!(
+                    node,
+                    round = c.round,
+                    expected = collection.round(),
+                    "out-of-order contribution ignored"
+                ),
+                Received::NotAwaited => {}
             }
         }
     }
@@ -290,17 +303,15 @@ fn broadcast(shared: &Shared, errors: &[LinearRgb], summary: &RoundSummary) -> V
     }
     let mut sent = Vec::new();
     for (projector, tx, nodes) in ready {
-        let entries: Vec<v1::NodeRgb> = {
+        let entries: Vec<v1::NodeErrors> = {
             let live = shared.live();
+            let columns = live.problem.columns();
             nodes
                 .iter()
                 .filter_map(|&n| {
-                    let support = live.problem.columns().get(n as usize)?.support();
+                    let support = columns.get(n as usize)?.support();
                     let values = support.iter().map(|&i| errors[i as usize]);
-                    Some(v1::NodeRgb {
-                        node: n,
-                        values: Some(sparse_from_iter(support, values)),
-                    })
+                    Some(node_errors(n, support.len(), values))
                 })
                 .collect()
         };

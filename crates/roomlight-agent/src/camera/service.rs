@@ -6,7 +6,7 @@
 use super::registry::{Peer, PeerGuard};
 use super::{Contribution, Shared};
 use prost::Message;
-use roomlight_proto::convert::from_node_rgbs;
+use roomlight_proto::convert::from_node_changes;
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::pin::Pin;
@@ -19,10 +19,11 @@ use tokio_stream::wrappers::ReceiverStream;
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
-/// Messages a peer's queue holds beyond its handshake: a node agent that falls this far behind
-/// is dropped as lagging (the rounds never wait for one node). Rounds send one message per node
-/// agent, a bring-up one per node, so a healthy node is never near it.
-const QUEUE: usize = 256;
+/// Rounds a node agent may fall behind in reading its stream before it is told it lags and is
+/// dropped (the rounds never wait for one node). A round queues one `Errors` message per node
+/// agent, so its queue holds this many rounds, beyond its handshake and one attenuation message
+/// per node (what a relight of the room sends at once); a healthy node is never near it.
+const LAG_ROUNDS: usize = 256;
 
 /// The gRPC service.
 #[derive(Clone)]
@@ -64,7 +65,7 @@ impl v1::room_server::Room for Service {
         let calibrated = !shared.live().uncalibrated.contains(&hello.projector_id);
         let greeting = greeting(&shared, &hello, &nodes, calibrated);
         // The greeting is queued before admission, so that it precedes anything the rounds send.
-        let (tx, rx) = mpsc::channel(QUEUE + greeting.len());
+        let (tx, rx) = mpsc::channel(greeting.len() + nodes.len() + LAG_ROUNDS);
         for m in greeting {
             // The queue was made to hold the greeting: this cannot fail.
             if tx.try_send(m).is_err() {
@@ -219,7 +220,7 @@ async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming
             }
             Some(v1::node_message::Body::Contribution(c)) => {
                 let owned = guard.owned(c.nodes.iter().map(|e| e.node));
-                let batch = match from_node_rgbs("contribution", c.nodes, |n| owned.contains(&n)) {
+                let batch = match from_node_changes(c.nodes, |n| owned.contains(&n)) {
                     Ok(batch) => batch,
                     Err(e) => {
                         tracing::warn!(%projector, error = %e, "malformed contribution: ignored");

@@ -13,7 +13,7 @@ use crate::AgentError;
 use crate::hardware::Display;
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState};
 use roomlight_proto::convert::{
-    from_node_rgbs, from_rgb, from_sparse, sparse_from_iter, to_rgb, to_sparse,
+    from_node_errors, from_rgb, from_sparse, node_change, to_rgb, to_sparse,
 };
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::collections::HashMap;
@@ -231,13 +231,14 @@ impl<D: Display> Session<'_, D> {
     }
 
     /// A round's errors for this projector's nodes: each node steps and shows its new value,
-    /// the contributions go back in one message, and the round's frame is acknowledged. An
-    /// entry for a node it does not own, or malformed, is refused (logged) and that node holds;
-    /// valid errors a node cannot use (not on its support) leave it where it is, reporting a
+    /// the changes of value go back in one message (the camera agent forms the contributions
+    /// from its columns), and the round's frame is acknowledged. An entry for a node it does
+    /// not own, or malformed, is refused (logged) and that node holds; valid errors a node
+    /// cannot use (not as many as its support has patches) leave it where it is, reporting a
     /// zero change.
     async fn errors(&mut self, e: v1::Errors) -> Result<(), AgentError> {
         let nodes = &self.nodes;
-        let batch = match from_node_rgbs("errors", e.nodes, |n| nodes.contains_key(&n)) {
+        let batch = match from_node_errors(e.nodes, |n| nodes.contains_key(&n)) {
             Ok(batch) => batch,
             Err(err) => {
                 tracing::warn!(round = e.round, error = %err, "malformed errors: ignored");
@@ -248,16 +249,14 @@ impl<D: Display> Session<'_, D> {
             tracing::warn!(round = e.round, error = %err, "errors refused: the node holds");
         }
         let mut contributions = Vec::with_capacity(batch.entries.len());
-        for entry in batch.entries {
-            let Some(state) = self.nodes.get_mut(&entry.node) else {
+        for (node, errors) in batch.entries {
+            let Some(state) = self.nodes.get_mut(&node) else {
                 continue;
             };
-            let delta = state
-                .update(&entry.values, e.restart)
-                .unwrap_or(LinearRgb::ZERO);
-            self.display.show(entry.node, state.shown());
-            self.memory.values.insert(entry.node, state.shown());
-            contributions.push(contribution(entry.node, state, delta));
+            let delta = state.update(&errors, e.restart).unwrap_or(LinearRgb::ZERO);
+            self.display.show(node, state.shown());
+            self.memory.values.insert(node, state.shown());
+            contributions.push(node_change(node, delta));
         }
         let contribution = v1::Contribution {
             round: e.round,
@@ -313,16 +312,6 @@ impl<D: Display> Session<'_, D> {
             }
         }
         acknowledge(self.display, &self.tx, show.seq, true).await
-    }
-}
-
-/// One node's contribution change `δ_n = p_n Δx_n` on its support, packed for the wire.
-fn contribution(node: u32, state: &NodeState, delta: LinearRgb) -> v1::NodeRgb {
-    let column = state.column();
-    let delta = column.values().iter().map(|p| p.hadamard(delta));
-    v1::NodeRgb {
-        node,
-        values: Some(sparse_from_iter(column.support(), delta)),
     }
 }
 
