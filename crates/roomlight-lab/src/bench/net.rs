@@ -180,6 +180,10 @@ pub struct SyntheticAgents {
     owners: HashMap<String, Vec<u32>>,
     endpoint: String,
     cancel: CancellationToken,
+    /// The node agents' token: they stop before the camera agent.
+    nodes: CancellationToken,
+    camera: tokio::task::JoinHandle<Result<(), roomlight_agent::AgentError>>,
+    /// The node agents.
     tasks: Vec<tokio::task::JoinHandle<Result<(), roomlight_agent::AgentError>>>,
 }
 
@@ -234,7 +238,9 @@ impl SyntheticAgents {
             owners,
             endpoint,
             cancel,
-            tasks: vec![camera_task],
+            nodes: CancellationToken::new(),
+            camera: camera_task,
+            tasks: Vec::new(),
         })
     }
 
@@ -251,22 +257,30 @@ impl SyntheticAgents {
                 start: LinearRgb::splat(0.5),
                 state_file: None,
             };
-            let task = node::run(config, self.room.display(), self.cancel.child_token());
+            let task = node::run(config, self.room.display(), self.nodes.child_token());
             self.tasks.push(tokio::spawn(task));
         }
     }
 
     /// Stops every agent and waits until they are gone, 10 s at most in all (a thousand
-    /// agents must not wait 5 s each); those still running then are aborted.
+    /// agents must not wait 5 s each); those still running then are aborted. The node agents
+    /// stop first, so that none of them sees the camera agent vanish (a warning each).
     pub async fn stop(self) {
-        self.cancel.cancel();
         let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+        self.nodes.cancel();
         for task in self.tasks {
-            let abort = task.abort_handle();
-            if tokio::time::timeout_at(deadline, task).await.is_err() {
-                abort.abort();
-            }
+            join_or_abort(task, deadline).await;
         }
+        self.cancel.cancel();
+        join_or_abort(self.camera, deadline).await;
+    }
+}
+
+/// Waits for `task` until `deadline`, then aborts it.
+async fn join_or_abort<T>(task: tokio::task::JoinHandle<T>, deadline: tokio::time::Instant) {
+    let abort = task.abort_handle();
+    if tokio::time::timeout_at(deadline, task).await.is_err() {
+        abort.abort();
     }
 }
 
