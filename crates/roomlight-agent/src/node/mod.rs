@@ -71,6 +71,10 @@ pub async fn run(
     loop {
         let outcome = session::run(&config, &endpoint, &mut display, &cancel, &mut memory).await;
         memory.flush();
+        if cancel.is_cancelled() {
+            // Stopping: a stream that broke while the goodbye went out is no loss to report.
+            return Ok(());
+        }
         match outcome {
             Ok(SessionEnd::Cancelled) => return Ok(()),
             Ok(SessionEnd::Closed) => backoff.reset(),
