@@ -4,6 +4,12 @@
 //! the same for `settle` and it decodes (a file renamed into place is complete at once; hidden
 //! and `.part`/`.tmp` files are never taken). inotify through `notify` wakes the wait; a poll
 //! every 50 ms covers file systems without events. It must not know radiometry.
+//!
+//! Armed, the backend announces that it wants a photograph: it writes `DIR/.wanted` holding a
+//! sequence number, one more than the file held before (so it keeps rising across restarts),
+//! after listing the folder. A tethering script, a person watching the folder, or the
+//! simulator's grab mode (`roomlight sim --grab`) shoots once per new number; the file is
+//! hidden, so it is never taken for a photograph.
 
 use crate::Backend;
 use crate::error::CameraError;
@@ -15,6 +21,16 @@ use std::time::{Duration, Instant};
 
 const POLL: Duration = Duration::from_millis(50);
 const IMAGE_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "tif", "tiff"];
+/// The file an armed backend writes its request's sequence number to, in its folder.
+pub const WANTED: &str = ".wanted";
+
+/// The sequence number in `dir`'s [`WANTED`] file; 0 when there is none (or it is not one).
+pub fn wanted(dir: &Path) -> u64 {
+    std::fs::read_to_string(dir.join(WANTED))
+        .ok()
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(0)
+}
 
 /// Waits for new image files in a folder.
 #[derive(Debug, Clone)]
@@ -109,6 +125,7 @@ impl FolderBackend {
             tracing::debug!(camera = %self.name, "no file events ({e}); polling");
         }
         let before = self.images()?.into_iter().map(|(p, _)| p).collect();
+        self.announce()?;
         Ok(Armed {
             backend: self.clone(),
             started,
@@ -116,6 +133,21 @@ impl FolderBackend {
             events,
             _watcher: watcher.ok(),
         })
+    }
+}
+
+impl FolderBackend {
+    /// Writes the next sequence number to `.wanted`, renamed into place so that a reader never
+    /// sees half a number.
+    fn announce(&self) -> Result<(), CameraError> {
+        let next = wanted(&self.dir) + 1;
+        let tmp = self.dir.join(format!("{WANTED}.tmp"));
+        std::fs::write(&tmp, format!("{next}\n"))
+            .and_then(|()| std::fs::rename(&tmp, self.dir.join(WANTED)))
+            .map_err(|e| CameraError::Gone {
+                camera: self.name.clone(),
+                reason: format!("announcing the capture in {WANTED}: {e}"),
+            })
     }
 }
 
@@ -171,5 +203,29 @@ impl Backend for FolderBackend {
 
     fn capture(&mut self, deadline: Instant) -> Result<Frame, CameraError> {
         self.arm()?.wait(deadline)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each arming announces one more than the folder's `.wanted` held, restarts included, and
+    /// the announcement is not taken for a photograph.
+    #[test]
+    fn arming_announces_a_rising_sequence_number() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        assert_eq!(wanted(dir.path()), 0);
+        let backend = FolderBackend::new(dir.path().to_path_buf(), Duration::ZERO, 1 << 20);
+        let first = backend.arm().expect("arm");
+        assert_eq!(wanted(dir.path()), 1);
+        drop(first);
+        let again = FolderBackend::new(dir.path().to_path_buf(), Duration::ZERO, 1 << 20);
+        let armed = again.arm().expect("arm");
+        assert_eq!(wanted(dir.path()), 2);
+        let err = armed
+            .wait(Instant::now() + Duration::from_millis(120))
+            .expect_err("nothing but .wanted was written");
+        assert!(matches!(err, CameraError::Timeout { .. }), "{err}");
     }
 }
