@@ -22,6 +22,23 @@ pub enum CameraError {
         asked: i64,
         got: i64,
     },
+    /// A shot whose EXIF disagrees with what was asked (or lacks the tag).
+    #[error("camera {camera}: EXIF {tag}: asked {asked}, got {got}")]
+    Exif {
+        camera: String,
+        tag: String,
+        asked: String,
+        got: String,
+    },
+    /// A camera setting (gphoto2's shutter speed, ISO, aperture) that did not take, or whose
+    /// value the camera does not offer.
+    #[error("camera {camera}: setting {setting}: asked {asked}, got {got}")]
+    Setting {
+        camera: String,
+        setting: String,
+        asked: String,
+        got: String,
+    },
     /// An image file that cannot be decoded, or that is larger than allowed.
     #[error("image {path}: {reason}")]
     Decode { path: PathBuf, reason: String },

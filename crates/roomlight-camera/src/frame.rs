@@ -4,6 +4,8 @@
 //! curves (radiometry.rs turns frames into linear light).
 
 use crate::error::CameraError;
+use crate::exif::Shot;
+use image::ImageDecoder as _;
 use std::path::Path;
 
 /// A frame's samples, row-major RGB.
@@ -23,6 +25,8 @@ pub struct Frame {
     pub samples: Samples,
     /// The exposure actually used in seconds, when the camera reports it.
     pub exposure_s: Option<f64>,
+    /// What the image file's EXIF says it was taken with (files only).
+    pub shot: Option<Shot>,
 }
 
 impl Frame {
@@ -33,12 +37,14 @@ impl Frame {
             height,
             samples: Samples::Rgb8(pixels),
             exposure_s: None,
+            shot: None,
         })
     }
 }
 
 /// Decodes an image file into a frame, refusing it before decoding when it has more than
-/// `max_pixels` pixels; every error names the file.
+/// `max_pixels` pixels; every error names the file. The EXIF, when the file has some, gives
+/// the shot's settings and the exposure used; EXIF that does not parse is an error.
 pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
     let bad = |reason: String| CameraError::Decode {
         path: path.to_path_buf(),
@@ -67,8 +73,16 @@ pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
     // RGBA16 is the widest layout a decoder allocates, plus the conversion's copy.
     limits.max_alloc = Some(pixels.saturating_mul(16).max(1 << 20));
     reader.limits(limits);
-    let image = reader
-        .decode()
+    let mut decoder = reader
+        .into_decoder()
+        .map_err(|e| bad(format!("cannot decode: {e}")))?;
+    let shot = decoder
+        .exif_metadata()
+        .map_err(|e| bad(format!("cannot read its EXIF: {e}")))?
+        .map(Shot::from_tiff)
+        .transpose()
+        .map_err(bad)?;
+    let image = image::DynamicImage::from_decoder(decoder)
         .map_err(|e| bad(format!("cannot decode: {e}")))?;
     let samples = if image.color().bytes_per_pixel() / image.color().channel_count() >= 2 {
         Samples::Rgb16(image.to_rgb16().pixels().map(|p| p.0).collect())
@@ -79,7 +93,8 @@ pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
         width,
         height,
         samples,
-        exposure_s: None,
+        exposure_s: shot.and_then(|s| s.exposure_s),
+        shot,
     })
 }
 

@@ -1,5 +1,6 @@
 //! roomlight's real cameras. This crate owns the camera backends (a folder that receives
-//! photographs, a command that writes one, a V4L2 video device), the spec and config that
+//! photographs, a command that writes one, a V4L2 video device, a DSLR through libgphoto2
+//! with each shot's EXIF checked), the spec and config that
 //! choose one, and the radiometry that turns what they deliver into linear light (response
 //! curves, saturation and under-exposure masks, dark frames). It must not know rounds, the
 //! wire, or the calibration procedure: the camera agent drives it through
@@ -9,8 +10,10 @@ pub mod adapter;
 pub mod cli;
 pub mod command;
 pub mod error;
+pub mod exif;
 pub mod folder;
 pub mod frame;
+pub mod gphoto2;
 pub mod radiometry;
 pub mod spec;
 pub mod v4l2;
@@ -19,7 +22,7 @@ pub use adapter::{Charts, HwCamera};
 pub use error::CameraError;
 pub use frame::{Frame, Samples};
 pub use radiometry::{Linearized, Radiometry, Response, calibrate_response};
-pub use spec::{CameraConfig, CameraSpec, V4l2Controls};
+pub use spec::{CameraConfig, CameraSpec, Gphoto2Settings, V4l2Controls};
 
 use std::time::{Duration, Instant};
 
@@ -33,8 +36,16 @@ pub trait Backend: Send {
     fn capture(&mut self, deadline: Instant) -> Result<Frame, CameraError>;
 }
 
-/// Opens the backend a config names.
+/// Opens the backend a config names; with `expect_exif`, every shot's EXIF is checked.
 pub fn open_backend(config: &CameraConfig) -> Result<Box<dyn Backend>, CameraError> {
+    let backend = open_unchecked(config)?;
+    Ok(match config.expect_exif {
+        Some(expect) => Box::new(exif::Checked::new(backend, expect)),
+        None => backend,
+    })
+}
+
+fn open_unchecked(config: &CameraConfig) -> Result<Box<dyn Backend>, CameraError> {
     Ok(match &config.spec {
         CameraSpec::Folder(dir) => Box::new(folder::FolderBackend::new(
             dir.clone(),
@@ -52,11 +63,6 @@ pub fn open_backend(config: &CameraConfig) -> Result<Box<dyn Backend>, CameraErr
             })?;
             Box::new(v4l2::V4l2Backend::open(path.clone(), controls)?)
         }
-        CameraSpec::Gphoto2(_) => {
-            return Err(CameraError::Spec {
-                spec: config.spec.to_string(),
-                reason: "the gphoto2 backend is not written yet".into(),
-            });
-        }
+        CameraSpec::Gphoto2(port) => gphoto2::open(port.as_deref(), config)?,
     })
 }

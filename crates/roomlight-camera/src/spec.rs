@@ -4,6 +4,7 @@
 //! It must not open devices.
 
 use crate::error::CameraError;
+use crate::exif::ExpectExif;
 use crate::radiometry::Response;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -114,6 +115,31 @@ fn default_size() -> [u32; 2] {
     [1280, 720]
 }
 
+/// A DSLR's settings for a session (`gphoto2:` cameras): each is set to the camera's nearest
+/// offered value (within 3 %), read back, and checked in every shot's EXIF.
+/// `gphoto2 = { exposure_s = 0.0333, iso = 100, f_number = 8.0 }`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Gphoto2Settings {
+    /// Shutter speed in seconds.
+    pub exposure_s: f64,
+    pub iso: u32,
+    /// `None`: a lens without electronic aperture (left as it is, not checked).
+    #[serde(default)]
+    pub f_number: Option<f64>,
+}
+
+impl Gphoto2Settings {
+    /// What every shot's EXIF must say.
+    pub fn expected(&self) -> ExpectExif {
+        ExpectExif {
+            exposure_s: Some(self.exposure_s),
+            iso: Some(self.iso),
+            f_number: self.f_number,
+        }
+    }
+}
+
 /// The camera agent's camera, as its config file holds it:
 /// `camera = { spec = "v4l2:/dev/video0", timeout_s = 5, response = "srgb" }`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -144,6 +170,13 @@ pub struct CameraConfig {
     /// For `folder:` cameras: how long a new file's size must stay the same before it counts.
     #[serde(default = "default_settle_ms")]
     pub settle_ms: u64,
+    /// For `gphoto2:` cameras: shutter, ISO and aperture (required there, refused elsewhere).
+    #[serde(default)]
+    pub gphoto2: Option<Gphoto2Settings>,
+    /// For `folder:` and `command:` cameras (a tethered DSLR writing files): what every shot's
+    /// EXIF must say; a shot that disagrees is refused naming the tag.
+    #[serde(default)]
+    pub expect_exif: Option<ExpectExif>,
 }
 
 fn default_timeout_s() -> f64 {
@@ -175,6 +208,8 @@ impl CameraConfig {
             max_pixels: default_max_pixels(),
             v4l2: None,
             settle_ms: default_settle_ms(),
+            gphoto2: None,
+            expect_exif: None,
         }
     }
 
@@ -200,6 +235,32 @@ impl CameraConfig {
             return Err(bad("max_pixels = 0".into()));
         }
         self.response.validate().map_err(bad)?;
+        if let Some(expect) = &self.expect_exif {
+            expect.validate().map_err(bad)?;
+            if !matches!(self.spec, CameraSpec::Folder(_) | CameraSpec::Command(_)) {
+                return Err(bad(
+                    "expect_exif is for folder: and command: cameras (gphoto2 checks its own \
+                     settings; video frames have no EXIF)"
+                        .into(),
+                ));
+            }
+        }
+        match (&self.spec, &self.gphoto2) {
+            (CameraSpec::Gphoto2(_), None) => {
+                return Err(bad(
+                    "a gphoto2 camera needs gphoto2 = { exposure_s = ..., iso = ... }: its \
+                     settings are set and checked per session"
+                        .into(),
+                ));
+            }
+            (CameraSpec::Gphoto2(_), Some(g)) => g.expected().validate().map_err(bad)?,
+            (_, Some(_)) => {
+                return Err(bad(
+                    "gphoto2 settings given for a camera that is not gphoto2".into(),
+                ));
+            }
+            (_, None) => {}
+        }
         match (&self.spec, &self.v4l2) {
             (CameraSpec::V4l2(_), None) => Err(bad(
                 "a v4l2 camera needs v4l2 = { exposure_100us = ... }: auto exposure is refused"

@@ -257,6 +257,7 @@ impl Backend for V4l2Backend {
                     height: h,
                     samples: Samples::Rgb8(pixels),
                     exposure_s: Some(self.exposure_s),
+                    shot: None,
                 });
             }
         }

@@ -58,6 +58,7 @@ fn saturated_and_underexposed_pixels_are_masked_and_dark_frames_subtracted() {
         height: 1,
         samples: Samples::Rgb16(vec![[65535 / 2, 0, 1000]]),
         exposure_s: None,
+        shot: None,
     };
     let l = Radiometry::new(&Response::Srgb, 250, 0)
         .linearize(&deep, "deep")
