@@ -142,10 +142,110 @@ pub trait Display: Send + 'static {
     fn flush(&mut self) -> impl Future<Output = ()> + Send {
         std::future::ready(())
     }
+
+    /// Follows the display's state (showing, or lost and why), for the node agent to tell the
+    /// camera agent; `None` for displays without such a state (the simulator's).
+    fn state_feed(&self) -> Option<DisplayFeed> {
+        None
+    }
+}
+
+/// What a display says of itself: showing on its output, or lost (unplugged, window closed)
+/// and why. Strings are the display's own words; the wire bounds them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DisplayReport {
+    Showing { output: String },
+    Lost { output: String, reason: String },
+}
+
+impl DisplayReport {
+    /// Its output's name.
+    pub fn output(&self) -> &str {
+        match self {
+            Self::Showing { output } | Self::Lost { output, .. } => output,
+        }
+    }
+}
+
+/// A display's state as it changes: any `watch` channel of the display's own state type,
+/// described as a [`DisplayReport`] (so the agent needs no display crate's types).
+pub struct DisplayFeed(Box<dyn Feed>);
+
+impl std::fmt::Debug for DisplayFeed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_tuple("DisplayFeed").finish_non_exhaustive()
+    }
+}
+
+trait Feed: Send {
+    fn now(&mut self) -> DisplayReport;
+    fn changed(&mut self) -> std::pin::Pin<Box<dyn Future<Output = bool> + Send + '_>>;
+}
+
+/// How a display's own state reads as a report.
+type Describe<T> = Box<dyn Fn(&T) -> DisplayReport + Send>;
+
+struct WatchFeed<T> {
+    rx: tokio::sync::watch::Receiver<T>,
+    describe: Describe<T>,
+}
+
+impl<T: Send + Sync> Feed for WatchFeed<T> {
+    fn now(&mut self) -> DisplayReport {
+        (self.describe)(&self.rx.borrow_and_update())
+    }
+
+    fn changed(&mut self) -> std::pin::Pin<Box<dyn Future<Output = bool> + Send + '_>> {
+        Box::pin(async { self.rx.changed().await.is_ok() })
+    }
+}
+
+impl DisplayFeed {
+    /// Follows `rx`, each state described by `describe`.
+    pub fn from_watch<T: Send + Sync + 'static>(
+        rx: tokio::sync::watch::Receiver<T>,
+        describe: impl Fn(&T) -> DisplayReport + Send + 'static,
+    ) -> Self {
+        Self(Box::new(WatchFeed {
+            rx,
+            describe: Box::new(describe),
+        }))
+    }
+
+    /// The state now.
+    pub fn now(&mut self) -> DisplayReport {
+        self.0.now()
+    }
+
+    /// The next state that differs from the last one returned (a loss whose reason changes
+    /// between retries counts as a change); `None` once the display has gone for good.
+    pub async fn next(&mut self, last: &DisplayReport) -> Option<DisplayReport> {
+        loop {
+            if !self.0.changed().await {
+                return None;
+            }
+            let now = self.0.now();
+            if &now != last {
+                return Some(now);
+            }
+        }
+    }
 }
 
 /// Measures the chart patches (linear camera values, one per patch).
 pub trait Camera: Send + 'static {
+    /// Its name in logs and the status (e.g. its spec, `v4l2:/dev/video0`).
+    fn name(&self) -> &str {
+        "camera"
+    }
+
+    /// How long one capture (of the normal exposure) may take before the camera agent abandons
+    /// it as hung. A camera with a timeout of its own should make this a little longer than
+    /// that one, so its own, more precise error is the one logged. By default a minute.
+    fn capture_timeout(&self) -> std::time::Duration {
+        std::time::Duration::from_secs(60)
+    }
+
     /// One capture of every patch.
     fn capture(&mut self)
     -> impl Future<Output = Result<Vec<LinearRgb>, crate::AgentError>> + Send;

@@ -64,6 +64,9 @@ pub enum ProtoError {
     /// One node's entry of a batched message is malformed.
     #[error("node {node}: {reason}")]
     Node { node: u32, reason: Box<ProtoError> },
+    /// An enumeration's value this build does not know (or the unspecified one).
+    #[error("{field}: {value} is not a known value")]
+    UnknownValue { field: &'static str, value: i32 },
 }
 
 /// Largest sparse vector accepted (a node's support, or a room's patches).
@@ -71,6 +74,10 @@ pub const MAX_SPARSE_ENTRIES: usize = 1_000_000;
 
 /// Most node entries one batched message may carry (a node agent drives one projector).
 pub const MAX_BATCH_NODES: usize = 65_536;
+
+/// Longest output name or reason a `DisplayStatus` may carry, in bytes: enough for any
+/// output's name and an X error, too little to fill a camera agent's log.
+pub const MAX_DISPLAY_TEXT: usize = 256;
 
 impl From<ProtoError> for tonic::Status {
     fn from(e: ProtoError) -> Self {
@@ -338,4 +345,47 @@ pub fn from_rgb(field: &'static str, v: Option<&v1::Rgb>) -> Result<LinearRgb, P
         });
     }
     Ok(out)
+}
+
+/// A node's `DisplayStatus`, its strings cut to [`MAX_DISPLAY_TEXT`] bytes (at a character
+/// boundary) so the camera agent never refuses it for its length.
+pub fn display_status(state: v1::DisplayState, output: &str, reason: &str) -> v1::DisplayStatus {
+    v1::DisplayStatus {
+        state: state as i32,
+        output: bounded(output).to_string(),
+        reason: bounded(reason).to_string(),
+    }
+}
+
+/// At most [`MAX_DISPLAY_TEXT`] bytes of `s`, cut at a character boundary.
+fn bounded(s: &str) -> &str {
+    let mut end = s.len().min(MAX_DISPLAY_TEXT);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    &s[..end]
+}
+
+/// A `DisplayStatus` from the wire, checked: showing or lost (not unspecified, not a value of a
+/// later version), its output and reason at most [`MAX_DISPLAY_TEXT`] bytes.
+pub fn check_display_status(s: &v1::DisplayStatus) -> Result<v1::DisplayState, ProtoError> {
+    for (field, text) in [
+        ("display_status.output", &s.output),
+        ("display_status.reason", &s.reason),
+    ] {
+        if text.len() > MAX_DISPLAY_TEXT {
+            return Err(ProtoError::TooLarge {
+                field,
+                len: text.len(),
+                max: MAX_DISPLAY_TEXT,
+            });
+        }
+    }
+    match v1::DisplayState::try_from(s.state) {
+        Ok(state @ (v1::DisplayState::Showing | v1::DisplayState::Lost)) => Ok(state),
+        _ => Err(ProtoError::UnknownValue {
+            field: "display_status.state",
+            value: s.state,
+        }),
+    }
 }

@@ -3,8 +3,9 @@
 use prost::Message;
 use roomlight_core::LinearRgb;
 use roomlight_proto::convert::{
-    MAX_BATCH_NODES, ProtoError, from_node_changes, from_node_errors, from_rgb, from_sparse,
-    node_change, node_errors, pack_patches, pack_rgb, to_rgb, to_sparse,
+    MAX_BATCH_NODES, MAX_DISPLAY_TEXT, ProtoError, check_display_status, display_status,
+    from_node_changes, from_node_errors, from_rgb, from_sparse, node_change, node_errors,
+    pack_patches, pack_rgb, to_rgb, to_sparse,
 };
 use roomlight_proto::v1;
 
@@ -164,4 +165,68 @@ fn malformed_entries_of_a_batch_are_refused_one_by_one() {
         from_node_changes(flood, |_| true),
         Err(ProtoError::TooLarge { .. })
     ));
+}
+
+#[test]
+fn a_display_status_is_bounded_on_the_way_out_and_checked_on_the_way_in() {
+    let lost = display_status(v1::DisplayState::Lost, "HDMI-1", "output HDMI-1 is gone");
+    let back = v1::DisplayStatus::decode(lost.encode_to_vec().as_slice()).expect("decodes");
+    assert_eq!(check_display_status(&back), Ok(v1::DisplayState::Lost));
+    assert_eq!(
+        (back.output.as_str(), back.reason.as_str()),
+        ("HDMI-1", "output HDMI-1 is gone")
+    );
+    // A long reason of multi-byte characters is cut at a character boundary, under the bound.
+    let long = "é".repeat(MAX_DISPLAY_TEXT);
+    let cut = display_status(v1::DisplayState::Lost, "A", &long);
+    assert!(cut.reason.len() <= MAX_DISPLAY_TEXT && cut.reason.len() >= MAX_DISPLAY_TEXT - 1);
+    assert!(cut.reason.chars().all(|c| c == 'é'));
+    assert_eq!(check_display_status(&cut), Ok(v1::DisplayState::Lost));
+    // Refused: a string over the bound, the unspecified state, a state of a later version.
+    let too_long = v1::DisplayStatus {
+        state: v1::DisplayState::Lost as i32,
+        output: "x".repeat(MAX_DISPLAY_TEXT + 1),
+        reason: String::new(),
+    };
+    assert!(matches!(
+        check_display_status(&too_long),
+        Err(ProtoError::TooLarge {
+            field: "display_status.output",
+            ..
+        })
+    ));
+    for state in [0, 7] {
+        let s = v1::DisplayStatus {
+            state,
+            ..Default::default()
+        };
+        let e = check_display_status(&s).expect_err("refused");
+        assert!(e.to_string().contains("display_status.state"), "{e}");
+    }
+}
+
+#[test]
+fn a_display_status_is_a_message_without_a_body_to_a_camera_agent_that_predates_it() {
+    // A NodeMessage as version 3 had it before DisplayStatus: an older camera agent decodes the
+    // new message as one without a body, which it ignores.
+    #[derive(Clone, PartialEq, prost::Message)]
+    struct OldNodeMessage {
+        #[prost(oneof = "OldBody", tags = "4")]
+        body: Option<OldBody>,
+    }
+    #[derive(Clone, PartialEq, prost::Oneof)]
+    enum OldBody {
+        #[prost(message, tag = "4")]
+        Heartbeat(v1::Heartbeat),
+    }
+    let new = v1::NodeMessage {
+        body: Some(v1::node_message::Body::DisplayStatus(display_status(
+            v1::DisplayState::Lost,
+            "A",
+            "gone",
+        ))),
+    };
+    let old =
+        OldNodeMessage::decode(new.encode_to_vec().as_slice()).expect("an old peer decodes it");
+    assert_eq!(old.body, None);
 }

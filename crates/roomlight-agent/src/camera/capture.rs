@@ -1,40 +1,91 @@
 //! Captures the nodes can act on: the camera's stale frames discarded first (every frame
-//! counted), patches checked against the model, and with a survey the charts sampled in a whole
-//! image. It knows nothing of peers or rounds.
+//! counted), each capture abandoned after the camera's timeout, patches checked against the
+//! model, and with a survey the charts sampled in a whole image. It keeps the camera's health
+//! (`faults`): a capture that fails or cannot be used is logged once with the camera's name, the
+//! error and the next try, and the state is published in the room's status; the first that
+//! works again is logged once too. It knows nothing of peers or rounds.
 
 use super::Shared;
+use super::faults::{CameraHealth, CameraState};
 use crate::hardware::Camera;
 use roomlight_calib::image_io::LinearImage;
 use roomlight_core::LinearRgb;
+use std::time::{Duration, SystemTime};
 
-/// The camera and how many frames it has taken.
+/// The camera, how many frames it has taken, and whether it works.
 pub(super) struct Captures<C> {
     camera: C,
     /// Captures taken, stale ones included.
     pub(super) count: u64,
+    health: CameraHealth,
+    /// When the camera may be tried again after a failure.
+    retry_at: Option<tokio::time::Instant>,
 }
 
 impl<C: Camera> Captures<C> {
     pub(super) fn new(camera: C) -> Self {
-        Self { camera, count: 0 }
+        Self {
+            camera,
+            count: 0,
+            health: CameraHealth::default(),
+            retry_at: None,
+        }
     }
 
-    /// One capture the nodes can act on. `None` when the camera failed or handed over the wrong
-    /// number of patches (logged).
-    async fn fresh(&mut self, shared: &Shared) -> Option<Vec<LinearRgb>> {
+    /// The camera's state now.
+    pub(super) fn state(&self) -> &CameraState {
+        self.health.state()
+    }
+
+    /// When the camera may be tried again; `None` when it is not failing.
+    pub(super) fn retry_at(&self) -> Option<tokio::time::Instant> {
+        self.retry_at
+    }
+
+    /// Records a capture's outcome: logs and publishes a failure (and when to try again) or
+    /// the end of an outage.
+    fn record<T>(&mut self, shared: &Shared, outcome: Result<T, String>) -> Option<T> {
+        let camera = self.camera.name();
+        match outcome {
+            Ok(v) => {
+                self.retry_at = None;
+                if let Some(back) = self.health.succeeded() {
+                    let down = SystemTime::now()
+                        .duration_since(back.since)
+                        .unwrap_or_default();
+                    tracing::info!(%camera, failures = back.failures, ?down, "camera back: rounds resume");
+                    shared.publish_camera(self.health.state());
+                }
+                Some(v)
+            }
+            Err(error) => {
+                let retry_in = self.health.failed(error.clone(), SystemTime::now());
+                self.retry_at = Some(tokio::time::Instant::now() + retry_in);
+                let CameraState::Failing { failures, .. } = self.health.state() else {
+                    return None;
+                };
+                tracing::warn!(%camera, %error, failures, ?retry_in, "capture failed: round abandoned, the projectors keep their light; next try in {retry_in:?}");
+                shared.publish_camera(self.health.state());
+                None
+            }
+        }
+    }
+
+    /// One capture the nodes can act on: an error when the camera failed or handed over the
+    /// wrong number of patches.
+    async fn fresh(&mut self, shared: &Shared) -> Result<Vec<LinearRgb>, String> {
+        let timeout = self.camera.capture_timeout();
         let y = self
-            .latest(shared, async |c: &mut C| c.capture().await)
+            .latest(shared, timeout, async |c: &mut C| c.capture().await)
             .await?;
         let patches = shared.live().problem.patches();
         if y.len() != patches {
-            tracing::error!(
-                got = y.len(),
-                expected = patches,
-                "capture has the wrong number of patches"
-            );
-            return None;
+            return Err(format!(
+                "the capture has {} patches, the model {patches}",
+                y.len()
+            ));
         }
-        Some(y)
+        Ok(y)
     }
 
     /// A capture of the model's patches, with whether each could be measured: with a survey, a
@@ -45,50 +96,46 @@ impl<C: Camera> Captures<C> {
         &mut self,
         shared: &Shared,
     ) -> Option<(Vec<LinearRgb>, Vec<bool>)> {
+        let outcome = self.try_measured(shared).await;
+        self.record(shared, outcome)
+    }
+
+    async fn try_measured(
+        &mut self,
+        shared: &Shared,
+    ) -> Result<(Vec<LinearRgb>, Vec<bool>), String> {
         let Some(survey) = &shared.survey else {
             let y = self.fresh(shared).await?;
             let ok = vec![true; y.len()];
-            return Some((y, ok));
+            return Ok((y, ok));
         };
-        let image = self.image(shared).await?;
+        let timeout = self.camera.capture_timeout();
+        let image = self
+            .latest(shared, timeout, async |c: &mut C| c.capture_image().await)
+            .await?;
         let samples =
-            match roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample) {
-                Ok(s) => s,
-                Err(e) => {
-                    tracing::warn!(error = %e, "the charts could not be sampled");
-                    return None;
-                }
-            };
+            roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample)
+                .map_err(|e| format!("the charts could not be sampled: {e}"))?;
         let mut means = Vec::with_capacity(survey.patches.len());
         let mut ok = Vec::with_capacity(survey.patches.len());
         for &i in &survey.patches {
             let Some(sample) = samples.get(i) else {
-                tracing::error!(
-                    patch = i,
-                    charts = samples.len(),
-                    "the survey names a patch the charts lack"
-                );
-                return None;
+                return Err(format!(
+                    "the survey names patch {i}, the charts have {}",
+                    samples.len()
+                ));
             };
             means.push(sample.mean);
             ok.push(sample.status == roomlight_calib::charts::PatchStatus::Ok);
         }
         let patches = shared.live().problem.patches();
         if means.len() != patches {
-            tracing::error!(
-                surveyed = means.len(),
-                expected = patches,
-                "the survey's patches do not match the model's"
-            );
-            return None;
+            return Err(format!(
+                "the survey has {} patches, the model {patches}",
+                means.len()
+            ));
         }
-        Some((means, ok))
-    }
-
-    /// One whole image, the camera's stale frames discarded first (every frame counted).
-    pub(super) async fn image(&mut self, shared: &Shared) -> Option<LinearImage> {
-        self.latest(shared, async |c: &mut C| c.capture_image().await)
-            .await
+        Ok((means, ok))
     }
 
     /// One whole image exposed `exposure` times as long as normal (in the units of a normal
@@ -98,10 +145,14 @@ impl<C: Camera> Captures<C> {
         shared: &Shared,
         exposure: f32,
     ) -> Option<LinearImage> {
-        self.latest(shared, async move |c: &mut C| {
-            c.capture_image_exposed(exposure).await
-        })
-        .await
+        // A longer exposure may take as much longer.
+        let timeout = self.camera.capture_timeout().mul_f32(exposure.max(1.0));
+        let outcome = self
+            .latest(shared, timeout, async move |c: &mut C| {
+                c.capture_image_exposed(exposure).await
+            })
+            .await;
+        self.record(shared, outcome)
     }
 
     /// The camera's limits, for calibration.
@@ -109,26 +160,25 @@ impl<C: Camera> Captures<C> {
         self.camera.limits()
     }
 
-    /// The last of `stale_frames + 1` captures taken with `take` (every one counted); `None`
-    /// when one failed (logged).
+    /// The last of `stale_frames + 1` captures taken with `take` (every one counted), each
+    /// abandoned after `timeout`; an error naming the first that failed or hung.
     async fn latest<T>(
         &mut self,
         shared: &Shared,
+        timeout: Duration,
         mut take: impl AsyncFnMut(&mut C) -> Result<T, crate::AgentError>,
-    ) -> Option<T> {
+    ) -> Result<T, String> {
         let mut last = None;
         for _ in 0..=shared.config.stale_frames {
-            match take(&mut self.camera).await {
-                Ok(v) => {
+            match tokio::time::timeout(timeout, take(&mut self.camera)).await {
+                Ok(Ok(v)) => {
                     self.count += 1;
                     last = Some(v);
                 }
-                Err(e) => {
-                    tracing::warn!(error = %e, "capture failed");
-                    return None;
-                }
+                Ok(Err(e)) => return Err(e.to_string()),
+                Err(_) => return Err(format!("no capture within {timeout:?} (hung)")),
             }
         }
-        last
+        last.ok_or_else(|| "no capture taken".to_string())
     }
 }

@@ -9,13 +9,16 @@
 //! - `service`: the gRPC `Room.Attach` handshake, admission, and each peer's reader task;
 //! - `registry`: the live peers (admission, readiness, removal by a guard's `Drop`);
 //! - `rounds`: the round loop;
-//! - `capture`: captures the nodes can act on (stale frames discarded, charts sampled);
+//! - `capture`: captures the nodes can act on (stale frames discarded, charts sampled, hung
+//!   captures abandoned) and the camera's health;
+//! - `faults`: the camera's typed state and the backoff after a failed capture;
 //! - `calibration`: the calibration procedure driven over the wire (bring-up, joins, hot);
 //! - `rig`: the procedure's rig over the peers (Show and Assign messages, the camera);
 //! - `model`: the live model (attenuation, `s`, starts, patches left out) and its file.
 
 mod calibration;
 mod capture;
+mod faults;
 mod model;
 mod registry;
 mod rig;
@@ -23,6 +26,7 @@ mod rounds;
 mod service;
 
 use crate::hardware::Camera;
+pub use faults::{CameraState, RETRY_FIRST, RETRY_MAX};
 use model::Live;
 use prost::Message;
 use registry::{Outbox, Registry};
@@ -132,6 +136,21 @@ pub struct RoomStatus {
     pub settled: bool,
     /// Projectors calibrated hot so far.
     pub calibrated_hot: u64,
+    /// Whether the camera works; while it fails, rounds are abandoned and the projectors keep
+    /// their light.
+    pub camera: CameraState,
+    /// Attached projectors whose node agent says its display is lost (they stay attached).
+    pub displays_lost: Vec<DisplayLost>,
+}
+
+/// A projector whose display is lost, as its node agent reported it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DisplayLost {
+    pub projector: String,
+    /// The display's output (e.g. `HDMI-1`).
+    pub output: String,
+    /// Why, in the display's words.
+    pub reason: String,
 }
 
 /// A node agent's contributions for a round, as its reader passed them on: each node it owns
@@ -162,6 +181,8 @@ struct Shared {
     tracker: TaskTracker,
     /// Peers dropped for lagging, logged at a limited rate.
     lagging: Mutex<LagLog>,
+    /// The room's status, as the round loop and the readers update it.
+    status: watch::Sender<RoomStatus>,
 }
 
 impl Shared {
@@ -214,6 +235,25 @@ impl Shared {
         true
     }
 
+    /// Publishes the camera's state (at once: a failing camera runs no round to report it).
+    fn publish_camera(&self, state: &CameraState) {
+        self.status.send_if_modified(|s| {
+            let changed = s.camera != *state;
+            s.camera = state.clone();
+            changed
+        });
+    }
+
+    /// Publishes which displays are lost now (at once: the rounds go on without them).
+    fn publish_displays(&self) {
+        let lost = self.registry.lock().displays_lost();
+        self.status.send_if_modified(|s| {
+            let changed = s.displays_lost != lost;
+            s.displays_lost = lost;
+            changed
+        });
+    }
+
     /// Writes the model to `model_out`, if configured (a failure is logged: the rounds go on).
     fn save_model(&self) {
         if let Some(path) = &self.config.model_out
@@ -238,6 +278,7 @@ pub fn serve(
 ) {
     let (contributions, contrib_rx) = mpsc::channel(4096);
     let live = Live::new(&model);
+    let (status, status_rx) = watch::channel(RoomStatus::default());
     let shared = Arc::new(Shared {
         config,
         survey: model.survey,
@@ -250,9 +291,9 @@ pub fn serve(
         cancel: CancellationToken::new(),
         tracker: TaskTracker::new(),
         lagging: Mutex::new(LagLog::default()),
+        status,
     });
-    let (status_tx, status_rx) = watch::channel(RoomStatus::default());
-    let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx, status_tx);
+    let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx);
     let handle = tokio::spawn(run(shared, rounds, listener, cancel));
     (status_rx, handle)
 }

@@ -1,10 +1,13 @@
 //! The registry of live peers: per attached projector its outbound queue and what only the wire
-//! knows of it (its stream, its resolution, the last calibration pattern it shows), beside the
+//! knows of it (its stream, its resolution, the last calibration pattern it shows, what its
+//! node agent says of its display), beside the
 //! core's [`Projectors`] (its nodes, what it shows, readiness, node → projector). Admission
 //! checks and inserts under one lock; a guard's `Drop` removes a peer, so every way a reader
 //! ends cleans up; the nodes of peers that left are kept for the round waiting on them. Waiters
 //! are woken on every change. It knows nothing of the model, the camera or message contents.
 
+use super::DisplayLost;
+use crate::hardware::DisplayReport;
 use roomlight_core::round::Projectors;
 use roomlight_proto::v1;
 use std::collections::HashMap;
@@ -30,6 +33,8 @@ pub(super) struct Peer {
     pub(super) width: u32,
     pub(super) height: u32,
     pub(super) kind: v1::ProjectorKind,
+    /// Its display's state as its node agent last reported it (`None`: never reported).
+    pub(super) display: Option<DisplayReport>,
     /// Which stream this entry belongs to (a reconnected projector gets a new one).
     connection: u64,
     /// Ends its reader when the peer is dropped by the camera agent (lagging, shutdown).
@@ -45,6 +50,7 @@ impl Peer {
             width: hello.width,
             height: hello.height,
             kind: v1::ProjectorKind::try_from(hello.kind).unwrap_or(v1::ProjectorKind::Unspecified),
+            display: None,
             connection: 0,
             cancel,
         }
@@ -76,6 +82,24 @@ impl Peers {
     /// The projectors attached now.
     pub(super) fn len(&self) -> usize {
         self.wire.len()
+    }
+
+    /// The attached projectors whose display is lost, by projector id.
+    pub(super) fn displays_lost(&self) -> Vec<DisplayLost> {
+        let mut lost: Vec<DisplayLost> = self
+            .wire
+            .iter()
+            .filter_map(|(id, p)| match &p.display {
+                Some(DisplayReport::Lost { output, reason }) => Some(DisplayLost {
+                    projector: id.clone(),
+                    output: output.clone(),
+                    reason: reason.clone(),
+                }),
+                _ => None,
+            })
+            .collect();
+        lost.sort_by(|a, b| a.projector.cmp(&b.projector));
+        lost
     }
 
     /// Its queue and nodes.
@@ -286,6 +310,21 @@ impl PeerGuard {
         self.registry.notify();
     }
 
+    /// Its node agent reported its display's state: recorded (the projector stays attached);
+    /// the state it replaces, or `None` when this stream is no longer the projector's.
+    pub(super) fn display(&self, report: DisplayReport) -> Option<Option<DisplayReport>> {
+        let previous = {
+            let mut peers = self.registry.lock();
+            let peer = peers
+                .wire
+                .get_mut(&self.projector)
+                .filter(|p| p.connection == self.connection)?;
+            peer.display.replace(report)
+        };
+        self.registry.notify();
+        Some(previous)
+    }
+
     /// Which of `nodes` this stream's projector owns (O(1) each: the controller's node →
     /// projector index), under one lock (a batched message names all a projector's nodes).
     pub(super) fn owned(&self, nodes: impl Iterator<Item = u32>) -> Vec<u32> {
@@ -412,5 +451,43 @@ mod tests {
         assert_eq!(departed, vec![4, 5]);
         drop(guard);
         assert!(registry.lock().take_departed().is_empty(), "removed once");
+    }
+
+    #[test]
+    fn a_lost_display_is_recorded_per_projector_and_forgotten_when_it_leaves() {
+        let registry = Arc::new(Registry::default());
+        let (a, _ra) = peer();
+        let (b, _rb) = peer();
+        let ga = registry.admit("a", a, vec![0], true).expect("a");
+        let gb = registry.admit("b", b, vec![1], true).expect("b");
+        let lost = DisplayReport::Lost {
+            output: "HDMI-1".into(),
+            reason: "output HDMI-1 is gone".into(),
+        };
+        assert_eq!(ga.display(lost.clone()), Some(None));
+        assert_eq!(
+            gb.display(DisplayReport::Showing {
+                output: "HDMI-2".into()
+            }),
+            Some(None)
+        );
+        let expected = vec![DisplayLost {
+            projector: "a".into(),
+            output: "HDMI-1".into(),
+            reason: "output HDMI-1 is gone".into(),
+        }];
+        assert_eq!(registry.lock().displays_lost(), expected);
+        assert_eq!(registry.lock().len(), 2, "a lost display stays attached");
+        let back = DisplayReport::Showing {
+            output: "HDMI-1".into(),
+        };
+        assert_eq!(ga.display(back), Some(Some(lost.clone())));
+        assert!(registry.lock().displays_lost().is_empty());
+        ga.display(lost);
+        drop(ga);
+        assert!(
+            registry.lock().displays_lost().is_empty(),
+            "left: forgotten"
+        );
     }
 }

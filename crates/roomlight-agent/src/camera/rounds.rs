@@ -1,7 +1,9 @@
 //! The round loop: calibrate the projectors waiting for it (backing off on failure) while the
 //! others go on; wait until every live projector shows its last frame (late ones are left out),
 //! capture, send each node agent the errors on its nodes' supports, collect contributions, run
-//! model rounds, and report a status. What the next round is, its restart flag and whether the
+//! model rounds, and report a status. A capture that fails or hangs abandons the round: nothing
+//! is sent (the projectors keep their light) and the loop waits out the camera's backoff before
+//! it captures again (`faults`). What the next round is, its restart flag and whether the
 //! room has settled are the core's round controller's decisions (`roomlight_core::round::
 //! Controller`, the same the in-memory closed loop makes); this loop carries them out over the
 //! wire. It knows nothing of the handshake or how a peer's stream is read.
@@ -17,7 +19,7 @@ use roomlight_proto::v1;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 
 /// What to do after looking at the projectors waiting for their calibration.
@@ -35,7 +37,6 @@ pub(super) struct Rounds<C> {
     shared: Arc<Shared>,
     eye: Captures<C>,
     contributions: mpsc::Receiver<Contribution>,
-    status: watch::Sender<RoomStatus>,
     /// Captures and model rounds, the errors, restarts and settling.
     controller: Controller,
     calibrated_hot: u64,
@@ -50,7 +51,6 @@ impl<C: Camera> Rounds<C> {
         shared: Arc<Shared>,
         camera: C,
         contributions: mpsc::Receiver<Contribution>,
-        status: watch::Sender<RoomStatus>,
     ) -> Self {
         let sigma = shared.live().problem.noise().to_vec();
         let model_rounds = shared.config.model_rounds;
@@ -58,7 +58,6 @@ impl<C: Camera> Rounds<C> {
             shared,
             eye: Captures::new(camera),
             contributions,
-            status,
             controller: Controller::new(sigma, model_rounds),
             calibrated_hot: 0,
             backoff: Backoff::default(),
@@ -78,6 +77,14 @@ impl<C: Camera> Rounds<C> {
             };
             if !present {
                 continue;
+            }
+            // A failing camera is tried again only after its backoff: meanwhile nothing is
+            // captured, no errors are sent, and the projectors keep their light.
+            if let Some(at) = self.eye.retry_at() {
+                tokio::select! {
+                    () = tokio::time::sleep_until(at) => {}
+                    () = cancel.cancelled() => break,
+                }
             }
             match self.calibrate_waiting(&cancel).await {
                 Next::Again => continue,
@@ -143,8 +150,8 @@ impl<C: Camera> Rounds<C> {
             .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
             .await;
         let Some((y, ok)) = self.eye.measured(&shared).await else {
-            // The camera is unreachable: the lights stay as they are; try again.
-            tokio::time::sleep(Duration::from_millis(200)).await;
+            // The round is abandoned (logged, the camera's state published): nothing is sent,
+            // the lights stay as they are, and the loop tries again after the backoff.
             return;
         };
         self.leave_out_unmeasurable(&ok).await;
@@ -173,8 +180,11 @@ impl<C: Camera> Rounds<C> {
             round = summary.round;
             self.round_trip(&summary).await;
         }
-        let live_projectors = shared.registry.lock().len();
-        self.status.send_replace(RoomStatus {
+        let (live_projectors, displays_lost) = {
+            let peers = shared.registry.lock();
+            (peers.len(), peers.displays_lost())
+        };
+        shared.status.send_replace(RoomStatus {
             round,
             captures: self.eye.count,
             measured_objective,
@@ -183,6 +193,8 @@ impl<C: Camera> Rounds<C> {
             bytes_in: shared.bytes_in.swap(0, Ordering::Relaxed),
             settled: self.controller.settled(),
             calibrated_hot: self.calibrated_hot,
+            camera: self.eye.state().clone(),
+            displays_lost,
         });
     }
 

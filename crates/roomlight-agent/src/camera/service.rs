@@ -1,12 +1,14 @@
 //! The gRPC `Room.Attach` service: the handshake (Hello → checks → Welcome, Assign and each
 //! node's attenuation), admission into the registry, and the per-peer reader task that turns a
-//! node agent's messages into registry updates and contributions. It knows nothing of rounds or
+//! node agent's messages into registry updates (readiness, its display's state) and
+//! contributions. It knows nothing of rounds or
 //! the camera: the round loop reads what the readers leave in the registry and the channel.
 
 use super::registry::{Peer, PeerGuard};
 use super::{Contribution, Shared};
+use crate::hardware::DisplayReport;
 use prost::Message;
-use roomlight_proto::convert::from_node_changes;
+use roomlight_proto::convert::{check_display_status, from_node_changes};
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::pin::Pin;
@@ -188,7 +190,7 @@ fn greeting(
 }
 
 /// Reads one node agent's stream until it ends, errs, or misses three heartbeats; the guard
-/// removes the peer whichever way it ends.
+/// removes the peer whichever way it ends (and its display leaves the status).
 async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming<v1::NodeMessage>) {
     let projector = guard.projector().to_string();
     let silence = 3 * shared.config.heartbeat;
@@ -241,6 +243,9 @@ async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming
                     break;
                 }
             }
+            Some(v1::node_message::Body::DisplayStatus(d)) => {
+                display_status(&shared, &guard, d);
+            }
             Some(v1::node_message::Body::Goodbye(g)) => {
                 tracing::info!(%projector, reason = %g.reason, "goodbye");
                 break;
@@ -250,4 +255,42 @@ async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming
             | None => {}
         }
     }
+    // It left: its display, lost or not, is no longer the room's concern.
+    drop(guard);
+    shared.publish_displays();
+}
+
+/// A node agent's report of its display (read only after the stream was authenticated by its
+/// Hello): checked at the boundary, recorded in the registry and published; a change between
+/// showing and lost is logged once. The projector stays attached either way.
+fn display_status(shared: &Shared, guard: &PeerGuard, d: v1::DisplayStatus) {
+    let projector = guard.projector();
+    let state = match check_display_status(&d) {
+        Ok(state) => state,
+        Err(e) => {
+            tracing::warn!(%projector, error = %e, "malformed display status: ignored");
+            return;
+        }
+    };
+    let report = match state {
+        v1::DisplayState::Lost => DisplayReport::Lost {
+            output: d.output,
+            reason: d.reason,
+        },
+        _ => DisplayReport::Showing { output: d.output },
+    };
+    let Some(previous) = guard.display(report.clone()) else {
+        return;
+    };
+    let was_lost = matches!(previous, Some(DisplayReport::Lost { .. }));
+    match &report {
+        DisplayReport::Lost { output, reason } if !was_lost => {
+            tracing::warn!(%projector, %output, %reason, "display lost: the projector stays attached; its node agent retries it");
+        }
+        DisplayReport::Showing { output } if was_lost => {
+            tracing::info!(%projector, %output, "display back");
+        }
+        _ => {}
+    }
+    shared.publish_displays();
 }

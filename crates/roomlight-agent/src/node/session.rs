@@ -1,16 +1,18 @@
 //! One session of a node agent with the camera agent: the handshake (Hello with the values it
 //! remembers, then Welcome, Assign and each node's attenuation), the message loop (errors in,
 //! steps, contributions and acknowledgements out; calibration patterns shown as sent), and
-//! heartbeats.
+//! beside it heartbeats and the display's state (`DisplayStatus` at the start and on every
+//! change), each from a task of its own so that a display slow to present (lost, waiting to
+//! come back) neither silences the node nor delays the report.
 //!
 //! It knows nothing of reconnecting or of the state file's format: it ends with a
 //! [`SessionEnd`] or an error, and keeps what must outlive it in the node agent's [`Memory`].
 
 use super::NodeConfig;
 use super::state::Memory;
-use super::wire::{Wire, assignment_from_wire, pattern_from_wire};
+use super::wire::{Wire, assignment_from_wire, display_status_to_wire, pattern_from_wire};
 use crate::AgentError;
-use crate::hardware::Display;
+use crate::hardware::{Display, DisplayFeed};
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState};
 use roomlight_proto::convert::{
     from_node_errors, from_rgb, from_sparse, node_change, to_rgb, to_sparse,
@@ -18,7 +20,7 @@ use roomlight_proto::convert::{
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::collections::HashMap;
 use std::time::Duration;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 use tokio_stream::StreamExt;
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::sync::CancellationToken;
@@ -67,6 +69,14 @@ pub(super) async fn run(
     let (tx, rx) = mpsc::channel(256);
     send(&tx, hello(config, display, memory)).await?;
     let mut inbound = client.attach(ReceiverStream::new(rx)).await?.into_inner();
+    // The side tasks end with the session, whichever way it ends.
+    let side = cancel.child_token();
+    let _stop_side = side.clone().drop_guard();
+    let (period, period_rx) = watch::channel(FIRST_HEARTBEAT);
+    tokio::spawn(heartbeats(tx.clone(), period_rx, side.clone()));
+    if let Some(feed) = display.state_feed() {
+        tokio::spawn(report_display(tx.clone(), feed, side));
+    }
     let mut session = Session {
         config,
         display,
@@ -76,7 +86,6 @@ pub(super) async fn run(
         nodes: HashMap::new(),
         started: false,
     };
-    let mut ticker = tokio::time::interval(FIRST_HEARTBEAT);
     loop {
         let next = tokio::select! {
             () = cancel.cancelled() => {
@@ -85,10 +94,6 @@ pub(super) async fn run(
                 let _ = send(&session.tx, v1::node_message::Body::Goodbye(goodbye)).await;
                 return Ok(SessionEnd::Cancelled);
             }
-            _ = ticker.tick() => {
-                send(&session.tx, v1::node_message::Body::Heartbeat(v1::Heartbeat { sent_unix_ms: 0 })).await?;
-                continue;
-            }
             next = inbound.next() => next,
         };
         let Some(msg) = next.transpose()? else {
@@ -96,7 +101,9 @@ pub(super) async fn run(
         };
         use v1::room_message::Body;
         match msg.body {
-            Some(Body::Welcome(w)) => ticker = tokio::time::interval(session.welcome(&w)),
+            Some(Body::Welcome(w)) => {
+                period.send_replace(session.welcome(&w));
+            }
             Some(Body::Assign(a)) => session.assign(&a)?,
             Some(Body::Attenuation(a)) => session.attenuation(&a).await?,
             Some(Body::Errors(e)) => session.errors(e).await?,
@@ -106,6 +113,57 @@ pub(super) async fn run(
                 return Ok(SessionEnd::Closed);
             }
             None => {}
+        }
+    }
+}
+
+/// Sends a heartbeat every period (the latest `period` says) until `stop`, the end of the
+/// session (`period`'s sender dropped) or of the stream.
+async fn heartbeats(
+    tx: mpsc::Sender<v1::NodeMessage>,
+    mut period: watch::Receiver<Duration>,
+    stop: CancellationToken,
+) {
+    let mut ticker = tokio::time::interval(*period.borrow_and_update());
+    loop {
+        tokio::select! {
+            () = stop.cancelled() => return,
+            changed = period.changed() => {
+                if changed.is_err() {
+                    return;
+                }
+                ticker = tokio::time::interval(*period.borrow_and_update());
+            }
+            _ = ticker.tick() => {
+                let beat = v1::node_message::Body::Heartbeat(v1::Heartbeat { sent_unix_ms: 0 });
+                if send(&tx, beat).await.is_err() {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// Tells the camera agent the display's state now, then each change, until `stop` or the end
+/// of the stream. The display logs its own losses; the camera agent records and publishes them.
+async fn report_display(
+    tx: mpsc::Sender<v1::NodeMessage>,
+    mut feed: DisplayFeed,
+    stop: CancellationToken,
+) {
+    let mut last = feed.now();
+    loop {
+        let body = v1::node_message::Body::DisplayStatus(display_status_to_wire(&last));
+        if send(&tx, body).await.is_err() {
+            return;
+        }
+        let next = tokio::select! {
+            () = stop.cancelled() => return,
+            next = feed.next(&last) => next,
+        };
+        match next {
+            Some(report) => last = report,
+            None => return,
         }
     }
 }

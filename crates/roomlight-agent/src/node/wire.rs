@@ -1,14 +1,24 @@
 //! The node agent's side of the wire contract for what the camera agent asks it to show and
 //! how to draw: Show patterns with their masks and Assign weights, checked at the boundary
 //! (codes in [0, 1], known axes and codings, a mask of the projector's size, weights in (0, 1]
-//! inside the frame) before anything reaches the display. It knows nothing of sessions or
-//! streams.
+//! inside the frame) before anything reaches the display; and its display's state on the way
+//! out. It knows nothing of sessions or streams.
 
 use crate::AgentError;
-use crate::hardware::{Assignment, Fill, Pattern, validate_assignment};
-use roomlight_proto::convert::from_rgb;
+use crate::hardware::{Assignment, DisplayReport, Fill, Pattern, validate_assignment};
+use roomlight_proto::convert::{display_status, from_rgb};
 use roomlight_proto::v1;
 use std::sync::Arc;
+
+/// What the display says of itself, as the camera agent reads it (strings bounded).
+pub(super) fn display_status_to_wire(report: &DisplayReport) -> v1::DisplayStatus {
+    match report {
+        DisplayReport::Showing { output } => display_status(v1::DisplayState::Showing, output, ""),
+        DisplayReport::Lost { output, reason } => {
+            display_status(v1::DisplayState::Lost, output, reason)
+        }
+    }
+}
 
 /// A Show message's pattern: node values, or a whole frame.
 pub(super) enum Wire {
