@@ -7,6 +7,7 @@
 pub mod calib;
 pub mod core;
 pub mod evidence;
+pub mod hw;
 pub mod memory;
 pub mod net;
 pub mod report;
