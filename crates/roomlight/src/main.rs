@@ -244,6 +244,8 @@ enum BenchCommand {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Display and capture latency here, and the wall-clock time to 1% for two camera models.
+    Hw(bench::hw::HwArgs),
 }
 
 fn main() -> Result<()> {
@@ -351,6 +353,7 @@ fn bench(args: BenchArgs) -> Result<()> {
         }
         Some(BenchCommand::Calib { quick }) => bench::calib::run(quick),
         Some(BenchCommand::Sim { quick, out }) => bench::sim::run(quick, out.as_deref()),
+        Some(BenchCommand::Hw(args)) => bench::hw::run(&args),
     }
 }
 
