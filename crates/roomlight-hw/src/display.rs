@@ -2,14 +2,15 @@
 //! through the assignment the camera agent measured (`Assignment::draw`), calibration patterns
 //! through `Pattern::codes`; both give projector codes in [0, 1], which are rounded to 8 bits
 //! and shown as they are (the projector's response is already in the codes). `flush` resolves
-//! once the frame is on the screen plus `settle_ms`, the projector's own latency. It must not
+//! once the frame is on the screen plus `settle_ms`, the projector's own latency. Its state
+//! (showing, or lost and why) feeds the node agent, which tells the camera agent. It must not
 //! know the wire or rounds.
 
 use crate::HwError;
 use crate::frame::Frame;
 use crate::output::OutputSelector;
 use crate::window::{DisplayState, WindowHandle};
-use roomlight_agent::hardware::{Assignment, Display, Pattern};
+use roomlight_agent::hardware::{Assignment, Display, DisplayFeed, DisplayReport, Pattern};
 use roomlight_core::LinearRgb;
 use std::time::Duration;
 use tokio::sync::{oneshot, watch};
@@ -164,5 +165,143 @@ impl Display for WindowDisplay {
         }
         let frame = self.render();
         self.present(frame).await;
+    }
+
+    fn state_feed(&self) -> Option<DisplayFeed> {
+        let opened_on = self.output_name().to_string();
+        Some(DisplayFeed::from_watch(self.watch(), move |s| {
+            report(s, &opened_on)
+        }))
+    }
+}
+
+/// A window's state as the node agent reports it; a lost window names the output it was
+/// opened on.
+fn report(state: &DisplayState, opened_on: &str) -> DisplayReport {
+    match state {
+        DisplayState::Showing { output, .. } => DisplayReport::Showing {
+            output: output.name.clone(),
+        },
+        DisplayState::Lost { reason, .. } => DisplayReport::Lost {
+            output: opened_on.to_string(),
+            reason: reason.clone(),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! A real window under Xvfb driven by a real node agent attached to a camera agent: its
+    //! output is removed and added back, and the camera agent's status follows.
+
+    use super::*;
+    use crate::Geometry;
+    use crate::xvfb::Xvfb;
+    use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
+    use roomlight_agent::hardware::VirtualRoom;
+    use roomlight_agent::node::{self, NodeConfig};
+    use roomlight_core::StepRule;
+    use roomlight_core::closed_loop::{Plant, PlantConfig};
+    use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
+
+    const A: Geometry = Geometry {
+        width: 320,
+        height: 240,
+        x: 0,
+        y: 0,
+    };
+
+    async fn wait(
+        status: &mut watch::Receiver<RoomStatus>,
+        pred: impl Fn(&RoomStatus) -> bool,
+    ) -> RoomStatus {
+        let within = Duration::from_secs(30);
+        let reached = tokio::time::timeout(within, status.wait_for(|s| pred(s)))
+            .await
+            .is_ok_and(|r| r.is_ok());
+        let last = status.borrow().clone();
+        assert!(
+            reached && pred(&last),
+            "not reached within {within:?}: {last:?}"
+        );
+        last
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn an_output_removed_under_a_node_agent_is_lost_in_the_camera_agents_status_until_back() {
+        let x = Xvfb::start(640, 240).unwrap_or_else(|e| panic!("{e}"));
+        x.add_output("A", A).expect("output A");
+        let spec = WindowSpec {
+            x_display: Some(x.display().to_string()),
+            output: "A".parse().expect("selector"),
+            settle: Duration::from_millis(5),
+        };
+        let display = WindowDisplay::open(&spec, "p0").expect("window on A");
+
+        let problem = synthetic_room(&SyntheticConfig::new(6, 4))
+            .expect("room")
+            .problem;
+        let room =
+            VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind");
+        let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+        let config = CameraConfig {
+            room: "lab".into(),
+            token: "t".into(),
+            // A node silent for 600 ms is dropped; a lost window holds a frame up to 5 s.
+            heartbeat: Duration::from_millis(200),
+            deadline: Duration::from_secs(1),
+            model_rounds: 0,
+            calibration_epoch: 1,
+            stale_frames: 0,
+            model_out: None,
+        };
+        let model = RoomModel {
+            problem,
+            owners: [("p0".to_string(), (0..6).collect())].into(),
+            start: None,
+            hot: Default::default(),
+            survey: None,
+        };
+        // Tokens the tasks are never asked to stop by: they are aborted at the end.
+        let (mut status, camera) =
+            camera::serve(config, model, room.camera(), listener, Default::default());
+        let node = tokio::spawn(node::run(
+            NodeConfig {
+                endpoint,
+                room: "lab".into(),
+                token: "t".into(),
+                projector_id: "p0".into(),
+                kind: Default::default(),
+                rule: StepRule::Momentum { theta: 1.0 },
+                start: LinearRgb::splat(0.5),
+                state_file: None,
+            },
+            display,
+            Default::default(),
+        ));
+        wait(&mut status, |s| s.live_projectors == 1 && s.captures >= 1).await;
+
+        x.remove_output("A").expect("remove A");
+        let lost = wait(&mut status, |s| !s.displays_lost.is_empty()).await;
+        let entry = &lost.displays_lost[0];
+        assert_eq!(
+            (entry.projector.as_str(), entry.output.as_str()),
+            ("p0", "A")
+        );
+        assert!(!entry.reason.is_empty());
+        // Rounds go on; the projector stays attached while its window is gone.
+        let captures = lost.captures;
+        let later = wait(&mut status, |s| s.captures >= captures + 2).await;
+        assert_eq!(later.live_projectors, 1, "{later:?}");
+        assert_eq!(later.displays_lost.len(), 1, "{later:?}");
+
+        x.add_output("A", A).expect("A again");
+        let back = wait(&mut status, |s| s.displays_lost.is_empty()).await;
+        assert_eq!(back.live_projectors, 1);
+        node.abort();
+        camera.abort();
     }
 }
