@@ -19,15 +19,48 @@ struct State {
     noise: CameraNoise,
 }
 
+/// The served room and what it shows; shared with the grab mode (`process::photos`), which
+/// takes the projectors' frames from the screen instead of from `ShowImage`.
 #[derive(Clone)]
-struct Rendered {
+pub(crate) struct Rendered {
     room: Arc<Room>,
     state: Arc<Mutex<State>>,
+    /// Frames come from the screen: `ShowImage` is refused.
+    from_screen: bool,
 }
 
 impl Rendered {
+    /// All projectors black, LEDs off, camera noise from `seed`.
+    pub(crate) fn new(room: Arc<Room>, seed: u64, from_screen: bool) -> Self {
+        let state = State {
+            frames: vec![Frame::Black; room.projectors().len()],
+            preset: None,
+            noise: CameraNoise::with_seed(&room, seed),
+        };
+        Self {
+            room,
+            state: Arc::new(Mutex::new(state)),
+            from_screen,
+        }
+    }
+
     fn state(&self) -> std::sync::MutexGuard<'_, State> {
         self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Shows `frames` (one per projector) and photographs the room under the current LEDs,
+    /// with the camera's noise. Blocking: rendering takes a fraction of a second.
+    pub(crate) fn photograph(
+        &self,
+        frames: Vec<Frame>,
+    ) -> Result<roomlight_sim::Capture, roomlight_sim::SimError> {
+        let preset = {
+            let mut s = self.state();
+            s.frames = frames.clone();
+            s.preset
+        };
+        let clean = self.room.render(&frames, preset)?;
+        Ok(self.state().noise.expose(&clean))
     }
 }
 
@@ -59,6 +92,12 @@ impl v1::rendered_room_server::RenderedRoom for Rendered {
         &self,
         request: Request<v1::ShowImageRequest>,
     ) -> Result<Response<v1::ShowReply>, Status> {
+        if self.from_screen {
+            return Err(Status::failed_precondition(
+                "this room takes its projectors' frames from the screen (grab mode), not from \
+                 ShowImage",
+            ));
+        }
         let r = request.into_inner();
         let scene = self.room.scene();
         let Some(k) = scene.projectors.iter().position(|p| p.name == r.projector) else {
@@ -165,17 +204,18 @@ pub async fn serve(
     listener: tokio::net::TcpListener,
     cancel: CancellationToken,
 ) -> Result<()> {
-    let state = State {
-        frames: vec![Frame::Black; room.projectors().len()],
-        preset: None,
-        noise: CameraNoise::with_seed(&room, seed),
-    };
-    let service = v1::rendered_room_server::RenderedRoomServer::new(Rendered {
-        room,
-        state: Arc::new(Mutex::new(state)),
-    })
-    .max_decoding_message_size(MAX_MESSAGE)
-    .max_encoding_message_size(MAX_MESSAGE);
+    serve_rendered(Rendered::new(room, seed, false), listener, cancel).await
+}
+
+/// Serves `rendered` until `cancel`.
+pub(crate) async fn serve_rendered(
+    rendered: Rendered,
+    listener: tokio::net::TcpListener,
+    cancel: CancellationToken,
+) -> Result<()> {
+    let service = v1::rendered_room_server::RenderedRoomServer::new(rendered)
+        .max_decoding_message_size(MAX_MESSAGE)
+        .max_encoding_message_size(MAX_MESSAGE);
     tonic::transport::Server::builder()
         .add_service(service)
         .serve_with_incoming_shutdown(

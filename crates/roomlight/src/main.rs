@@ -37,12 +37,18 @@ enum Command {
         /// Its TOML config (see deploy/camera.toml).
         #[arg(long)]
         config: PathBuf,
+        /// Load and check the config, print what would run, and exit.
+        #[arg(long)]
+        check: bool,
     },
     /// A node agent (one per projector).
     Node {
         /// Its TOML config (see deploy/node.toml).
         #[arg(long)]
         config: PathBuf,
+        /// Load and check the config, print what would run, and exit.
+        #[arg(long)]
+        check: bool,
     },
     /// Prints a model file's size and its optimum G* (to read the camera agent's objective
     /// against), e.g. the `model_out` of a room calibrated over the wire.
@@ -260,8 +266,8 @@ fn main() -> Result<()> {
         }),
         Command::Sim(args) => procs::sim(&args),
         Command::Calibrate(args) => procs::calibrate(&args),
-        Command::Camera { config } => procs::camera(&config),
-        Command::Node { config } => procs::node(&config),
+        Command::Camera { config, check } => procs::camera(&config, check),
+        Command::Node { config, check } => procs::node(&config, check),
         Command::Optimum { model } => procs::optimum(&model),
         Command::Graycode { which } => graycode_cmd::run(which),
         Command::Bench(args) => bench(args),

@@ -40,6 +40,17 @@ pub struct SimArgs {
     /// With --scene: the camera's resolution instead of the scene's, as WIDTHxHEIGHT.
     #[arg(long, requires = "scene")]
     camera: Option<String>,
+    /// With --scene: PROJECTOR's frames are the screen region WxH+X+Y (its node agent's
+    /// window), never ShowImage; a photograph goes to --photos per `.wanted` request of the
+    /// `folder:` camera there. Once per projector shown.
+    #[arg(long, requires_all = ["scene", "photos"], value_name = "PROJECTOR=WxH+X+Y")]
+    grab: Vec<String>,
+    /// With --grab: the camera's folder.
+    #[arg(long, requires = "grab")]
+    photos: Option<PathBuf>,
+    /// With --grab: the X display (default: $DISPLAY).
+    #[arg(long, requires = "grab")]
+    x_display: Option<String>,
 }
 
 /// `roomlight calibrate`: calibrates a simulated room (in one process, through captures only)
@@ -166,6 +177,7 @@ pub fn sim(args: &SimArgs) -> Result<()> {
             scene: scene.clone(),
             camera: resolution(args.camera.as_deref())?,
             seed: args.seed,
+            grab: grab_mode(args)?,
         },
         None => {
             let Some(model_out) = &args.model_out else {
@@ -186,14 +198,36 @@ pub fn sim(args: &SimArgs) -> Result<()> {
     })
 }
 
+fn grab_mode(args: &SimArgs) -> Result<Option<process::GrabMode>> {
+    let Some(photos) = &args.photos else {
+        return Ok(None);
+    };
+    let regions = args.grab.iter().map(|g| {
+        let (p, region) = g.split_once('=').context("expected PROJECTOR=WxH+X+Y")?;
+        Ok((p.to_string(), region.parse()?))
+    });
+    Ok(Some(process::GrabMode {
+        x_display: args.x_display.clone(),
+        regions: regions
+            .collect::<Result<_>>()
+            .with_context(|| format!("--grab {:?}", args.grab))?,
+        photos: photos.clone(),
+    }))
+}
+
 /// `roomlight optimum`: nodes, patches (and those left out), G* and G with every node black.
 pub fn optimum(path: &Path) -> Result<()> {
     println!("{}", process::optimum_summary(path)?);
     Ok(())
 }
 
-pub fn camera(path: &Path) -> Result<()> {
+/// With `check`: the config loaded, checked and printed, nothing run.
+pub fn camera(path: &Path, check: bool) -> Result<()> {
     let process = config::load_camera(path)?;
+    if check {
+        println!("{process:#?}");
+        return Ok(());
+    }
     runtime()?.block_on(async {
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
@@ -201,8 +235,12 @@ pub fn camera(path: &Path) -> Result<()> {
     })
 }
 
-pub fn node(path: &Path) -> Result<()> {
+pub fn node(path: &Path, check: bool) -> Result<()> {
     let setup = config::load_node(path)?;
+    if check {
+        println!("{setup:#?}");
+        return Ok(());
+    }
     let endpoint = match &setup.camera {
         CameraLocation::Address(address) => address.clone(),
         CameraLocation::Mdns(room) => {

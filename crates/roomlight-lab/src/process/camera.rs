@@ -1,5 +1,7 @@
-//! `roomlight camera` on simulated hardware: the camera agent's model and camera from the files
-//! of a calibrated room or a survey, served until cancelled, one status line per round.
+//! `roomlight camera`: the camera agent's model and camera from the files of a calibrated room
+//! or a survey, served until cancelled, one status line per round. The camera is the
+//! simulator's (over gRPC) or a real one (roomlight-camera's `HwCamera`: a folder, a command,
+//! a V4L2 device) sampled at the charts.
 
 use super::files::{ChartsFile, ModelFile, load_model, read_json};
 use super::survey::survey_model;
@@ -10,11 +12,13 @@ use roomlight_agent::camera::{self, CameraConfig, RoomModel};
 use roomlight_agent::discovery::{self, MdnsConfig};
 use roomlight_agent::remote::RemoteCamera;
 use roomlight_calib::image_io::LinearImage;
+use roomlight_camera::{Charts, HwCamera};
 use roomlight_core::LinearRgb;
 use std::io::Write;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::pin::Pin;
+use std::sync::Arc;
 use tokio_util::sync::CancellationToken;
 
 /// Where the camera agent's model comes from.
@@ -34,12 +38,25 @@ pub enum CameraSource {
     },
 }
 
-/// A camera agent on simulated hardware.
+/// What the camera agent photographs the room with.
+#[derive(Debug, Clone)]
+pub enum CameraHardware {
+    /// The `roomlight sim` process at this endpoint serves the camera.
+    Sim(String),
+    /// A real camera with its radiometry. `lights`: the endpoint of a rendered room (`roomlight
+    /// sim --grab`) whose LEDs the survey switches off and on to measure the room's black and
+    /// target; calibration over the wire needs it.
+    Real {
+        camera: Box<roomlight_camera::CameraConfig>,
+        lights: Option<String>,
+    },
+}
+
+/// A camera agent.
 #[derive(Debug, Clone)]
 pub struct CameraProcess {
     pub agent: CameraConfig,
-    /// The `roomlight sim` process that serves the camera.
-    pub hardware: String,
+    pub hardware: CameraHardware,
     pub source: CameraSource,
     /// Where node agents attach.
     pub listen: String,
@@ -47,11 +64,12 @@ pub struct CameraProcess {
     pub advertise: Option<MdnsConfig>,
 }
 
-/// The camera agent's camera: the synthetic room's patches, or a rendered room's images
-/// sampled at the charts.
-enum AnyCamera {
+/// The camera agent's camera: the synthetic room's patches, a rendered room's images sampled
+/// at the charts, or a real camera's.
+pub(super) enum AnyCamera {
     Synthetic(RemoteCamera),
     Rendered(RenderedCamera),
+    Real(HwCamera),
 }
 
 impl roomlight_agent::hardware::Camera for AnyCamera {
@@ -59,6 +77,7 @@ impl roomlight_agent::hardware::Camera for AnyCamera {
         let capture: Pin<Box<dyn Future<Output = _> + Send + '_>> = match self {
             Self::Synthetic(c) => Box::pin(c.capture_image()),
             Self::Rendered(c) => Box::pin(c.capture_image()),
+            Self::Real(c) => Box::pin(c.capture_image()),
         };
         capture
     }
@@ -67,9 +86,23 @@ impl roomlight_agent::hardware::Camera for AnyCamera {
         let capture: Pin<Box<dyn Future<Output = _> + Send + '_>> = match self {
             Self::Synthetic(c) => Box::pin(c.capture()),
             Self::Rendered(c) => Box::pin(c.capture()),
+            Self::Real(c) => Box::pin(c.capture()),
         };
         capture
     }
+
+    fn limits(&self) -> roomlight_calib::rig::CameraLimits {
+        match self {
+            Self::Synthetic(c) => c.limits(),
+            Self::Rendered(c) => c.limits(),
+            Self::Real(c) => c.limits(),
+        }
+    }
+}
+
+/// Opens a real camera; its errors name it.
+fn open_real(config: &roomlight_camera::CameraConfig) -> Result<HwCamera> {
+    HwCamera::open(config).with_context(|| format!("opening the camera {}", config.spec))
 }
 
 async fn connect_rendered(hardware: &str) -> Result<crate::rendered::Client> {
@@ -82,11 +115,11 @@ async fn connect_rendered(hardware: &str) -> Result<crate::rendered::Client> {
 async fn from_model(
     model_path: &Path,
     charts: Option<&Path>,
-    hardware: &str,
+    hardware: &CameraHardware,
 ) -> Result<(RoomModel, AnyCamera)> {
     let model = load_model(model_path)?;
-    let camera = match charts {
-        Some(path) => {
+    let camera = match (charts, hardware) {
+        (Some(path), hardware) => {
             let charts: ChartsFile = read_json(path, "a charts file")?;
             if charts.patches.len() != model.problem.patches() {
                 bail!(
@@ -97,17 +130,31 @@ async fn from_model(
                     model.problem.patches()
                 );
             }
-            AnyCamera::Rendered(RenderedCamera::new(
-                connect_rendered(hardware).await?,
-                charts.corners,
-                charts.patches,
-                charts.sample,
-            ))
+            match hardware {
+                CameraHardware::Sim(endpoint) => AnyCamera::Rendered(RenderedCamera::new(
+                    connect_rendered(endpoint).await?,
+                    charts.corners,
+                    charts.patches,
+                    charts.sample,
+                )),
+                CameraHardware::Real { camera, .. } => {
+                    AnyCamera::Real(open_real(camera)?.with_charts(Charts {
+                        corners: Arc::new(charts.corners),
+                        patches: Arc::new(charts.patches),
+                        sample: charts.sample,
+                    }))
+                }
+            }
         }
-        None => AnyCamera::Synthetic(
-            RemoteCamera::connect(hardware.to_string())
+        (None, CameraHardware::Sim(endpoint)) => AnyCamera::Synthetic(
+            RemoteCamera::connect(endpoint.clone())
                 .await
-                .with_context(|| format!("connecting to the camera at {hardware}"))?,
+                .with_context(|| format!("connecting to the camera at {endpoint}"))?,
+        ),
+        (None, CameraHardware::Real { camera, .. }) => bail!(
+            "{}: a real camera ({}) needs the charts its patches are sampled at",
+            model_path.display(),
+            camera.spec
         ),
     };
     let model = RoomModel {
@@ -131,9 +178,18 @@ async fn model_and_camera(process: &CameraProcess) -> Result<(RoomModel, AnyCame
                 Some(out) if out.exists() => Some((out.as_path(), load_model(out)?)),
                 _ => None,
             };
-            let client = connect_rendered(&process.hardware).await?;
-            let (model, camera) = survey_model(survey, preset.as_deref(), resume, client).await?;
-            Ok((model, AnyCamera::Rendered(camera)))
+            let (lights, eye) = match &process.hardware {
+                CameraHardware::Sim(endpoint) => (endpoint, None),
+                CameraHardware::Real {
+                    camera,
+                    lights: Some(lights),
+                } => (lights, Some(open_real(camera)?)),
+                CameraHardware::Real { lights: None, .. } => {
+                    bail!("calibration over the wire with a real camera needs `lights`")
+                }
+            };
+            let client = connect_rendered(lights).await?;
+            survey_model(survey, preset.as_deref(), resume, client, eye).await
         }
     }
 }

@@ -9,11 +9,13 @@ mod calibrate;
 mod camera;
 mod files;
 mod node;
+mod photos;
 mod sim;
 mod survey;
 
 pub use calibrate::{CalibrateOptions, calibrate_to_files};
-pub use camera::{CameraProcess, CameraSource, serve_camera};
+pub use camera::{CameraHardware, CameraProcess, CameraSource, serve_camera};
 pub use files::{ChartsFile, ModelFile, SurveyFile, load_model, load_scene, optimum_summary};
 pub use node::{NodeDisplay, run_node};
+pub use photos::GrabMode;
 pub use sim::{PreparedSim, SimRoom, SyntheticSim, prepare_sim};

@@ -1,8 +1,11 @@
 //! `roomlight sim`: the simulated hardware as a process — a synthetic room served as
 //! `VirtualHardware` (its model written as the stand-in for calibration), or the rendered room
-//! served as `RenderedRoom`.
+//! served as `RenderedRoom`, its frames from `ShowImage` or, in grab mode, from the screen
+//! (`photos`).
 
 use super::files::{ModelFile, load_scene, write_json};
+use super::photos::{GrabMode, shoot_on_request};
+use crate::rendered::Rendered;
 use anyhow::{Context, Result, bail};
 use roomlight_agent::hardware::VirtualRoom;
 use roomlight_agent::remote::serve_hardware;
@@ -33,11 +36,13 @@ pub struct SyntheticSim {
 #[derive(Debug, Clone)]
 pub enum SimRoom {
     Synthetic(SyntheticSim),
-    /// A scene by name or file (see `load_scene`), camera noise from `seed`.
+    /// A scene by name or file (see `load_scene`), camera noise from `seed`; with `grab`, its
+    /// frames from the screen and its photographs written as files.
     Rendered {
         scene: String,
         camera: Option<[u32; 2]>,
         seed: u64,
+        grab: Option<GrabMode>,
     },
 }
 
@@ -46,7 +51,12 @@ pub enum SimRoom {
 #[derive(Debug)]
 pub enum PreparedSim {
     Synthetic(VirtualRoom),
-    Rendered { room: Arc<Room>, seed: u64 },
+    Rendered {
+        room: Arc<Room>,
+        seed: u64,
+        /// Grab mode with each projector's region, checked against the room.
+        grab: Option<(GrabMode, Vec<Option<roomlight_hw::Geometry>>)>,
+    },
 }
 
 /// Builds the room; a synthetic room's model file is written here.
@@ -56,12 +66,18 @@ pub fn prepare_sim(which: &SimRoom) -> Result<PreparedSim> {
             scene,
             camera,
             seed,
+            grab,
         } => {
             let room = Room::build(load_scene(scene, *camera)?)
                 .with_context(|| format!("building the room of {scene}"))?;
+            let grab = match grab {
+                Some(g) => Some((g.clone(), g.regions_of(&room)?)),
+                None => None,
+            };
             Ok(PreparedSim::Rendered {
                 room: Arc::new(room),
                 seed: *seed,
+                grab,
             })
         }
         SimRoom::Synthetic(s) => synthetic(s).map(PreparedSim::Synthetic),
@@ -114,8 +130,39 @@ impl PreparedSim {
     ) -> Result<()> {
         match self {
             Self::Synthetic(room) => Ok(serve_hardware(room, listener, cancel).await?),
-            Self::Rendered { room, seed } => {
-                crate::rendered::serve(room, seed, listener, cancel).await
+            Self::Rendered {
+                room,
+                seed,
+                grab: None,
+            } => crate::rendered::serve(room, seed, listener, cancel).await,
+            Self::Rendered {
+                room,
+                seed,
+                grab: Some((grab, regions)),
+            } => {
+                let rendered = Rendered::new(room, seed, true);
+                // Ends both the service and the shooter: a sim that cannot grab serves nothing.
+                let stop = cancel.child_token();
+                let mut shooter = {
+                    let (rendered, stop) = (rendered.clone(), stop.clone());
+                    tokio::task::spawn_blocking(move || {
+                        shoot_on_request(&rendered, &grab, &regions, &stop)
+                    })
+                };
+                let served = crate::rendered::serve_rendered(rendered, listener, stop.clone());
+                tokio::pin!(served);
+                let (served, shot) = tokio::select! {
+                    r = &mut served => {
+                        stop.cancel();
+                        (r, shooter.await)
+                    }
+                    r = &mut shooter => {
+                        stop.cancel();
+                        (served.await, r)
+                    }
+                };
+                shot.context("the grab task")??;
+                served
             }
         }
     }

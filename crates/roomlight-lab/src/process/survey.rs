@@ -1,15 +1,21 @@
 //! The camera agent's model for calibration over the wire: the survey checked against the
 //! rendered room, and the room's black and target measured through the charts before any
-//! projector joins (or, for a restarted agent, the model it wrote resumed).
+//! projector joins (or, for a restarted agent, the model it wrote resumed). The room's LEDs are
+//! switched through the rendered room; the photographs are its camera's or a real camera's
+//! (`eye`).
 
+use super::camera::AnyCamera;
 use super::files::{ModelFile, SurveyFile, read_json};
 use crate::rendered::{Client, RenderedCamera};
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::{self, RoomModel};
+use roomlight_agent::hardware::Camera as _;
 use roomlight_calib::procedure::Target;
+use roomlight_camera::{Charts, HwCamera};
 use roomlight_proto::v1;
 use std::collections::HashMap;
 use std::path::Path;
+use std::sync::Arc;
 
 /// A survey checked against the room it was made of, with its target as a camera mask.
 struct Checked {
@@ -29,13 +35,21 @@ impl Checked {
         }
     }
 
-    fn camera(&self, client: Client, patches: Vec<usize>) -> RenderedCamera {
-        RenderedCamera::new(
-            client,
-            self.survey.corners.clone(),
-            patches,
-            self.survey.sample,
-        )
+    /// The camera sampling `patches`: the rendered room's through `client`, or `eye`.
+    fn camera(&self, client: Client, patches: Vec<usize>, eye: Option<&HwCamera>) -> AnyCamera {
+        match eye {
+            None => AnyCamera::Rendered(RenderedCamera::new(
+                client,
+                self.survey.corners.clone(),
+                patches,
+                self.survey.sample,
+            )),
+            Some(eye) => AnyCamera::Real(eye.clone().with_charts(Charts {
+                corners: Arc::new(self.survey.corners.clone()),
+                patches: Arc::new(patches),
+                sample: self.survey.sample,
+            })),
+        }
     }
 }
 
@@ -50,11 +64,12 @@ pub(super) async fn survey_model(
     preset: Option<&str>,
     resume: Option<(&Path, ModelFile)>,
     client: Client,
-) -> Result<(RoomModel, RenderedCamera)> {
+    eye: Option<HwCamera>,
+) -> Result<(RoomModel, AnyCamera)> {
     let checked = check(survey_path, &client).await?;
     match resume {
-        Some((path, model)) => resumed(&checked, path, model, client),
-        None => measured(&checked, preset, client).await,
+        Some((path, model)) => resumed(&checked, path, model, client, eye.as_ref()),
+        None => measured(&checked, preset, client, eye.as_ref()).await,
     }
 }
 
@@ -108,7 +123,8 @@ fn resumed(
     path: &Path,
     model: ModelFile,
     client: Client,
-) -> Result<(RoomModel, RenderedCamera)> {
+    eye: Option<&HwCamera>,
+) -> Result<(RoomModel, AnyCamera)> {
     let patches = model.patches.clone().with_context(|| {
         format!(
             "{}: no patches (not written by a camera agent calibrating over the wire)",
@@ -132,7 +148,7 @@ fn resumed(
         model.problem.nodes(),
         model.owners.len()
     );
-    let camera = checked.camera(client, patches.clone());
+    let camera = checked.camera(client, patches.clone(), eye);
     let model = RoomModel {
         problem: model.problem,
         owners: model.owners,
@@ -148,7 +164,8 @@ async fn measured(
     checked: &Checked,
     preset: Option<&str>,
     client: Client,
-) -> Result<(RoomModel, RenderedCamera)> {
+    eye: Option<&HwCamera>,
+) -> Result<(RoomModel, AnyCamera)> {
     let preset = match preset {
         Some(p) if checked.presets.iter().any(|q| q == p) => p.to_string(),
         Some(p) => bail!("preset {p:?}: the room has {}", checked.presets.join(", ")),
@@ -158,17 +175,36 @@ async fn measured(
             .cloned()
             .context("the room has no LED preset to reproduce")?,
     };
-    let camera = checked.camera(client, Vec::new());
+    let lights = RenderedCamera::new(
+        client.clone(),
+        Vec::new(),
+        Vec::new(),
+        checked.survey.sample,
+    );
+    let mut camera = checked.camera(client.clone(), Vec::new(), eye);
     let survey = &checked.survey;
-    let sample = |image| {
+    let mut photograph = async || -> Result<Vec<roomlight_calib::charts::PatchSample>> {
+        let image = camera
+            .capture_image()
+            .await
+            .context("photographing the room")?;
+        if (image.width, image.height) != (survey.camera_width, survey.camera_height) {
+            bail!(
+                "a photograph of {}x{}: the survey's camera is {}x{}",
+                image.width,
+                image.height,
+                survey.camera_width,
+                survey.camera_height
+            );
+        }
         roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample)
             .context("sampling the charts")
     };
-    camera.set_lights("").await?;
-    let black = sample(camera.image().await?)?;
-    camera.set_lights(&preset).await?;
-    let lit = sample(camera.image().await?)?;
-    camera.set_lights("").await?;
+    lights.set_lights("").await?;
+    let black = photograph().await?;
+    lights.set_lights(&preset).await?;
+    let lit = photograph().await?;
+    lights.set_lights("").await?;
     // The model's patches and problem as the in-process pipeline builds them; no projector
     // has joined, so no columns yet.
     let target = Target::from_samples(&black, &lit)
@@ -180,7 +216,7 @@ async fn measured(
         patches.len(),
         lit.len()
     );
-    let camera = checked.camera(camera.client(), patches.clone());
+    let camera = checked.camera(client, patches.clone(), eye);
     let model = RoomModel {
         problem,
         owners: HashMap::new(),

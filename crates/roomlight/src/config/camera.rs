@@ -1,10 +1,10 @@
 //! The camera agent's config file and the one conversion into the process that runs it.
 
 use super::{Hardware, check, check_nonempty, read_toml};
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::CameraConfig;
 use roomlight_agent::discovery::MdnsConfig;
-use roomlight_lab::process::{CameraProcess, CameraSource};
+use roomlight_lab::process::{CameraHardware, CameraProcess, CameraSource};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -15,7 +15,18 @@ struct CameraFile {
     room: String,
     token: String,
     listen: String,
-    hardware: Hardware,
+    /// The simulator's camera: `hardware = { sim = "http://host:port" }`; or `camera`.
+    #[serde(default)]
+    hardware: Option<Hardware>,
+    /// A real camera: `camera = "folder:/path"` (any roomlight-camera spec), or a table of
+    /// roomlight-camera's `CameraConfig` (`camera = { spec = "...", timeout_s = 5, response =
+    /// "linear", ... }`); read in `real_camera`.
+    #[serde(default)]
+    camera: Option<toml::Value>,
+    /// With `camera` and `survey`: the rendered room (`roomlight sim --grab`) whose LEDs the
+    /// survey switches to measure the room's black and target.
+    #[serde(default)]
+    lights: Option<String>,
     /// The calibrated model (`roomlight calibrate` or `roomlight sim` writes it); or `survey`.
     #[serde(default)]
     model: Option<PathBuf>,
@@ -70,14 +81,30 @@ fn mdns_default() -> bool {
 pub fn load_camera(path: &Path) -> Result<CameraProcess> {
     let file: CameraFile = read_toml(path)?;
     file.check(path)?;
-    Ok(file.into_process())
+    let hardware = file.hardware(path)?;
+    Ok(file.into_process(hardware))
+}
+
+/// `camera` as a spec string or a `CameraConfig` table, validated.
+fn real_camera(value: &toml::Value) -> Result<roomlight_camera::CameraConfig> {
+    let config = match value {
+        toml::Value::String(spec) => roomlight_camera::CameraConfig::new(spec.parse()?),
+        table => table.clone().try_into()?,
+    };
+    config.validate()?;
+    Ok(config)
 }
 
 impl CameraFile {
     fn check(&self, path: &Path) -> Result<()> {
         check_nonempty(path, "room", &self.room)?;
         check_nonempty(path, "listen", &self.listen)?;
-        check_nonempty(path, "hardware.sim", self.hardware.endpoint())?;
+        if let Some(hardware) = &self.hardware {
+            check_nonempty(path, "hardware.sim", hardware.endpoint())?;
+        }
+        if let Some(lights) = &self.lights {
+            check_nonempty(path, "lights", lights)?;
+        }
         // Under 50 ms heartbeats swamp a large room; over a minute a dead node holds rounds.
         check(
             path,
@@ -127,8 +154,39 @@ impl CameraFile {
         Ok(())
     }
 
+    /// Exactly one of `hardware` and `camera`; `lights` only with `camera`, and needed by a
+    /// survey; a real camera's model needs its charts.
+    fn hardware(&self, path: &Path) -> Result<CameraHardware> {
+        let p = path.display();
+        let camera = match (&self.hardware, &self.camera) {
+            (Some(_), Some(_)) | (None, None) => bail!(
+                "{p}: give either hardware = {{ sim = \"...\" }} (the simulator's camera) or \
+                 camera = \"folder:DIR\" (a real camera)"
+            ),
+            (Some(Hardware::Sim(endpoint)), None) => {
+                if self.lights.is_some() {
+                    bail!("{p}: lights comes with camera, not hardware");
+                }
+                return Ok(CameraHardware::Sim(endpoint.clone()));
+            }
+            (None, Some(value)) => real_camera(value).with_context(|| format!("{p}: camera"))?,
+        };
+        if self.survey.is_some() && self.lights.is_none() {
+            bail!(
+                "{p}: survey with a real camera needs lights, the rendered room whose LEDs it switches"
+            );
+        }
+        if self.model.is_some() && self.charts.is_none() {
+            bail!("{p}: model with a real camera needs charts, where its patches are");
+        }
+        Ok(CameraHardware::Real {
+            camera: Box::new(camera),
+            lights: self.lights.clone(),
+        })
+    }
+
     /// The one place a checked camera config becomes the agent's `CameraConfig` and process.
-    fn into_process(self) -> CameraProcess {
+    fn into_process(self, hardware: CameraHardware) -> CameraProcess {
         let source = match (self.model, self.survey) {
             (Some(model), _) => CameraSource::Model {
                 model,
@@ -139,7 +197,6 @@ impl CameraFile {
                 preset: self.preset,
             },
         };
-        let Hardware::Sim(hardware) = self.hardware;
         CameraProcess {
             agent: CameraConfig {
                 room: self.room,

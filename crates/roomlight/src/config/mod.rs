@@ -5,8 +5,6 @@
 
 mod camera;
 mod node;
-#[cfg(test)]
-mod tests;
 
 pub use camera::load_camera;
 pub use node::{CameraLocation, load_node};
@@ -17,8 +15,8 @@ use std::fmt::Display;
 use std::ops::RangeInclusive;
 use std::path::Path;
 
-/// The hardware a process drives. Only the simulator for now; real displays and cameras
-/// become variants of their own (`hardware = { v4l2 = "/dev/video0" }`, …).
+/// The simulator a process drives; real hardware has keys of its own (a camera agent's
+/// `camera`, a node's `display`).
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Hardware {
