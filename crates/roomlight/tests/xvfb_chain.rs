@@ -52,12 +52,13 @@ impl Procs {
 /// The first line that `pred` accepts, within `within`.
 fn wait_line(rx: &mpsc::Receiver<String>, within: Duration, pred: impl Fn(&str) -> bool) -> String {
     let until = Instant::now() + within;
+    let mut last = String::new();
     loop {
         let left = until.saturating_duration_since(Instant::now());
         match rx.recv_timeout(left) {
             Ok(line) if pred(&line) => return line,
-            Ok(_) => {}
-            Err(e) => panic!("no such line within {within:?}: {e}"),
+            Ok(line) => last = line,
+            Err(e) => panic!("no such line within {within:?} ({e}); the last: {last}"),
         }
     }
 }
@@ -107,13 +108,17 @@ fn noise_free(d: &Path) -> (f64, impl Fn(f64) -> f64) {
     (best.objective, move |g: f64| best.excess(g - bias))
 }
 
+/// The camera's resolution, as processes.rs's (at 320×240 the run did not converge within the
+/// test's deadlines).
+const CAMERA: &str = "640x480";
+
 #[test]
 fn the_room_converges_through_windows_grabs_and_photographs() {
     let started = Instant::now();
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();
     let calibrate = Command::new(env!("CARGO_BIN_EXE_roomlight"))
-        .args(["calibrate", "--scene", "small", "--camera", "640x480"])
+        .args(["calibrate", "--scene", "small", "--camera", CAMERA])
         .args(["--survey-only", "--out", "."])
         .current_dir(d)
         .output()
@@ -160,7 +165,7 @@ fn the_room_converges_through_windows_grabs_and_photographs() {
         "--scene",
         "small",
         "--camera",
-        "640x480",
+        CAMERA,
         "--seed",
         "9",
         "--listen",
@@ -187,7 +192,7 @@ fn the_room_converges_through_windows_grabs_and_photographs() {
             "room = \"small\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\n\
              camera = {{ spec = \"folder:photos\", settle_ms = 0, timeout_s = 10, saturated_code = 255 }}\n\
              lights = \"http://{sim}\"\nsurvey = \"survey.json\"\nmodel_out = \"model.json\"\n\
-             heartbeat_ms = 500\nmodel_rounds = 20\nmdns = false\n"
+             heartbeat_ms = 500\nmodel_rounds = 5\nmdns = false\n"
         ),
     )
     .expect("camera config");

@@ -139,8 +139,18 @@ fn shoot(
     .context("a capture of the wrong size")?;
     let path = dir.join(format!("photo-{n:06}.png"));
     let part = dir.join(format!(".photo-{n:06}.png.part"));
+    // Fast and unfiltered: a noisy photograph barely compresses, and encoding it well took
+    // longer than rendering it.
+    let file = std::fs::File::create(&part)
+        .map(std::io::BufWriter::new)
+        .with_context(|| format!("creating {}", part.display()))?;
+    let encoder = image::codecs::png::PngEncoder::new_with_quality(
+        file,
+        image::codecs::png::CompressionType::Fast,
+        image::codecs::png::FilterType::NoFilter,
+    );
     image
-        .save_with_format(&part, image::ImageFormat::Png)
+        .write_with_encoder(encoder)
         .with_context(|| format!("writing {}", part.display()))?;
     std::fs::rename(&part, &path).with_context(|| format!("renaming to {}", path.display()))?;
     Ok(path)
