@@ -186,6 +186,29 @@ fn the_room_converges_through_windows_grabs_and_photographs() {
         l.starts_with("sim listening on")
     }));
 
+    // Frames come from the screen only: a projector image over gRPC is refused.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    let refused = runtime.block_on(async {
+        let mut client = roomlight_proto::v1::rendered_room_client::RenderedRoomClient::connect(
+            format!("http://{sim}"),
+        )
+        .await
+        .expect("connect");
+        client
+            .show_image(roomlight_proto::v1::ShowImageRequest {
+                projector: luminaires[0].0.clone(),
+                width: luminaires[0].2.width,
+                height: luminaires[0].2.height,
+                rgb8: vec![255; (luminaires[0].2.width * luminaires[0].2.height * 3) as usize],
+            })
+            .await
+            .expect_err("ShowImage in grab mode")
+    });
+    assert_eq!(refused.code(), tonic::Code::FailedPrecondition, "{refused}");
+
     std::fs::write(
         d.join("camera.toml"),
         format!(
