@@ -112,6 +112,8 @@ fn noise_free(d: &Path) -> (f64, impl Fn(f64) -> f64) {
 /// test's deadlines).
 const CAMERA: &str = "640x480";
 
+// Over 80 lines: one scenario read top to bottom, each step (screen, simulator, camera agent,
+// nodes, calibration, convergence) waiting on the one before.
 #[test]
 fn the_room_converges_through_windows_grabs_and_photographs() {
     let started = Instant::now();
