@@ -1,7 +1,8 @@
 //! Which camera and how it is treated: the `CameraSpec` parsed from `folder:DIR`,
 //! `command:CMD`, `v4l2:/dev/videoN` or `gphoto2[:PORT]`, and the typed `CameraConfig` the
-//! camera agent's config holds (spec, timeout, response, masks, dark frame, V4L2 controls).
-//! It must not open devices.
+//! camera agent's config holds (spec, timeout, response, masks, dark frame, V4L2 controls,
+//! gphoto2 settings, the EXIF a folder/command camera's shots must carry). It must not open
+//! devices.
 
 use crate::error::CameraError;
 use crate::exif::ExpectExif;
