@@ -142,7 +142,19 @@ impl HwCamera {
     }
 }
 
+/// How much longer than the backend's own timeout the camera agent waits before it abandons a
+/// capture as hung: the backend's error, which says more, comes first.
+const AGENT_TIMEOUT_MARGIN: Duration = Duration::from_secs(2);
+
 impl roomlight_agent::hardware::Camera for HwCamera {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn capture_timeout(&self) -> Duration {
+        self.timeout + AGENT_TIMEOUT_MARGIN
+    }
+
     fn capture(&mut self) -> impl Future<Output = Result<Vec<LinearRgb>, AgentError>> + Send {
         let this = self.clone();
         async move { this.patches().await.map_err(AgentError::Protocol) }

@@ -19,6 +19,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::pin::Pin;
 use std::sync::Arc;
+use std::time::Duration;
 use tokio_util::sync::CancellationToken;
 
 /// Where the camera agent's model comes from.
@@ -91,6 +92,22 @@ impl roomlight_agent::hardware::Camera for AnyCamera {
         capture
     }
 
+    fn name(&self) -> &str {
+        match self {
+            Self::Synthetic(c) => c.name(),
+            Self::Rendered(c) => c.name(),
+            Self::Real(c) => c.name(),
+        }
+    }
+
+    fn capture_timeout(&self) -> Duration {
+        match self {
+            Self::Synthetic(c) => c.capture_timeout(),
+            Self::Rendered(c) => c.capture_timeout(),
+            Self::Real(c) => c.capture_timeout(),
+        }
+    }
+
     fn limits(&self) -> roomlight_calib::rig::CameraLimits {
         match self {
             Self::Synthetic(c) => c.limits(),
@@ -100,9 +117,25 @@ impl roomlight_agent::hardware::Camera for AnyCamera {
     }
 }
 
-/// Opens a real camera; its errors name it.
-fn open_real(config: &roomlight_camera::CameraConfig) -> Result<HwCamera> {
-    HwCamera::open(config).with_context(|| format!("opening the camera {}", config.spec))
+/// Opens a real camera. A config the camera can never satisfy is an error naming it; a camera
+/// that cannot be opened yet (not plugged in, powered off, busy) is tried again with backoff,
+/// 1 s doubling to 30 s, with a log line each time: a camera agent started before its camera
+/// waits for it rather than exit (the caller stops waiting when the process is stopped).
+async fn open_real(config: &roomlight_camera::CameraConfig) -> Result<HwCamera> {
+    config
+        .validate()
+        .with_context(|| format!("the camera {}", config.spec))?;
+    let mut wait = Duration::from_secs(1);
+    loop {
+        match HwCamera::open(config) {
+            Ok(camera) => return Ok(camera),
+            Err(e) => {
+                tracing::warn!(camera = %config.spec, error = %e, retry_in = ?wait, "camera unreachable at start");
+                tokio::time::sleep(wait).await;
+                wait = (wait * 2).min(Duration::from_secs(30));
+            }
+        }
+    }
 }
 
 async fn connect_rendered(hardware: &str) -> Result<crate::rendered::Client> {
@@ -138,7 +171,7 @@ async fn from_model(
                     charts.sample,
                 )),
                 CameraHardware::Real { camera, .. } => {
-                    AnyCamera::Real(open_real(camera)?.with_charts(Charts {
+                    AnyCamera::Real(open_real(camera).await?.with_charts(Charts {
                         corners: Arc::new(charts.corners),
                         patches: Arc::new(charts.patches),
                         sample: charts.sample,
@@ -183,7 +216,7 @@ async fn model_and_camera(process: &CameraProcess) -> Result<(RoomModel, AnyCame
                 CameraHardware::Real {
                     camera,
                     lights: Some(lights),
-                } => (lights, Some(open_real(camera)?)),
+                } => (lights, Some(open_real(camera).await?)),
                 CameraHardware::Real { lights: None, .. } => {
                     bail!("calibration over the wire with a real camera needs `lights`")
                 }
@@ -201,7 +234,11 @@ pub async fn serve_camera(
     listening: impl FnOnce(SocketAddr),
     cancel: CancellationToken,
 ) -> Result<()> {
-    let (model, camera) = model_and_camera(&process).await?;
+    let (model, camera) = tokio::select! {
+        loaded = model_and_camera(&process) => loaded?,
+        // Stopped while it waits for its camera.
+        () = cancel.cancelled() => return Ok(()),
+    };
     let listener = tokio::net::TcpListener::bind(&process.listen)
         .await
         .with_context(|| format!("binding {}", process.listen))?;
