@@ -106,6 +106,7 @@ impl Display for ScriptedDisplay {
         let slow = self.slow.load(Ordering::Relaxed);
         async move {
             if slow {
+                // The fake's latency (a display that holds each frame), not a wait on a condition.
                 tokio::time::sleep(SLOW_FLUSH).await;
             }
         }

@@ -79,6 +79,7 @@ impl Tether for Fake {
         Ok(())
     }
     fn capture(&mut self) -> Result<(String, Vec<u8>), String> {
+        // The fake camera's shot time (a slow DSLR), not a wait on a condition.
         std::thread::sleep(self.delay);
         let shot = self.exif_override.unwrap_or(Shot {
             exposure_s: parse_shutter(&self.value("shutterspeed")),
