@@ -96,6 +96,13 @@ async fn a_node_that_never_reads_is_dropped_and_the_rounds_go_on_for_the_others(
         cancel.child_token(),
     ));
 
+    // p0 is attached and the rounds run before p1 joins: a status showing one projector after
+    // p1's admission then means p1 was dropped, not that p0 is still on its way.
+    wait(&mut status, Duration::from_secs(30), |s| {
+        s.live_projectors == 1 && s.captures >= 1
+    })
+    .await;
+
     // p1 answers every round without reading its stream: it acknowledges every frame at once
     // (the largest sequence number) and sends zero contributions for the round after each
     // status, so the rounds never wait for it. A small HTTP/2 window keeps the bytes in flight
@@ -166,11 +173,12 @@ async fn a_node_that_never_reads_is_dropped_and_the_rounds_go_on_for_the_others(
         }
     });
 
-    // (No status need show both: under load the watch may skip to after p1 was dropped.)
-    wait(&mut status, Duration::from_secs(30), |s| s.captures >= 2).await;
+    // (No status need show both: under load the watch may skip to after p1 was dropped. So
+    // the capture count at its admission marks the statuses that came after it.)
+    let admitted_at = status.borrow_and_update().captures;
     // Its queue fills within some hundred rounds; then it is dropped and p0 goes on alone.
     let dropped = wait(&mut status, Duration::from_secs(60), |s| {
-        s.live_projectors == 1
+        s.live_projectors == 1 && s.captures >= admitted_at + 2
     })
     .await;
     wait(&mut status, Duration::from_secs(30), |s| {
