@@ -42,17 +42,35 @@ impl Frame {
     }
 }
 
-/// Decodes an image file into a frame, refusing it before decoding when it has more than
-/// `max_pixels` pixels; every error names the file. The EXIF, when the file has some, gives
-/// the shot's settings and the exposure used; EXIF that does not parse is an error.
+/// Decodes an image file (PNG, JPEG, TIFF, or a RAW shot as DNG) into a frame, refusing it
+/// before decoding when it has more than `max_pixels` pixels; every error names the file. The
+/// EXIF, when the file has some, gives the shot's settings and the exposure used; EXIF that
+/// does not parse is an error.
 pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
     let bad = |reason: String| CameraError::Decode {
         path: path.to_path_buf(),
         reason,
     };
+    let data = read_bounded(path, max_pixels)?;
+    if crate::dng::is_dng(&data) {
+        let frame = crate::dng::decode(path, &data, max_pixels)?;
+        // A DNG is itself the TIFF structure EXIF is read from; TIFF/EP keeps the settings in
+        // its first directory instead of an EXIF one.
+        let ep = crate::dng::tiff_ep_shot(&data);
+        let exif = Shot::from_tiff(data).map_err(bad)?;
+        let shot = Shot {
+            exposure_s: exif.exposure_s.or(ep.exposure_s),
+            iso: exif.iso.or(ep.iso),
+            f_number: exif.f_number.or(ep.f_number),
+        };
+        return Ok(Frame {
+            exposure_s: shot.exposure_s,
+            shot: Some(shot),
+            ..frame
+        });
+    }
     let open = || {
-        image::ImageReader::open(path)
-            .map_err(|e| bad(format!("cannot open: {e}")))?
+        image::ImageReader::new(std::io::Cursor::new(&data))
             .with_guessed_format()
             .map_err(|e| bad(format!("cannot read: {e}")))
     };
@@ -96,6 +114,33 @@ pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
         exposure_s: shot.and_then(|s| s.exposure_s),
         shot,
     })
+}
+
+/// Reads a whole image file, refusing one larger than an uncompressed image of `max_pixels`
+/// pixels could be (16-bit RGBA, or four 16-bit sensor values a pixel, plus 16 MiB of
+/// metadata and previews) before reading it.
+fn read_bounded(path: &Path, max_pixels: u64) -> Result<Vec<u8>, CameraError> {
+    let bad = |reason: String| CameraError::Decode {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let cap = max_pixels.saturating_mul(8).saturating_add(16 << 20);
+    let file = std::fs::File::open(path).map_err(|e| bad(format!("cannot open: {e}")))?;
+    let len = file
+        .metadata()
+        .map_err(|e| bad(format!("cannot read: {e}")))?
+        .len();
+    if len > cap {
+        return Err(bad(format!(
+            "{len} bytes, more than the {cap} an image of {max_pixels} pixels may take; refused \
+             before reading"
+        )));
+    }
+    let mut data = Vec::with_capacity(len as usize);
+    // Bounded again while reading: the file may grow after its size was read.
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, cap), &mut data)
+        .map_err(|e| bad(format!("cannot read: {e}")))?;
+    Ok(data)
 }
 
 /// Writes a frame as PNG (8- or 16-bit as it came), for `roomlight hw capture`.

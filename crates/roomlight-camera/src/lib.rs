@@ -9,6 +9,7 @@
 pub mod adapter;
 pub mod cli;
 pub mod command;
+mod dng;
 pub mod error;
 pub mod exif;
 pub mod folder;
