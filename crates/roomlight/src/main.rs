@@ -111,12 +111,17 @@ enum HwCommand {
     /// One capture written as PNG, with the exposure actually used; exits non-zero naming the
     /// camera when it times out.
     Capture {
-        /// `folder:DIR`, `command:CMD` (`{out}` is the file to write) or `v4l2:/dev/videoN`.
+        /// `folder:DIR`, `command:CMD` (`{out}` is the file to write), `v4l2:/dev/videoN` or
+        /// `gphoto2[:PORT]`, with default settings.
+        #[arg(long, required_unless_present = "config", conflicts_with = "config")]
+        camera: Option<String>,
+        /// A camera agent's config: its camera with every setting (exposure, controls, EXIF).
         #[arg(long)]
-        camera: String,
+        config: Option<PathBuf>,
         #[arg(long)]
         out: PathBuf,
-        #[arg(long, default_value_t = 10.0)]
+        /// With --camera (a config has its own `timeout_s`).
+        #[arg(long, default_value_t = 10.0, conflicts_with = "config")]
         timeout_s: f64,
     },
     /// A camera's response curve from photographs of a static scene at several exposures
@@ -297,13 +302,31 @@ fn hw(args: HwArgs) -> Result<()> {
         }
         HwCommand::Capture {
             camera: spec,
+            config,
             out,
             timeout_s: t,
         } => {
-            if !(t.is_finite() && (0.001..=86_400.0).contains(&t)) {
-                anyhow::bail!("--timeout-s {t}: expected 0.001 to 86400 seconds");
-            }
-            let report = camera::capture(&spec, &out, std::time::Duration::from_secs_f64(t))?;
+            let report = match (spec, config) {
+                (Some(spec), _) => {
+                    if !(t.is_finite() && (0.001..=86_400.0).contains(&t)) {
+                        anyhow::bail!("--timeout-s {t}: expected 0.001 to 86400 seconds");
+                    }
+                    camera::capture(&spec, &out, std::time::Duration::from_secs_f64(t))?
+                }
+                (None, file) => {
+                    let file = file.unwrap_or_default();
+                    let process = config::load_camera(&file)?;
+                    let roomlight_lab::process::CameraHardware::Real { camera: real, .. } =
+                        process.hardware
+                    else {
+                        anyhow::bail!(
+                            "{}: no `camera` to capture with (the simulator's)",
+                            file.display()
+                        );
+                    };
+                    camera::capture_config(&real, &out)?
+                }
+            };
             println!("{report}");
             Ok(())
         }

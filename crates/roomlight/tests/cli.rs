@@ -712,6 +712,30 @@ fn hw_capture_writes_the_cameras_image_and_times_out_naming_it() {
     let back = image::open(&out).expect("capture written").to_rgb8();
     assert_eq!(back, img, "the capture is the camera's image");
 
+    // Through the camera agent's config: its camera with its settings. A pixel cap below the
+    // photo's 48 pixels (which --camera's defaults accept) shows that they apply.
+    let config = dir.path().join("camera.toml");
+    let capture_with = |max_pixels: u64| {
+        let text = format!(
+            "room = \"lab\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nmodel = \"m.json\"\n\
+             charts = \"c.json\"\n[camera]\nspec = {camera:?}\ntimeout_s = 5\n\
+             max_pixels = {max_pixels}\n"
+        );
+        std::fs::write(&config, text).expect("config");
+        Command::new(env!("CARGO_BIN_EXE_roomlight"))
+            .args(["hw", "capture", "--config", config.to_str().expect("utf-8")])
+            .args(["--out", out.to_str().expect("utf-8")])
+            .output()
+            .expect("run roomlight")
+    };
+    std::fs::remove_file(&out).expect("remove the first capture");
+    let ok = capture_with(1000);
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    assert_eq!(image::open(&out).expect("written").to_rgb8(), img);
+    let capped = capture_with(10);
+    let err = String::from_utf8_lossy(&capped.stderr);
+    assert!(!capped.status.success() && err.contains("more than the 10 allowed"), "{err}");
+
     let hung = Command::new(env!("CARGO_BIN_EXE_roomlight"))
         .args([
             "hw",
