@@ -71,6 +71,23 @@ pub(crate) fn is_dng(data: &[u8]) -> bool {
         .is_ok_and(|ifd| ifd.get(DNG_VERSION).is_some())
 }
 
+/// Why a TIFF that is not a DNG must not be read as an image: camera RAW files (NEF, ARW, ...)
+/// are TIFFs whose first directory is a reduced-resolution preview or points to SubIFDs;
+/// decoding it would silently give a small 8-bit preview instead of the shot.
+pub(crate) fn foreign_raw(data: &[u8]) -> Option<String> {
+    let tiff = Tiff::new(data).ok()?;
+    let first = tiff.ifd(tiff.first_ifd().ok()?).ok()?;
+    let preview = tiff
+        .uint(&first, NEW_SUBFILE_TYPE)
+        .ok()?
+        .is_some_and(|t| t & 1 == 1);
+    (preview || first.get(SUB_IFDS).is_some()).then(|| {
+        "a camera RAW file that is not DNG (its first image is a preview): shoot JPEG or DNG, \
+         or develop it linear to a 16-bit PNG or TIFF with a command: camera"
+            .into()
+    })
+}
+
 /// The shot's settings as TIFF/EP writes them, in the first directory (`ExposureTime`,
 /// `FNumber`, ISO), for DNGs that keep them there rather than in an EXIF directory.
 pub(crate) fn tiff_ep_shot(data: &[u8]) -> Shot {

@@ -69,6 +69,9 @@ pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
             ..frame
         });
     }
+    if let Some(reason) = crate::dng::foreign_raw(&data) {
+        return Err(bad(reason));
+    }
     let open = || {
         image::ImageReader::new(std::io::Cursor::new(&data))
             .with_guessed_format()

@@ -408,6 +408,20 @@ fn bad_dngs_are_refused_with_the_reason_and_never_panic() {
 }
 
 #[test]
+fn a_camera_raw_that_is_not_dng_is_refused_not_read_as_its_preview() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (mut bytes, _) = tiles_grbg(dir.path());
+    // Without its DNGVersion the file is a NEF-like TIFF: a preview first, the RAW in a SubIFD.
+    let tag = bytes
+        .windows(2)
+        .rposition(|w| w == 50706u16.to_be_bytes())
+        .expect("DNGVersion entry");
+    bytes[tag..tag + 2].copy_from_slice(&50000u16.to_be_bytes());
+    let e = outcome(&dir.path().join("shot.nef"), &bytes, 1 << 20);
+    assert!(e.contains("shot.nef") && e.contains("not DNG"), "{e}");
+}
+
+#[test]
 fn a_16_bit_tiff_is_read_linear_as_it_is() {
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("linear.tif");
