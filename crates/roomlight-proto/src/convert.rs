@@ -64,6 +64,14 @@ pub enum ProtoError {
     /// One node's entry of a batched message is malformed.
     #[error("node {node}: {reason}")]
     Node { node: u32, reason: Box<ProtoError> },
+    /// A value outside the range the protocol allows (a change of value beyond ±1).
+    #[error("{field}: value {index} is {value:e}, expected {expected}")]
+    OutOfRange {
+        field: &'static str,
+        index: usize,
+        value: f64,
+        expected: &'static str,
+    },
     /// An enumeration's value this build does not know (or the unspecified one).
     #[error("{field}: {value} is not a known value")]
     UnknownValue { field: &'static str, value: i32 },
@@ -296,7 +304,8 @@ pub fn from_node_errors(
 }
 
 /// Reads the entries of a `Contribution` message: a node `owns` accepts, named once, with a
-/// finite change.
+/// finite change within ±1 per channel (a node's values lie in [0, 1], so no step moves one
+/// further; 1e300 is not a change but an attack on the objective).
 pub fn from_node_changes(
     entries: Vec<v1::NodeChange>,
     owns: impl Fn(u32) -> bool,
@@ -310,7 +319,16 @@ pub fn from_node_changes(
             if !owns(node) {
                 return Err(ProtoError::NotOwned { field, node });
             }
-            from_rgb(field, e.change.as_ref())
+            let change = from_rgb(field, e.change.as_ref())?;
+            match change.0.iter().position(|c| c.abs() > 1.0) {
+                Some(index) => Err(ProtoError::OutOfRange {
+                    field,
+                    index,
+                    value: change.0[index],
+                    expected: "a change within [-1, 1]",
+                }),
+                None => Ok(change),
+            }
         },
     )
 }

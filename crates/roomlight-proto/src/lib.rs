@@ -13,6 +13,7 @@ pub mod v1 {
     tonic::include_proto!("roomlight.v1");
 }
 
+pub mod bounds;
 pub mod convert;
 pub mod refusal;
 

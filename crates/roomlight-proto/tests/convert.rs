@@ -43,12 +43,12 @@ fn sparse_vectors_and_batches_round_trip_through_bytes() {
     // A round's changes of value, one triple a node.
     let msg = v1::Contribution {
         round: 12,
-        nodes: vec![node_change(3, values[0]), node_change(4, values[2])],
+        nodes: vec![node_change(3, values[0]), node_change(4, values[1])],
     };
     let back = v1::Contribution::decode(msg.encode_to_vec().as_slice()).expect("decodes");
     let batch = from_node_changes(back.nodes, |_| true).expect("a batch");
     assert!(batch.refused.is_empty(), "{:?}", batch.refused);
-    assert_eq!(batch.entries, vec![(3, values[0]), (4, values[2])]);
+    assert_eq!(batch.entries, vec![(3, values[0]), (4, values[1])]);
     assert_eq!(
         from_rgb("x", Some(&to_rgb(LinearRgb([0.25, 0.5, 1.0])))).expect("rgb"),
         LinearRgb([0.25, 0.5, 1.0])
@@ -126,9 +126,11 @@ fn malformed_entries_of_a_batch_are_refused_one_by_one() {
         node: 14,
         change: None,
     };
+    // Finite but absurd: a value in [0, 1] never changes by more than 1.
+    let huge = node_change(13, LinearRgb([0.0, 0.0, -1e300]));
     let owned = |n: u32| (10..15).contains(&n);
     let batch = from_node_changes(
-        vec![good(10), good(99), good(10), inf, absent, good(11)],
+        vec![good(10), good(99), good(10), inf, huge, absent, good(11)],
         owned,
     )
     .expect("bounded");
@@ -139,6 +141,7 @@ fn malformed_entries_of_a_batch_are_refused_one_by_one() {
         "node 99: contribution: node 99 is not one of this projector's nodes",
         "node 10: contribution: node 10 appears more than once",
         "node 12: contribution: value 1 is inf, expected a finite number",
+        "node 13: contribution: value 2 is -1e300, expected a change within [-1, 1]",
         "node 14: contribution: field rgb is missing",
     ];
     assert_eq!(reasons, expected);
