@@ -1,7 +1,9 @@
 //! Discovery (DESIGN §6): the camera agent advertises `_roomlight._tcp.local.` over mDNS
 //! (mdns-sd) with the room's name and the protocol version in its TXT record; a node agent
-//! browses for the agent of its room. mDNS only finds the camera agent: liveness comes from the
-//! stream, HTTP/2 keepalive and heartbeats.
+//! browses for the agent of its room. mDNS only finds candidates: anyone on the LAN can
+//! advertise the room, so a node agent tries them in turn and skips one that refuses it or
+//! cannot be reached (`node::run`); trust comes from the token (and, with issue 19, TLS).
+//! Liveness comes from the stream, HTTP/2 keepalive and heartbeats.
 
 use mdns_sd::{IfKind, ServiceDaemon, ServiceEvent, ServiceInfo};
 use roomlight_proto::PROTOCOL_VERSION;
@@ -125,6 +127,16 @@ pub fn find_camera(
     config: &MdnsConfig,
     within: Duration,
 ) -> Result<String, DiscoveryError> {
+    find_camera_except(room, config, within, &[])
+}
+
+/// As [`find_camera`], skipping the endpoints in `skip` (candidates tried and refused).
+pub fn find_camera_except(
+    room: &str,
+    config: &MdnsConfig,
+    within: Duration,
+    skip: &[String],
+) -> Result<String, DiscoveryError> {
     let daemon = daemon(config)?;
     let events = daemon.browse(SERVICE)?;
     let until = Instant::now() + within;
@@ -148,12 +160,15 @@ pub fn find_camera(
                     .map(|a| a.to_ip_addr())
                     .collect();
                 addresses.sort_by_key(|a| !a.is_ipv4());
-                if let Some(ip) = addresses.first() {
+                let endpoints = addresses.iter().map(|ip| {
                     let host = match ip {
                         IpAddr::V4(v4) => v4.to_string(),
                         IpAddr::V6(v6) => format!("[{v6}]"),
                     };
-                    break Some(format!("http://{host}:{}", service.get_port()));
+                    format!("http://{host}:{}", service.get_port())
+                });
+                if let Some(endpoint) = endpoints.into_iter().find(|e| !skip.contains(e)) {
+                    break Some(endpoint);
                 }
             }
             Ok(_) => {}
@@ -167,4 +182,61 @@ pub fn find_camera(
         version: PROTOCOL_VERSION,
         waited: within,
     })
+}
+
+/// The prefix of a node agent's endpoint that means "find the camera agent over mDNS".
+const MDNS_SCHEME: &str = "mdns:";
+
+/// Where to look for the camera agent of `room`, as a node agent's endpoint: the node agent
+/// browses for candidates itself and skips those that refuse it or cannot be reached.
+pub fn mdns_endpoint(room: &str, config: &MdnsConfig, within: Duration) -> String {
+    format!(
+        "{MDNS_SCHEME}port={};loopback={};wait_ms={};room={room}",
+        config.port,
+        u8::from(config.loopback_only),
+        within.as_millis()
+    )
+}
+
+/// What [`mdns_endpoint`] wrote: the room, where mDNS runs, how long each search lasts.
+/// `None` when `endpoint` is not an mDNS one (or malformed).
+pub fn parse_mdns_endpoint(endpoint: &str) -> Option<(String, MdnsConfig, Duration)> {
+    let rest = endpoint.strip_prefix(MDNS_SCHEME)?;
+    let mut fields = rest.splitn(4, ';');
+    let mut field = |key: &str| fields.next()?.strip_prefix(key)?.strip_prefix('=');
+    let port = field("port")?.parse().ok()?;
+    let loopback_only = field("loopback")? == "1";
+    let wait = Duration::from_millis(field("wait_ms")?.parse().ok()?);
+    let room = field("room")?.to_string();
+    Some((
+        room,
+        MdnsConfig {
+            port,
+            loopback_only,
+        },
+        wait,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_mdns_endpoint_reads_back_as_written() {
+        let config = MdnsConfig {
+            port: 5399,
+            loopback_only: true,
+        };
+        let written = mdns_endpoint("lab;2=x", &config, Duration::from_secs(30));
+        assert_eq!(
+            parse_mdns_endpoint(&written),
+            Some(("lab;2=x".to_string(), config, Duration::from_secs(30)))
+        );
+        assert_eq!(parse_mdns_endpoint("http://127.0.0.1:5"), None);
+        assert_eq!(
+            parse_mdns_endpoint("mdns:port=x;loopback=1;wait_ms=1;room=r"),
+            None
+        );
+    }
 }

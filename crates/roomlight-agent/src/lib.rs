@@ -9,6 +9,7 @@
 //!   drives its display, acknowledges frames and reports contributions.
 //!
 //! - [`discovery`]: the camera agent advertised over mDNS, and node agents finding it.
+//! - `throttle`: repeated warnings logged at a limited rate (a flood must not fill the disk).
 //!
 //! Measured and model rounds run over gRPC with joins (a projector not yet measured is
 //! calibrated hot) and leaves, reconnection and state files; calibration of a whole room over
@@ -19,6 +20,7 @@ pub mod discovery;
 pub mod hardware;
 pub mod node;
 pub mod remote;
+mod throttle;
 
 /// What went wrong in an agent.
 #[derive(Debug, thiserror::Error)]

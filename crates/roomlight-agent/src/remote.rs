@@ -195,25 +195,54 @@ pub async fn remote_display(
     }))
 }
 
-/// A camera in another process.
+/// Captures per second of the simulated camera unless told otherwise: a fast video camera's.
+/// Unpaced, a synthetic room's rounds ran as fast as the CPU allowed (100% of a core for
+/// nothing: the room converges in captures, not in seconds).
+pub const SIM_CAPTURE_RATE: f64 = 60.0;
+
+/// A camera in another process, paced to a capture rate as a real camera is by its frame rate.
 #[derive(Debug, Clone)]
-pub struct RemoteCamera(
-    v1::virtual_hardware_client::VirtualHardwareClient<tonic::transport::Channel>,
-);
+pub struct RemoteCamera {
+    client: v1::virtual_hardware_client::VirtualHardwareClient<tonic::transport::Channel>,
+    /// Time between two captures' starts.
+    interval: std::time::Duration,
+    /// When the next capture may start.
+    next: Option<tokio::time::Instant>,
+}
 
 impl RemoteCamera {
-    /// Connects to `endpoint`.
+    /// Connects to `endpoint`; captures at [`SIM_CAPTURE_RATE`].
     pub async fn connect(endpoint: String) -> Result<Self, AgentError> {
-        Ok(Self(
-            v1::virtual_hardware_client::VirtualHardwareClient::connect(endpoint).await?,
-        ))
+        Ok(Self {
+            client: v1::virtual_hardware_client::VirtualHardwareClient::connect(endpoint).await?,
+            interval: std::time::Duration::ZERO,
+            next: None,
+        }
+        .with_capture_rate(SIM_CAPTURE_RATE))
+    }
+
+    /// At most `per_second` captures a second (clamped to 0.1 to 10 000; not a number: the
+    /// default rate).
+    pub fn with_capture_rate(mut self, per_second: f64) -> Self {
+        let rate = if per_second.is_nan() {
+            SIM_CAPTURE_RATE
+        } else {
+            per_second.clamp(0.1, 10_000.0)
+        };
+        // rate ≥ 0.1: the division is finite.
+        self.interval = std::time::Duration::from_secs_f64(1.0 / rate);
+        self
     }
 }
 
 impl Camera for RemoteCamera {
     fn capture(&mut self) -> impl Future<Output = Result<Vec<LinearRgb>, AgentError>> + Send {
-        let mut client = self.0.clone();
+        let mut client = self.client.clone();
+        let now = tokio::time::Instant::now();
+        let at = self.next.map_or(now, |next| next.max(now));
+        self.next = Some(at + self.interval);
         async move {
+            tokio::time::sleep_until(at).await;
             let reply = client.capture(v1::CaptureRequest {}).await?.into_inner();
             if reply.values.len() % 3 != 0 || reply.values.iter().any(|v| !v.is_finite()) {
                 return Err(AgentError::Protocol(
@@ -227,5 +256,40 @@ impl Camera for RemoteCamera {
                 .map(|c| LinearRgb([c[0], c[1], c[2]]))
                 .collect())
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use roomlight_core::closed_loop::{Plant, PlantConfig};
+    use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
+
+    /// The synthetic room's camera is paced: 13 captures at 60 a second take at least 0.2 s
+    /// (unpaced they took a few milliseconds, and rounds spun a core).
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn the_simulated_camera_keeps_its_capture_rate() {
+        let problem = synthetic_room(&SyntheticConfig::new(4, 1))
+            .expect("room")
+            .problem;
+        let room = VirtualRoom::new(Plant::new(problem, PlantConfig::default()).expect("plant"));
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind");
+        let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+        let cancel = CancellationToken::new();
+        let _stop = cancel.clone().drop_guard();
+        tokio::spawn(serve_hardware(room, listener, cancel.clone()));
+        let mut camera = RemoteCamera::connect(endpoint).await.expect("connect");
+        let start = tokio::time::Instant::now();
+        for _ in 0..13 {
+            camera.capture().await.expect("capture");
+        }
+        let took = start.elapsed();
+        let least = std::time::Duration::from_secs_f64(12.0 / SIM_CAPTURE_RATE);
+        assert!(
+            took >= least,
+            "13 captures in {took:?}, expected at least {least:?}"
+        );
     }
 }

@@ -243,12 +243,8 @@ pub fn node(path: &Path, check: bool) -> Result<()> {
     }
     let endpoint = match &setup.camera {
         CameraLocation::Address(address) => address.clone(),
-        CameraLocation::Mdns(room) => {
-            let found = discovery::find_camera(room, &setup.mdns, setup.mdns_wait)
-                .with_context(|| format!("{}: camera over mDNS", path.display()))?;
-            tracing::info!(camera = %found, room = %room, "found over mDNS");
-            found
-        }
+        // The node agent tries each candidate advertising the room, skipping any that refuses it.
+        CameraLocation::Mdns(room) => discovery::mdns_endpoint(room, &setup.mdns, setup.mdns_wait),
     };
     let agent = setup.agent_config(endpoint);
     runtime()?.block_on(async {

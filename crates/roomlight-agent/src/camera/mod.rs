@@ -6,6 +6,7 @@
 //!
 //! This module owns the public face ([`serve`] and the types it takes and reports) and the state
 //! the parts share; it knows nothing of the wire messages' contents. The parts:
+//! - `listener`: the connection limit and the handshake timeout in front of the service;
 //! - `service`: the gRPC `Room.Attach` handshake, admission, and each peer's reader task;
 //! - `registry`: the live peers (admission, readiness, removal by a guard's `Drop`);
 //! - `rounds`: the round loop;
@@ -19,6 +20,7 @@
 mod calibration;
 mod capture;
 mod faults;
+mod listener;
 mod model;
 mod registry;
 mod rig;
@@ -36,7 +38,7 @@ use roomlight_proto::refusal::Refusal;
 use roomlight_proto::v1;
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
+use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
@@ -180,7 +182,13 @@ struct Shared {
     /// The peers' reader tasks, joined on shutdown.
     tracker: TaskTracker,
     /// Peers dropped for lagging, logged at a limited rate.
-    lagging: Mutex<LagLog>,
+    lagging: crate::throttle::Shared,
+    /// Hellos refused, logged at a limited rate (a flood must not fill the disk).
+    refusals: crate::throttle::Shared,
+    /// Admitted peers dropped for sending what the protocol forbids, logged at a limited rate.
+    misbehaving: crate::throttle::Shared,
+    /// The largest message a node agent may send, derived from the room's size.
+    max_message: usize,
     /// The room's status, as the round loop and the readers update it.
     status: watch::Sender<RoomStatus>,
 }
@@ -215,11 +223,10 @@ impl Shared {
             let _ = tx.try_send(Ok(v1::RoomMessage {
                 body: Some(goodbye),
             }));
-            if self.registry.drop_peer(projector, tx) {
-                self.lagging
-                    .lock()
-                    .unwrap_or_else(PoisonError::into_inner)
-                    .dropped(projector);
+            if self.registry.drop_peer(projector, tx)
+                && let Some(dropped) = self.lagging.hit()
+            {
+                tracing::warn!(%projector, dropped, "lagging: its queue is full; told and dropped (count since the last report)");
             }
             return false;
         }
@@ -278,6 +285,8 @@ pub fn serve(
 ) {
     let (contributions, contrib_rx) = mpsc::channel(4096);
     let live = Live::new(&model);
+    let max_message = max_node_message(&model);
+    let connections = connection_limit(&model);
     let (status, status_rx) = watch::channel(RoomStatus::default());
     let shared = Arc::new(Shared {
         config,
@@ -290,33 +299,43 @@ pub fn serve(
         bytes_in: AtomicU64::new(0),
         cancel: CancellationToken::new(),
         tracker: TaskTracker::new(),
-        lagging: Mutex::new(LagLog::default()),
+        lagging: Default::default(),
+        refusals: Default::default(),
+        misbehaving: Default::default(),
+        max_message,
         status,
     });
     let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx);
-    let handle = tokio::spawn(run(shared, rounds, listener, cancel));
+    let handle = tokio::spawn(run(shared, rounds, (listener, connections), cancel));
     (status_rx, handle)
 }
 
 /// The server and the rounds together; on a stop request the current round finishes (bounded:
 /// a round waits at most a deadline for the acknowledgements and one per model round for the
 /// contributions), then every node is told goodbye and the server drains.
+///
+/// Every connection counts against the limit (`listener`'s second half) and is closed unless a
+/// node is admitted on it within the handshake timeout (as long as a Hello may take, the
+/// deadline and at least a second); a node agent's messages are bounded by the room's size;
+/// a dead connection is found by HTTP/2 keepalive.
 async fn run<C: Camera>(
     shared: Arc<Shared>,
     rounds: rounds::Rounds<C>,
-    listener: tokio::net::TcpListener,
+    listener: (tokio::net::TcpListener, usize),
     cancel: CancellationToken,
 ) -> Result<(), crate::AgentError> {
+    let (listener, limit) = listener;
+    let handshake = shared.config.deadline.max(Duration::from_secs(1));
+    let incoming = listener::guarded(listener, limit, handshake, shared.cancel.clone());
+    let service = v1::room_server::RoomServer::new(service::Service::new(shared.clone()))
+        .max_decoding_message_size(shared.max_message);
     let server = tonic::transport::Server::builder()
         .http2_keepalive_interval(Some(Duration::from_secs(5)))
-        .add_service(v1::room_server::RoomServer::new(service::Service::new(
-            shared.clone(),
-        )))
-        .serve_with_incoming_shutdown(
-            // Small messages both ways every round: Nagle's algorithm would add ~40 ms.
-            tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true)),
-            shared.cancel.clone().cancelled_owned(),
-        );
+        .http2_keepalive_timeout(Some(Duration::from_secs(10)))
+        // A node agent opens one stream; a few more for a reconnect, none for a flood.
+        .max_concurrent_streams(Some(8))
+        .add_service(service)
+        .serve_with_incoming_shutdown(incoming, shared.cancel.clone().cancelled_owned());
     let grace = shared.config.deadline * (shared.config.model_rounds as u32 + 3);
     let stop_waiting = async {
         cancel.cancelled().await;
@@ -359,27 +378,27 @@ async fn run<C: Camera>(
     }
 }
 
-/// Peers dropped for lagging: the first is logged at once, later ones at most once a second
-/// with their count (a room of thousands of slow nodes must not flood the log).
-#[derive(Debug, Default)]
-struct LagLog {
-    last: Option<tokio::time::Instant>,
-    unlogged: u64,
+/// The largest message a node agent may send this room: its Hello carries the attenuation its
+/// nodes remember, at most the room's columns (calibration over the wire: columns not yet
+/// measured, so the room's patches for each of a generous 2 000 nodes).
+fn max_node_message(model: &RoomModel) -> usize {
+    let problem = &model.problem;
+    let nonzeros: usize = problem.columns().iter().map(|c| c.support().len()).sum();
+    let nodes = problem.columns().len();
+    match &model.survey {
+        Some(survey) => roomlight_proto::bounds::node_message_limit(
+            nodes.max(2_000),
+            nonzeros.max(survey.patches.len().saturating_mul(2_000)),
+        ),
+        None => roomlight_proto::bounds::node_message_limit(nodes, nonzeros),
+    }
 }
 
-impl LagLog {
-    fn dropped(&mut self, projector: &str) {
-        self.unlogged += 1;
-        let now = tokio::time::Instant::now();
-        if self
-            .last
-            .is_none_or(|t| now.duration_since(t) >= Duration::from_secs(1))
-        {
-            tracing::warn!(%projector, dropped = self.unlogged, "lagging: its queue is full; told and dropped (count since the last report)");
-            self.last = Some(now);
-            self.unlogged = 0;
-        }
-    }
+/// At most this many connections open at once: two per projector of the model (a reconnecting
+/// node's new stream beside its old one) and some for calibration over the wire and tools.
+pub fn connection_limit(model: &RoomModel) -> usize {
+    let spare = if model.survey.is_some() { 256 } else { 32 };
+    2 * model.owners.len() + spare
 }
 
 impl Shared {

@@ -325,6 +325,24 @@ impl PeerGuard {
         Some(previous)
     }
 
+    /// Tells the peer on this stream why it is dropped, best effort (a full queue loses it).
+    pub(super) fn goodbye(&self, reason: String) {
+        let tx = {
+            let peers = self.registry.lock();
+            peers
+                .wire
+                .get(&self.projector)
+                .filter(|p| p.connection == self.connection)
+                .map(|p| p.tx.clone())
+        };
+        if let Some(tx) = tx {
+            let goodbye = v1::room_message::Body::Goodbye(v1::Goodbye { reason });
+            let _ = tx.try_send(Ok(v1::RoomMessage {
+                body: Some(goodbye),
+            }));
+        }
+    }
+
     /// Which of `nodes` this stream's projector owns (O(1) each: the controller's node →
     /// projector index), under one lock (a batched message names all a projector's nodes).
     pub(super) fn owned(&self, nodes: impl Iterator<Item = u32>) -> Vec<u32> {

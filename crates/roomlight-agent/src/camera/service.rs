@@ -3,11 +3,18 @@
 //! node agent's messages into registry updates (readiness, its display's state) and
 //! contributions. It knows nothing of rounds or
 //! the camera: the round loop reads what the readers leave in the registry and the channel.
+//!
+//! Nothing a peer chose is logged or echoed before its token is checked (in constant time):
+//! refusals are logged at a limited rate with the peer's id escaped and cut. An admitted peer
+//! that sends what the protocol forbids (nodes it does not own, values that are not finite or
+//! beyond ±1) is told why in a Goodbye and disconnected; the round goes on without it.
 
+use super::listener::Handshake;
 use super::registry::{Peer, PeerGuard};
 use super::{Contribution, Shared};
 use crate::hardware::DisplayReport;
 use prost::Message;
+use roomlight_proto::bounds::{MAX_PROJECTOR_ID, check_projector_id, cut, escaped, token_matches};
 use roomlight_proto::convert::{check_display_status, from_node_changes};
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
@@ -15,7 +22,6 @@ use std::pin::Pin;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
-use subtle::ConstantTimeEq;
 use tokio::sync::mpsc;
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_stream::{Stream, StreamExt};
@@ -52,6 +58,7 @@ impl v1::room_server::Room for Service {
         request: Request<Streaming<v1::NodeMessage>>,
     ) -> Result<Response<AttachStream>, Status> {
         let shared = self.0.clone();
+        let handshake = request.extensions().get::<Handshake>().cloned();
         let mut inbound = request.into_inner();
         let first = tokio::time::timeout(
             shared.config.deadline.max(Duration::from_secs(1)),
@@ -63,7 +70,14 @@ impl v1::room_server::Room for Service {
         let Some(v1::node_message::Body::Hello(hello)) = first.body else {
             return Err(Refusal::FirstNotHello.into());
         };
-        let nodes = check_hello(&shared, &hello)?;
+        let nodes = check_hello(&shared, &hello).inspect_err(|refusal| {
+            if let Some(count) = shared.refusals.hit() {
+                // The id is the peer's choice: escaped and cut, never raw.
+                let projector = escaped(&hello.projector_id);
+                let refusal = refusal.row().key;
+                tracing::warn!(%projector, refusal, count, "refused (count since the last report)");
+            }
+        })?;
         let calibrated = !shared.live().uncalibrated.contains(&hello.projector_id);
         let greeting = greeting(&shared, &hello, &nodes, calibrated);
         // The greeting is queued before admission, so that it precedes anything the rounds send.
@@ -82,14 +96,22 @@ impl v1::room_server::Room for Service {
         {
             Ok(guard) => guard,
             Err(_) => {
-                tracing::warn!(%projector, "refused: already attached");
-                return Err(Refusal::AlreadyAttached {
-                    projector,
+                let refusal = Refusal::AlreadyAttached {
+                    projector: projector.clone(),
                     room: shared.config.room.clone(),
+                };
+                if let Some(count) = shared.refusals.hit() {
+                    let key = refusal.row().key;
+                    tracing::warn!(%projector, refusal = key, count, "refused (count since the last report)");
                 }
-                .into());
+                return Err(refusal.into());
             }
         };
+        // Authenticated and admitted: this connection is no longer closed at its handshake
+        // timeout.
+        if let Some(handshake) = handshake {
+            handshake.admitted();
+        }
         tracing::info!(%projector, nodes = nodes.len(), "joined");
         let tracker = shared.tracker.clone();
         tracker.spawn(read_node(shared, guard, inbound));
@@ -97,36 +119,35 @@ impl v1::room_server::Room for Service {
     }
 }
 
-/// Checks a Hello: protocol version, room, token, and that the projector is known (or can be
-/// calibrated over the wire, then marked uncalibrated). Its nodes (none yet for a projector to
-/// calibrate).
+/// Checks a Hello: the token first (in constant time: nothing the peer chose is read, logged
+/// or echoed before), then protocol version, room, the projector id's form, and that the
+/// projector is known (or can be calibrated over the wire, then marked uncalibrated). Its
+/// nodes (none yet for a projector to calibrate). The caller logs a refusal, rate-limited.
 fn check_hello(shared: &Shared, hello: &v1::Hello) -> Result<Vec<u32>, Refusal> {
     let config = &shared.config;
+    if !token_matches(&hello.token, &config.token) {
+        return Err(Refusal::WrongToken);
+    }
     if hello.protocol_version != PROTOCOL_VERSION {
-        tracing::warn!(projector = %hello.projector_id, version = hello.protocol_version, "refused: protocol version");
         return Err(Refusal::ProtocolVersion {
             got: hello.protocol_version,
             speaks: PROTOCOL_VERSION,
         });
     }
     if hello.room != config.room {
-        tracing::warn!(projector = %hello.projector_id, room = %hello.room, "refused: another room");
         return Err(Refusal::OtherRoom {
-            asked: hello.room.clone(),
+            // Echoed to the peer only (it was authenticated), cut to a bounded length.
+            asked: cut(&hello.room, MAX_PROJECTOR_ID).to_string(),
             room: config.room.clone(),
         });
     }
-    if !bool::from(hello.token.as_bytes().ct_eq(config.token.as_bytes())) {
-        tracing::warn!(projector = %hello.projector_id, "refused: wrong room token");
-        return Err(Refusal::WrongToken);
-    }
+    check_projector_id(&hello.projector_id).map_err(|what| Refusal::Malformed { what })?;
     let known = shared.live().owners.get(&hello.projector_id).cloned();
     match known {
         Some(nodes) => Ok(nodes),
         // Calibrated over the wire once it is here: it must say how large it is.
         None if shared.survey.is_some() => {
             if hello.width == 0 || hello.height == 0 {
-                tracing::warn!(projector = %hello.projector_id, "refused: no resolution to calibrate");
                 return Err(Refusal::NoResolution {
                     projector: hello.projector_id.clone(),
                     room: config.room.clone(),
@@ -222,22 +243,31 @@ async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming
             }
             Some(v1::node_message::Body::Contribution(c)) => {
                 let owned = guard.owned(c.nodes.iter().map(|e| e.node));
-                let batch = match from_node_changes(c.nodes, |n| owned.contains(&n)) {
-                    Ok(batch) => batch,
-                    Err(e) => {
-                        tracing::warn!(%projector, error = %e, "malformed contribution: ignored");
-                        continue;
+                // Anything but a well-formed contribution for its own nodes is not a slip but
+                // a broken or hostile peer: all of the message is dropped, the peer told why
+                // and disconnected, and the round goes on without its nodes.
+                let refused = match from_node_changes(c.nodes, |n| owned.contains(&n)) {
+                    Ok(batch) if batch.refused.is_empty() => Ok(batch.entries),
+                    Ok(batch) => Err(batch.refused[0].to_string()),
+                    Err(e) => Err(e.to_string()),
+                };
+                let entries = match refused {
+                    Ok(entries) => entries,
+                    Err(what) => {
+                        let refusal = Refusal::Malformed { what };
+                        guard.goodbye(refusal.to_string());
+                        if let Some(count) = shared.misbehaving.hit() {
+                            tracing::warn!(%projector, %refusal, count, "disconnected for a malformed contribution; its contributions dropped (count since the last report)");
+                        }
+                        break;
                     }
                 };
-                for e in &batch.refused {
-                    tracing::warn!(%projector, error = %e, "contribution refused");
-                }
-                if batch.entries.is_empty() {
+                if entries.is_empty() {
                     continue;
                 }
                 let contribution = Contribution {
                     round: c.round,
-                    nodes: batch.entries,
+                    nodes: entries,
                 };
                 if shared.contributions.send(contribution).await.is_err() {
                     break;
@@ -247,7 +277,7 @@ async fn read_node(shared: Arc<Shared>, guard: PeerGuard, mut inbound: Streaming
                 display_status(&shared, &guard, d);
             }
             Some(v1::node_message::Body::Goodbye(g)) => {
-                tracing::info!(%projector, reason = %g.reason, "goodbye");
+                tracing::info!(%projector, reason = %escaped(&g.reason), "goodbye");
                 break;
             }
             Some(v1::node_message::Body::Heartbeat(_))
@@ -268,7 +298,9 @@ fn display_status(shared: &Shared, guard: &PeerGuard, d: v1::DisplayStatus) {
     let state = match check_display_status(&d) {
         Ok(state) => state,
         Err(e) => {
-            tracing::warn!(%projector, error = %e, "malformed display status: ignored");
+            if let Some(count) = shared.misbehaving.hit() {
+                tracing::warn!(%projector, error = %e, count, "malformed display status: ignored (count since the last report)");
+            }
             return;
         }
     };
@@ -285,10 +317,11 @@ fn display_status(shared: &Shared, guard: &PeerGuard, d: v1::DisplayStatus) {
     let was_lost = matches!(previous, Some(DisplayReport::Lost { .. }));
     match &report {
         DisplayReport::Lost { output, reason } if !was_lost => {
+            let (output, reason) = (escaped(output), escaped(reason));
             tracing::warn!(%projector, %output, %reason, "display lost: the projector stays attached; its node agent retries it");
         }
         DisplayReport::Showing { output } if was_lost => {
-            tracing::info!(%projector, %output, "display back");
+            tracing::info!(%projector, output = %escaped(output), "display back");
         }
         _ => {}
     }

@@ -7,8 +7,9 @@
 //! - `backoff`: how long it waits before reconnecting.
 //!
 //! This module strings them together: relight from the state file, then sessions until
-//! cancelled, reconnecting unless the camera agent's refusal is one retrying cannot fix. It
-//! knows nothing of the camera agent's registry or rounds, only the wire contract.
+//! cancelled, reconnecting unless the camera agent's refusal is one retrying cannot fix (or,
+//! for a camera agent found over mDNS, trying the next candidate). It knows nothing of the
+//! camera agent's registry or rounds, only the wire contract.
 
 mod backoff;
 mod session;
@@ -54,26 +55,182 @@ pub struct NodeConfig {
 
 /// Runs one node agent until `cancel`. When the camera agent goes away the display keeps its last
 /// values (the lights stay on) and the agent reconnects with exponential backoff and jitter,
-/// resuming from the values it shows. A refusal that retrying cannot fix ends it with an error.
+/// resuming from the values it shows; the backoff starts afresh after every session in which it
+/// was admitted. A refusal that retrying cannot fix ends it with an error.
+///
+/// An endpoint written by [`crate::discovery::mdns_endpoint`] is found over mDNS instead: each
+/// candidate advertising the room is tried in turn, and one that refuses the node or cannot be
+/// reached is skipped (not fatal) while the search goes on.
 pub async fn run(
     config: NodeConfig,
+    display: impl Display,
+    cancel: CancellationToken,
+) -> Result<(), AgentError> {
+    match crate::discovery::parse_mdns_endpoint(&config.endpoint) {
+        Some((room, mdns, within)) => {
+            let find = move |skip: &[String]| {
+                crate::discovery::find_camera_except(&room, &mdns, within, skip)
+                    .inspect_err(|e| tracing::warn!(error = %e, "no camera agent candidate"))
+                    .ok()
+            };
+            run_with_candidates(config, find, display, cancel).await
+        }
+        None => {
+            let endpoint = endpoint(&config.endpoint)?;
+            sessions(&config, Target::Fixed(Box::new(endpoint)), display, cancel).await
+        }
+    }
+}
+
+/// Runs one node agent whose camera agent is one of the candidates `find` returns (it blocks
+/// while it searches, and returns `None` when it found none but those it is asked to skip): a
+/// candidate that refuses the node or cannot be reached before it was admitted is skipped, and
+/// the next one tried; once all were skipped the list starts afresh. The camera agent that
+/// admitted it is reconnected to as long as it can be reached.
+pub async fn run_with_candidates(
+    config: NodeConfig,
+    find: impl FnMut(&[String]) -> Option<String> + Send + 'static,
+    display: impl Display,
+    cancel: CancellationToken,
+) -> Result<(), AgentError> {
+    let find = std::sync::Arc::new(std::sync::Mutex::new(find));
+    sessions(
+        &config,
+        Target::Candidates(Box::new(move |skip: Vec<String>| {
+            let find = find.clone();
+            tokio::task::spawn_blocking(move || {
+                let mut find = find
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                find(&skip)
+            })
+        })),
+        display,
+        cancel,
+    )
+    .await
+}
+
+/// A search for a candidate, off the runtime's threads.
+type Search = Box<dyn FnMut(Vec<String>) -> tokio::task::JoinHandle<Option<String>> + Send>;
+
+/// Where the camera agent is.
+enum Target {
+    Fixed(Box<tonic::transport::Endpoint>),
+    Candidates(Search),
+}
+
+/// Candidates skipped at most at once (the oldest is tried again first).
+const MAX_SKIPPED: usize = 16;
+
+/// What to connect to next.
+enum Next {
+    /// This endpoint (found over mDNS: its address).
+    Try(Option<String>, Box<tonic::transport::Endpoint>),
+    /// No candidate now: wait the backoff and look again.
+    Wait,
+    /// Cancelled while searching.
+    Stop,
+}
+
+/// The fixed endpoint, the candidate that admitted the node last, or a new candidate (one not
+/// skipped; when there is none, the skipped ones are tried again after a wait).
+async fn next_endpoint(
+    target: &mut Target,
+    current: &mut Option<(String, tonic::transport::Endpoint)>,
+    skipped: &mut Vec<String>,
+    cancel: &CancellationToken,
+) -> Next {
+    let search = match (target, &current) {
+        (Target::Fixed(endpoint), _) => return Next::Try(None, endpoint.clone()),
+        (Target::Candidates(_), Some((address, endpoint))) => {
+            return Next::Try(Some(address.clone()), Box::new(endpoint.clone()));
+        }
+        (Target::Candidates(search), None) => search,
+    };
+    let found = tokio::select! {
+        () = cancel.cancelled() => return Next::Stop,
+        found = search(skipped.clone()) => found.ok().flatten(),
+    };
+    match found.map(|a| endpoint(&a).map(|e| (a, e))) {
+        Some(Ok((address, endpoint))) => {
+            *current = Some((address.clone(), endpoint.clone()));
+            Next::Try(Some(address), Box::new(endpoint))
+        }
+        Some(Err(e)) => {
+            tracing::warn!(error = %e, "a candidate's address: skipped");
+            Next::Wait
+        }
+        None => {
+            // Every candidate was skipped (or none answered): try them all again.
+            skipped.clear();
+            Next::Wait
+        }
+    }
+}
+
+/// Relights from the state file, then runs sessions until cancelled (see [`run`]).
+async fn sessions(
+    config: &NodeConfig,
+    mut target: Target,
     mut display: impl Display,
     cancel: CancellationToken,
 ) -> Result<(), AgentError> {
-    let endpoint = endpoint(&config.endpoint)?;
     // Relight at once from the state file, before any camera agent is reachable.
     let mut memory = Memory::relight(
         config.state_file.clone(),
         &mut display,
         &config.projector_id,
-    )?;
+    );
     let mut backoff = Backoff::new();
+    let mut skipped: Vec<String> = Vec::new();
+    let mut current: Option<(String, tonic::transport::Endpoint)> = None;
     loop {
-        let outcome = session::run(&config, &endpoint, &mut display, &cancel, &mut memory).await;
+        let (candidate, endpoint) =
+            match next_endpoint(&mut target, &mut current, &mut skipped, &cancel).await {
+                Next::Try(candidate, endpoint) => (candidate, endpoint),
+                Next::Wait => {
+                    if !backoff.sleep(&cancel).await {
+                        return Ok(());
+                    }
+                    continue;
+                }
+                Next::Stop => return Ok(()),
+            };
+        let mut admitted = false;
+        let outcome = session::run(
+            config,
+            &endpoint,
+            &mut display,
+            &cancel,
+            &mut memory,
+            &mut admitted,
+        )
+        .await;
         memory.flush();
         if cancel.is_cancelled() {
             // Stopping: a stream that broke while the goodbye went out is no loss to report.
             return Ok(());
+        }
+        if admitted {
+            // A good session: the next wait starts from the first step, whatever ended it.
+            backoff.reset();
+        }
+        if let Some(address) = candidate.filter(|_| !admitted) {
+            // mDNS found it, it did not admit us: whoever it is, try the next candidate.
+            let why = outcome
+                .as_ref()
+                .map_or_else(ToString::to_string, |_| "closed".into());
+            tracing::warn!(projector = %config.projector_id, candidate = %address, %why, "candidate did not admit us: skipped");
+            if skipped.len() == MAX_SKIPPED {
+                skipped.remove(0);
+            }
+            skipped.push(address);
+            current = None;
+            if !backoff.sleep(&cancel).await {
+                return Ok(());
+            }
+            continue;
         }
         match outcome {
             Ok(SessionEnd::Cancelled) => return Ok(()),

@@ -25,10 +25,6 @@ use tokio_stream::StreamExt;
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::sync::CancellationToken;
 
-/// Largest message a node agent takes from the camera agent (an Assign of a 4K projector's
-/// weights is about 70 MB).
-const MAX_ROOM_MESSAGE: usize = 256 << 20;
-
 /// Heartbeat period until the camera agent's Welcome gives its own.
 const FIRST_HEARTBEAT: Duration = Duration::from_secs(1);
 
@@ -55,17 +51,21 @@ async fn send(
         .map_err(|_| AgentError::Protocol("the outgoing stream closed".into()))
 }
 
-/// Runs one session until `cancel`, the camera agent's goodbye or the end of the stream.
+/// Runs one session until `cancel`, the camera agent's goodbye or the end of the stream;
+/// `admitted` is set once the camera agent welcomed it.
 pub(super) async fn run(
     config: &NodeConfig,
     endpoint: &tonic::transport::Endpoint,
     display: &mut impl Display,
     cancel: &CancellationToken,
     memory: &mut Memory,
+    admitted: &mut bool,
 ) -> Result<SessionEnd, AgentError> {
-    // An Assign with a projector's weights can be several megabytes.
+    // The largest message is an Assign of this projector's weights (8 bytes a pixel) or a
+    // node's attenuation: refused from its length prefix, before anything is allocated.
+    let limit = roomlight_proto::bounds::room_message_limit(display.resolution());
     let mut client = v1::room_client::RoomClient::new(endpoint.connect().await?)
-        .max_decoding_message_size(MAX_ROOM_MESSAGE);
+        .max_decoding_message_size(limit);
     let (tx, rx) = mpsc::channel(256);
     send(&tx, hello(config, display, memory)).await?;
     let mut inbound = client.attach(ReceiverStream::new(rx)).await?.into_inner();
@@ -102,6 +102,7 @@ pub(super) async fn run(
         use v1::room_message::Body;
         match msg.body {
             Some(Body::Welcome(w)) => {
+                *admitted = true;
                 period.send_replace(session.welcome(&w));
             }
             Some(Body::Assign(a)) => session.assign(&a)?,
@@ -227,6 +228,11 @@ impl<D: Display> Session<'_, D> {
 
     fn assign(&mut self, a: &v1::Assign) -> Result<(), AgentError> {
         self.assigned = a.nodes.iter().map(|n| n.node).collect();
+        // Remembered values of nodes that are not this projector's are not its to show (an
+        // empty list: a projector still to be segmented over the wire).
+        if !self.assigned.is_empty() {
+            self.memory.keep_only(&self.assigned);
+        }
         // Weights drawn by the camera agent (calibration over the wire): a malformed
         // assignment ends the session (the camera agent logs the stream's end).
         if a.width > 0 {

@@ -3,7 +3,10 @@
 //! and the state file that keeps them on disk (written atomically, at most once a second).
 //!
 //! It knows nothing of the wire or of sessions: the session hands it values and columns, and the
-//! node agent asks it to relight a display or to flush.
+//! node agent asks it to relight a display or to flush. A state file that cannot be read, or
+//! that is another projector's, is set aside (renamed `*.corrupt-<unix time>`) and the node
+//! starts fresh, saying why: a projector must never stay dark for a bad file. Values of nodes
+//! the camera agent does not assign to this projector are forgotten.
 
 use crate::AgentError;
 use crate::hardware::{Assignment, Display};
@@ -29,6 +32,9 @@ pub struct SavedState {
     /// with the values).
     #[serde(default)]
     pub attenuation: Vec<(u32, AttenuationColumn)>,
+    /// The projector whose state this is (absent in files of older builds).
+    #[serde(default)]
+    pub projector: Option<String>,
 }
 
 impl SavedState {
@@ -85,16 +91,20 @@ pub(super) struct Memory {
     pub(super) attenuation: HashMap<u32, AttenuationColumn>,
     path: Option<PathBuf>,
     last_write: Option<Instant>,
+    /// Whose memory this is (written into the state file).
+    projector: String,
 }
 
 impl Memory {
     /// The memory kept in `path` (empty when there is no file or no path), shown at once on
-    /// `display` so that the lights come back before any camera agent is reachable.
+    /// `display` so that the lights come back before any camera agent is reachable. A file that
+    /// cannot be read or is another projector's is set aside and the memory starts empty (the
+    /// nodes start at the configured start value), with a warning saying why.
     pub(super) fn relight(
         path: Option<PathBuf>,
         display: &mut impl Display,
         projector: &str,
-    ) -> Result<Self, AgentError> {
+    ) -> Self {
         let mut memory = Self {
             values: HashMap::new(),
             epoch: 0,
@@ -102,13 +112,24 @@ impl Memory {
             attenuation: HashMap::new(),
             path,
             last_write: None,
+            projector: projector.to_string(),
         };
-        let saved = match memory.path.as_deref() {
-            Some(path) => SavedState::load(path)?,
-            None => None,
+        let Some(path) = memory.path.as_deref() else {
+            return memory;
         };
-        let Some(saved) = saved else {
-            return Ok(memory);
+        let saved = match SavedState::load(path) {
+            Ok(Some(saved)) => match &saved.projector {
+                Some(other) if other != projector => {
+                    set_aside(path, &format!("it is projector {other:?}'s"));
+                    return memory;
+                }
+                _ => saved,
+            },
+            Ok(None) => return memory,
+            Err(e) => {
+                set_aside(path, &e.to_string());
+                return memory;
+            }
         };
         if let Some(a) = &saved.assignment {
             display.assign(a);
@@ -121,7 +142,22 @@ impl Memory {
         memory.epoch = saved.calibration_epoch;
         memory.assignment = saved.assignment;
         memory.attenuation = saved.attenuation.into_iter().collect();
-        Ok(memory)
+        memory
+    }
+
+    /// The camera agent assigned `nodes` to this projector: values and columns of any other
+    /// node (a state file's, not this projector's) are forgotten.
+    pub(super) fn keep_only(&mut self, nodes: &[u32]) {
+        let before = self.values.len() + self.attenuation.len();
+        self.values.retain(|n, _| nodes.contains(n));
+        self.attenuation.retain(|n, _| nodes.contains(n));
+        let dropped = before - self.values.len() - self.attenuation.len();
+        if dropped > 0 {
+            tracing::warn!(
+                dropped,
+                "remembered nodes this projector is not assigned: forgotten"
+            );
+        }
     }
 
     /// Values from another calibration mean nothing now: forget them.
@@ -156,12 +192,35 @@ impl Memory {
             values,
             assignment: self.assignment.clone(),
             attenuation,
+            projector: Some(self.projector.clone()),
         };
         if let Err(e) = saved.save(path) {
             // The lights matter more than the file: log and carry on.
             tracing::warn!(error = %e, "could not write the state file");
         }
         self.last_write = Some(Instant::now());
+    }
+}
+
+/// Renames an unusable state file to `<name>.corrupt-<unix seconds>` (kept for a post-mortem,
+/// out of the node's way) and says why; if even that fails, says so (the node starts fresh and
+/// its next flush overwrites the file).
+fn set_aside(path: &Path, why: &str) {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let mut aside = path.as_os_str().to_owned();
+    aside.push(format!(".corrupt-{secs}"));
+    let aside = PathBuf::from(aside);
+    match std::fs::rename(path, &aside) {
+        Ok(()) => tracing::warn!(
+            file = %path.display(), moved_to = %aside.display(), why,
+            "state file unusable: set aside; the nodes start fresh"
+        ),
+        Err(e) => tracing::warn!(
+            file = %path.display(), why, error = %e,
+            "state file unusable and could not be set aside; the nodes start fresh"
+        ),
     }
 }
 
@@ -185,6 +244,7 @@ mod tests {
             values: vec![(7, LinearRgb::splat(0.4))],
             assignment: None,
             attenuation: vec![(7, column)],
+            projector: Some("p".into()),
         };
         saved.save(&path).expect("save");
         assert_eq!(SavedState::load(&path).expect("load"), Some(saved));
@@ -231,16 +291,76 @@ mod tests {
     fn a_flushed_memory_relights_the_next_run() {
         let dir = tempfile::tempdir().expect("temp dir");
         let path = dir.path().join("r.state.json");
-        let mut first = Memory::relight(Some(path.clone()), &mut Recorder::default(), "r")
-            .expect("no file yet");
+        let mut first = Memory::relight(Some(path.clone()), &mut Recorder::default(), "r");
         assert!(first.values.is_empty() && first.epoch == 0);
         first.values.insert(2, LinearRgb::splat(0.3));
         first.epoch = 5;
         first.flush();
         let mut display = Recorder::default();
-        let second = Memory::relight(Some(path), &mut display, "r").expect("relit");
+        let second = Memory::relight(Some(path), &mut display, "r");
         assert_eq!(second.epoch, 5);
         assert_eq!(second.values, first.values);
         assert_eq!(display.0, first.values);
+    }
+
+    /// The files in `dir` whose name starts with `prefix`.
+    fn named(dir: &Path, prefix: &str) -> Vec<String> {
+        std::fs::read_dir(dir)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with(prefix))
+            .collect()
+    }
+
+    /// A corrupt state file does not keep a projector dark: it is renamed `*.corrupt-<time>`
+    /// and the node starts fresh (its configured start, nothing relit).
+    #[test]
+    fn a_corrupt_state_file_is_set_aside_and_the_node_starts_fresh() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("c.state.json");
+        std::fs::write(&path, "{ not json").expect("write");
+        let mut display = Recorder::default();
+        let memory = Memory::relight(Some(path.clone()), &mut display, "c");
+        assert!(memory.values.is_empty() && display.0.is_empty());
+        assert!(!path.exists(), "moved out of the way");
+        let aside = named(dir.path(), "c.state.json.corrupt-");
+        assert_eq!(aside.len(), 1, "{aside:?}");
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join(&aside[0])).expect("kept"),
+            "{ not json"
+        );
+    }
+
+    /// Another projector's state file relights nothing (it is set aside); values of nodes the
+    /// camera agent does not assign are forgotten.
+    #[test]
+    fn another_projectors_state_and_foreign_nodes_are_not_relit() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("d.state.json");
+        let saved = SavedState {
+            calibration_epoch: 1,
+            values: vec![(0, LinearRgb::splat(0.9)), (5, LinearRgb::splat(0.2))],
+            assignment: None,
+            attenuation: Vec::new(),
+            projector: Some("p1".into()),
+        };
+        saved.save(&path).expect("save");
+        let mut display = Recorder::default();
+        let memory = Memory::relight(Some(path.clone()), &mut display, "p0");
+        assert!(
+            memory.values.is_empty() && display.0.is_empty(),
+            "p1's nodes lit by p0"
+        );
+        assert_eq!(named(dir.path(), "d.state.json.corrupt-").len(), 1);
+        // An older file without a projector: relit, then cut to what the camera assigns.
+        let older = SavedState {
+            projector: None,
+            ..saved
+        };
+        older.save(&path).expect("save");
+        let mut memory = Memory::relight(Some(path), &mut display, "p0");
+        assert_eq!(memory.values.len(), 2);
+        memory.keep_only(&[5]);
+        assert_eq!(memory.values.keys().copied().collect::<Vec<_>>(), [5]);
     }
 }
