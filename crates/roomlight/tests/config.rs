@@ -152,6 +152,26 @@ fn out_of_range_numbers_are_refused_naming_file_and_field() {
     assert!(e.contains("theta = NaN"), "{e}");
 }
 
+/// An empty token would admit anyone who sends none: refused at load, naming file and field
+/// (never printing a token); so is one longer than the camera agent compares, and waits that
+/// would overflow a Duration's arithmetic.
+#[test]
+fn empty_or_oversized_tokens_and_overflowing_waits_are_refused() {
+    let empty_camera = CAMERA.replace("token = \"t\"", "token = \"\"");
+    let e = camera_err("cam.toml", &empty_camera);
+    assert!(e.contains("cam.toml") && e.contains("token is empty"), "{e}");
+    let empty_node = NODE.replace("token = \"t\"", "token = \"  \"");
+    let e = node_err("n.toml", &empty_node);
+    assert!(e.contains("n.toml") && e.contains("token is empty"), "{e}");
+    let long = NODE.replace("token = \"t\"", &format!("token = \"{}\"", "k".repeat(2000)));
+    let e = node_err("n.toml", &long);
+    assert!(e.contains("token of 2000 bytes") && !e.contains("kkkk"), "{e}");
+    let e = node_err("n.toml", &format!("{NODE}mdns_wait_s = {}\n", u64::MAX));
+    assert!(e.contains("n.toml") && e.contains("mdns_wait_s = 18446744073709551615"), "{e}");
+    let e = camera_err("cam.toml", &format!("{CAMERA}heartbeat_ms = {}\n", u64::MAX));
+    assert!(e.contains("heartbeat_ms = 18446744073709551615"), "{e}");
+}
+
 #[test]
 fn the_camera_is_found_by_address_or_over_mdns() {
     let (_d, path) = file(

@@ -99,6 +99,7 @@ impl CameraFile {
     fn check(&self, path: &Path) -> Result<()> {
         check_nonempty(path, "room", &self.room)?;
         check_nonempty(path, "listen", &self.listen)?;
+        super::check_token(path, &self.token)?;
         if let Some(hardware) = &self.hardware {
             check_nonempty(path, "hardware.sim", hardware.endpoint())?;
         }

@@ -67,6 +67,26 @@ fn check_nonempty(path: &Path, field: &str, value: &str) -> Result<()> {
     Ok(())
 }
 
+/// Refuses an empty room token (it would admit anyone who sends none) or one longer than the
+/// camera agent compares; the error never prints the token.
+fn check_token(path: &Path, token: &str) -> Result<()> {
+    if token.trim().is_empty() {
+        bail!(
+            "{}: token is empty: expected the room's shared secret (an empty token would admit anyone)",
+            path.display()
+        );
+    }
+    let max = roomlight_proto::bounds::MAX_TOKEN_BYTES;
+    if token.len() > max {
+        bail!(
+            "{}: token of {} bytes: expected at most {max}",
+            path.display(),
+            token.len()
+        );
+    }
+    Ok(())
+}
+
 fn mdns_port_default() -> u16 {
     5353
 }

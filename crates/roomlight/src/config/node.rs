@@ -180,6 +180,7 @@ impl NodeFile {
     fn check(&self, path: &Path) -> Result<()> {
         check_nonempty(path, "room", &self.room)?;
         check_nonempty(path, "projector", &self.projector)?;
+        super::check_token(path, &self.token)?;
         self.check_display(path)?;
         match &self.camera {
             Written::Address(a) => check_nonempty(path, "camera", a)?,
