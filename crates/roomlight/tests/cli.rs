@@ -730,11 +730,18 @@ fn hw_capture_writes_the_cameras_image_and_times_out_naming_it() {
     };
     std::fs::remove_file(&out).expect("remove the first capture");
     let ok = capture_with(1000);
-    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
     assert_eq!(image::open(&out).expect("written").to_rgb8(), img);
     let capped = capture_with(10);
     let err = String::from_utf8_lossy(&capped.stderr);
-    assert!(!capped.status.success() && err.contains("more than the 10 allowed"), "{err}");
+    assert!(
+        !capped.status.success() && err.contains("more than the 10 allowed"),
+        "{err}"
+    );
 
     let hung = Command::new(env!("CARGO_BIN_EXE_roomlight"))
         .args([

@@ -23,8 +23,20 @@ impl Drop for Procs {
 impl Procs {
     /// Starts `roomlight ARGS`, returning a channel of its stdout lines.
     fn spawn(&mut self, name: &str, args: &[&str], dir: &Path) -> mpsc::Receiver<String> {
+        self.spawn_with(name, args, dir, &[])
+    }
+
+    /// `spawn` with more environment variables.
+    fn spawn_with(
+        &mut self,
+        name: &str,
+        args: &[&str],
+        dir: &Path,
+        env: &[(&str, &Path)],
+    ) -> mpsc::Receiver<String> {
         let mut child = Command::new(env!("CARGO_BIN_EXE_roomlight"))
             .args(args)
+            .envs(env.iter().copied())
             .current_dir(dir)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -44,11 +56,59 @@ impl Procs {
         rx
     }
 
+    /// SIGTERM, as systemd stops a service; the child is reaped on drop.
+    fn terminate(&mut self, name: &str) {
+        let (_, child) = self.0.iter().find(|(n, _)| n == name).expect("started");
+        let status = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status()
+            .expect("run kill");
+        assert!(status.success(), "kill -TERM {name}");
+    }
+
     fn kill(&mut self, name: &str) {
         if let Some(k) = self.0.iter().position(|(n, _)| n == name) {
             let (_, mut child) = self.0.remove(k);
             child.kill().expect("SIGKILL");
             child.wait().expect("reaped");
+        }
+    }
+}
+
+/// A stand-in for systemd's notification socket: what a process started with
+/// `NOTIFY_SOCKET` pointing here says, datagram by datagram. A thread reads it all the time, as
+/// systemd does (a full socket queue would block the sender).
+struct Notifications(mpsc::Receiver<String>, std::path::PathBuf);
+
+impl Notifications {
+    fn bind(path: std::path::PathBuf) -> Self {
+        let socket = std::os::unix::net::UnixDatagram::bind(&path).expect("bind notify socket");
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = socket.recv(&mut buf) {
+                if tx
+                    .send(String::from_utf8_lossy(&buf[..n]).into_owned())
+                    .is_err()
+                {
+                    return;
+                }
+            }
+        });
+        Self(rx, path)
+    }
+
+    /// Waits (at most `within`) for a datagram with the line `line`; the datagram.
+    fn wait_for(&self, line: &str, within: Duration) -> String {
+        let until = Instant::now() + within;
+        let mut seen = Vec::new();
+        loop {
+            let left = until.saturating_duration_since(Instant::now());
+            match self.0.recv_timeout(left) {
+                Ok(message) if message.lines().any(|l| l == line) => return message,
+                Ok(message) => seen.push(message),
+                Err(_) => panic!("no {line:?} within {within:?}; got {seen:?}"),
+            }
         }
     }
 }
@@ -263,14 +323,43 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
     // the replacement node below finds it that way.
     let mdns_port = 20_000 + (std::process::id() % 20_000);
     std::fs::write(d.join("camera.toml"), format!("room = \"lab\"\ntoken = \"t0k3n\"\nlisten = \"127.0.0.1:0\"\nhardware = {{ sim = \"http://{sim}\" }}\nmodel = \"model.json\"\nheartbeat_ms = 200\nmodel_rounds = 5\nmdns = true\nmdns_port = {mdns_port}\nmdns_loopback_only = true\n")).expect("camera config");
-    let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
+    // The camera agent and p0 run as systemd would run them (Type=notify, WatchdogSec=).
+    let cam_notify = Notifications::bind(d.join("camera.notify"));
+    let p0_notify = Notifications::bind(d.join("p0.notify"));
+    let watchdog = Path::new("100000");
+    let cam_out = procs.spawn_with(
+        "camera",
+        &["camera", "--config", "camera.toml"],
+        d,
+        &[
+            ("NOTIFY_SOCKET", &cam_notify.1),
+            ("WATCHDOG_USEC", watchdog),
+        ],
+    );
     let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
         l.starts_with("camera listening on")
     }));
+    let ready = cam_notify.wait_for("READY=1", Duration::from_secs(10));
+    assert!(
+        ready.contains("STATUS=camera agent of room \"lab\" serving on"),
+        "{ready}"
+    );
+    cam_notify.wait_for("WATCHDOG=1", Duration::from_secs(10));
     for p in ["p0", "p1", "p2"] {
         write_node(d, p, &camera, &sim);
-        procs.spawn(p, &["node", "--config", &format!("{p}.toml")], d);
+        let env: &[(&str, &Path)] = if p == "p0" {
+            &[("NOTIFY_SOCKET", &p0_notify.1), ("WATCHDOG_USEC", watchdog)]
+        } else {
+            &[]
+        };
+        procs.spawn_with(p, &["node", "--config", &format!("{p}.toml")], d, env);
     }
+    let ready = p0_notify.wait_for("READY=1", Duration::from_secs(30));
+    assert!(
+        ready.contains("STATUS=projector p0 attached and showing"),
+        "{ready}"
+    );
+    p0_notify.wait_for("WATCHDOG=1", Duration::from_secs(10));
     // G* of the room, from the model the simulator wrote.
     let (_, _, best) = model_in(d);
     let converged = |l: &str| {
@@ -296,6 +385,9 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
     wait_line(&cam_out, Duration::from_secs(60), |l| {
         status(l).is_some_and(|(_, g, live)| live == 3 && best.excess(g) < 1e-3)
     });
+    // Stopped as systemd stops it: it says so on its way out.
+    procs.terminate("p0");
+    p0_notify.wait_for("STOPPING=1", Duration::from_secs(10));
     drop(procs);
 }
 

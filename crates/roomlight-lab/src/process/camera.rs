@@ -255,7 +255,9 @@ pub async fn serve_camera(
     };
     let (mut status, handle) =
         camera::serve(process.agent, model, camera, listener, cancel.clone());
-    loop {
+    super::systemd::ready(&format!("camera agent of room {room:?} serving on {addr}"));
+    super::systemd::with_watchdog(async {
+        loop {
         tokio::select! {
             () = cancel.cancelled() => break,
             changed = status.changed() => {
@@ -270,7 +272,9 @@ pub async fn serve_camera(
                 let _ = std::io::stdout().flush();
             }
         }
-    }
+        }
+    })
+    .await;
     handle.await.context("the camera agent task")??;
     Ok(())
 }

@@ -12,6 +12,7 @@ mod node;
 mod photos;
 mod sim;
 mod survey;
+mod systemd;
 
 pub use calibrate::{CalibrateOptions, calibrate_to_files};
 pub use camera::{CameraHardware, CameraProcess, CameraSource, serve_camera};

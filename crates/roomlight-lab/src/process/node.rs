@@ -2,6 +2,7 @@
 //! rendered room's projector drawing its nodes' weights, or a real window on an output
 //! (roomlight-hw).
 
+use super::systemd::{ReadyOnShow, with_watchdog};
 use anyhow::{Context, Result, bail};
 use roomlight_agent::node::{self, NodeConfig};
 use roomlight_agent::remote::{QueuedDisplay, remote_display};
@@ -36,15 +37,18 @@ pub async fn run_node(
     display: &NodeDisplay,
     cancel: CancellationToken,
 ) -> Result<()> {
+    let projector = config.projector_id.clone();
     if let NodeDisplay::Window(spec) = display {
-        let Some(window) = open_window(spec, &config.projector_id, &cancel).await else {
+        let Some(window) = open_window(spec, &projector, &cancel).await else {
             return Ok(());
         };
-        node::run(config, window, cancel).await?;
+        let window = ReadyOnShow::new(window, &projector);
+        with_watchdog(node::run(config, window, cancel)).await?;
         return Ok(());
     }
-    let display = connect(hardware, display, &config.projector_id, &cancel).await?;
-    node::run(config, display, cancel).await?;
+    let display = connect(hardware, display, &projector, &cancel).await?;
+    let display = ReadyOnShow::new(display, &projector);
+    with_watchdog(node::run(config, display, cancel)).await?;
     Ok(())
 }
 
