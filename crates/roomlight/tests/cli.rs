@@ -1,5 +1,6 @@
 //! The `roomlight` binary as a user runs it.
 
+use std::path::Path;
 use std::process::Command;
 
 fn roomlight(args: &[&str]) -> String {
@@ -765,4 +766,59 @@ fn hw_capture_writes_the_cameras_image_and_times_out_naming_it() {
         .expect("run roomlight");
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && err.contains("above zero"), "{err}");
+}
+
+/// The Debian package's metadata names files that exist: every asset but the release binary,
+/// both systemd units, the example configs, and executable maintainer scripts that parse.
+#[test]
+fn the_debian_package_names_files_that_exist() {
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let manifest: toml::Table = std::fs::read_to_string(here.join("Cargo.toml"))
+        .expect("Cargo.toml")
+        .parse()
+        .expect("Cargo.toml parses");
+    let deb = &manifest["package"]["metadata"]["deb"];
+    let assets = deb["assets"].as_array().expect("assets");
+    let mut installed = Vec::new();
+    for asset in assets {
+        let [from, to, mode] = &asset.as_array().expect("[from, to, mode]")[..] else {
+            panic!("asset {asset}");
+        };
+        let from = from.as_str().expect("source");
+        installed.push(format!(
+            "{}{}",
+            to.as_str().expect("target"),
+            from.rsplit('/').next().expect("name")
+        ));
+        assert!(matches!(mode.as_str(), Some("644" | "755")), "{asset}");
+        if !from.starts_with("target/") {
+            assert!(here.join(from).is_file(), "{from} is not a file");
+        }
+    }
+    for wanted in [
+        "usr/bin/roomlight",
+        "lib/systemd/system/roomlight-camera.service",
+        "lib/systemd/system/roomlight-node@.service",
+        "usr/share/doc/roomlight/examples/camera.toml",
+        "usr/share/doc/roomlight/examples/node.toml",
+    ] {
+        assert!(
+            installed.iter().any(|i| i == wanted),
+            "{wanted} not in {installed:?}"
+        );
+    }
+    let scripts = here.join(deb["maintainer-scripts"].as_str().expect("scripts"));
+    for script in ["postinst", "postrm"] {
+        let path = scripts.join(script);
+        let mode = std::os::unix::fs::PermissionsExt::mode(
+            &std::fs::metadata(&path).expect("script").permissions(),
+        );
+        assert!(mode & 0o111 != 0, "{script} is not executable");
+        let parsed = Command::new("sh")
+            .arg("-n")
+            .arg(&path)
+            .status()
+            .expect("sh -n");
+        assert!(parsed.success(), "{script} does not parse");
+    }
 }
