@@ -48,10 +48,11 @@ impl Pattern {
         let mut codes = match self.fill {
             Fill::Uniform(code) => vec![code; n],
             Fill::Structured { pattern, coding } => {
-                roomlight_calib::graycode::Manifest::with_coding(width, height, coding)
-                    .map_err(|e| refused(e.to_string()))?
-                    .pattern_image(pattern)
-                    .pixels
+                let manifest =
+                    roomlight_calib::graycode::Manifest::with_coding(width, height, coding)
+                        .map_err(|e| refused(e.to_string()))?;
+                check_gray_bit(&manifest, pattern).map_err(refused)?;
+                manifest.pattern_image(pattern).pixels
             }
         };
         if let Some(mask) = &self.mask {
@@ -74,6 +75,29 @@ impl Pattern {
 /// How a projector draws its nodes, as the camera agent measured it: the calibration rig's
 /// own type, so that what the procedure assigns is what a node agent draws.
 pub use roomlight_calib::rig::Assignment;
+
+/// A Gray bit must be one of the projector's: bit `b` of an axis of `bits` bits (a bit beyond
+/// them has no stripes to draw, and roomlight-calib's coder assumes it never comes).
+pub fn check_gray_bit(
+    manifest: &roomlight_calib::graycode::Manifest,
+    pattern: roomlight_calib::graycode::Pattern,
+) -> Result<(), String> {
+    use roomlight_calib::graycode::{Axis, Pattern as Gray};
+    let Gray::Bit { axis, bit, .. } = pattern else {
+        return Ok(());
+    };
+    let bits = match axis {
+        Axis::Column => manifest.column_bits,
+        Axis::Row => manifest.row_bits,
+    };
+    if bit >= bits {
+        return Err(format!(
+            "Gray bit {bit} of the {axis:?} axis: a {}×{} projector has {bits}",
+            manifest.width, manifest.height
+        ));
+    }
+    Ok(())
+}
 
 /// Refuses weights outside the frame, unsorted pixels, weights outside (0, 1] and a response
 /// that is not finite and positive; `what` names the sender in the message.

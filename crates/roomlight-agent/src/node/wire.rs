@@ -43,6 +43,13 @@ pub(super) fn pattern_from_wire(
         v1::show::Pattern::Uniform(u) => uniform_from_wire(&u)?,
         v1::show::Pattern::Gray(g) => gray_from_wire(&g)?,
     };
+    // A Gray bit the projector does not have is refused here, not acknowledged and then
+    // found undrawable.
+    if let (Fill::Structured { pattern, coding }, Some((width, height))) = (fill, resolution) {
+        let manifest = roomlight_calib::graycode::Manifest::with_coding(width, height, coding)
+            .map_err(|e| e.to_string())?;
+        crate::hardware::check_gray_bit(&manifest, pattern)?;
+    }
     Ok(Wire::Frame(Pattern {
         fill,
         mask: mask_from_wire(mask, resolution)?,
@@ -270,6 +277,16 @@ mod tests {
         assert!(read(gray(9, 3, xor)).is_err(), "unknown axis");
         assert!(read(gray(row, 3, 0)).is_err(), "unspecified coding");
         assert!(read(gray(row, 40, xor)).is_err(), "bit 40");
+        // A 5×2 projector has 3 column bits and 1 row bit (found by fuzzing: roomlight-calib's
+        // coder underflowed on bit 3 of its columns).
+        let sized = |p| pattern_from_wire(p, &[], Some((5, 2)));
+        let column = v1::Axis::Column as i32;
+        assert!(sized(gray(column, 2, xor)).is_ok());
+        assert!(
+            sized(gray(column, 3, xor)).is_err_and(|e| e.contains("has 3")),
+            "bit 3 of 3"
+        );
+        assert!(sized(gray(row, 1, xor)).is_err(), "bit 1 of 1");
     }
 
     /// A 5×2 projector's mask: 10 pixels, two bytes; pixels 0, 3 and 9 shown.
