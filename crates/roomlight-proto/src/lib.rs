@@ -15,6 +15,8 @@ pub mod v1 {
 
 pub mod bounds;
 pub mod convert;
+#[cfg(test)]
+mod fuzz;
 pub mod refusal;
 
 /// The protocol version this build speaks. 3: a node's errors travel without their patch ids

@@ -12,6 +12,8 @@
 //! camera agent's registry or rounds, only the wire contract.
 
 mod backoff;
+#[cfg(test)]
+mod fuzz;
 mod session;
 mod state;
 mod wire;

@@ -1,0 +1,197 @@
+//! Fuzzing of the node agent's own decoders of a camera agent's messages — Assign weights, Show
+//! patterns and their masks, as `wire` checks them and a display then draws them — and of its
+//! state file (JSON), as `state` reads it. Inputs are valid messages and files mutated, from a
+//! seeded generator; zero panics, and what passes the checks is drawable. The protobuf messages'
+//! common checks are fuzzed in roomlight-proto.
+//!
+//! `cargo test -p roomlight-agent fuzz` runs 20 000 messages and 500 state files;
+//! `ROOMLIGHT_FUZZ_ITERS=10000000 cargo test --release -p roomlight-agent fuzz` the long run.
+//! Test-only.
+
+use super::state::{Memory, SavedState};
+use super::wire::{Wire, assignment_from_wire, pattern_from_wire};
+use crate::hardware::Display;
+use prost::Message;
+use roomlight_core::{AttenuationColumn, LinearRgb};
+use roomlight_proto::convert::to_rgb;
+use roomlight_proto::v1;
+
+/// A seeded generator (SplitMix64) and a byte mutator, a copy of roomlight-proto's (test code is not shared across crates).
+pub(crate) struct Mutator(u64);
+
+impl Mutator {
+    pub(crate) fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `0..n` (`n = 0`: 0).
+    fn below(&mut self, n: usize) -> usize {
+        if n == 0 {
+            0
+        } else {
+            (self.next() % n as u64) as usize
+        }
+    }
+
+    /// One of `seeds` mutated a few times, or (one time in eight) random bytes.
+    pub(crate) fn input(&mut self, seeds: &[Vec<u8>]) -> Vec<u8> {
+        if seeds.is_empty() || self.below(8) == 0 {
+            let len = self.below(256);
+            return (0..len).map(|_| self.next() as u8).collect();
+        }
+        let mut bytes = seeds[self.below(seeds.len())].clone();
+        for _ in 0..=self.below(4) {
+            let at = self.below(bytes.len() + 1);
+            match self.below(5) {
+                0 if at < bytes.len() => bytes[at] ^= 1 << self.below(8),
+                1 if at < bytes.len() => bytes[at] = self.next() as u8,
+                2 => bytes.truncate(at),
+                3 => {
+                    let extra: Vec<u8> = (0..self.below(16)).map(|_| self.next() as u8).collect();
+                    bytes.splice(at..at, extra);
+                }
+                _ => {
+                    let end = (at + self.below(32)).min(bytes.len());
+                    let repeated = bytes[at..end].to_vec();
+                    bytes.splice(at..at, repeated);
+                }
+            }
+        }
+        bytes
+    }
+}
+
+/// Inputs per target: `ROOMLIGHT_FUZZ_ITERS`, else 3 000.
+pub(crate) fn iterations() -> usize {
+    std::env::var("ROOMLIGHT_FUZZ_ITERS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(20_000)
+}
+
+fn seeds() -> Vec<Vec<u8>> {
+    let bodies = [
+        v1::room_message::Body::Assign(v1::Assign {
+            nodes: vec![v1::NodeAssignment {
+                node: 3,
+                chart: 3,
+                pixels: vec![0, 5, 9],
+                weights: vec![1.0, 0.5, 0.25],
+            }],
+            width: 5,
+            height: 2,
+            gamma: vec![2.2, 2.2, 2.2],
+        }),
+        v1::room_message::Body::Show(v1::Show {
+            seq: 4,
+            pattern: Some(v1::show::Pattern::Gray(v1::GrayBit {
+                axis: v1::Axis::Column as i32,
+                bit: 1,
+                inverse: true,
+                coding: v1::Coding::Xor04 as i32,
+            })),
+            mask: vec![0b0000_1001, 0b0000_0010],
+        }),
+        v1::room_message::Body::Show(v1::Show {
+            seq: 5,
+            pattern: Some(v1::show::Pattern::Uniform(v1::Uniform {
+                code: Some(to_rgb(LinearRgb::splat(0.5))),
+            })),
+            mask: Vec::new(),
+        }),
+    ];
+    bodies
+        .into_iter()
+        .map(|b| v1::RoomMessage { body: Some(b) }.encode_to_vec())
+        .collect()
+}
+
+/// A node agent of a 5×2 projector reading a camera agent's message: what its checks accept,
+/// its display can draw.
+fn node_reads(bytes: &[u8]) {
+    let Ok(message) = v1::RoomMessage::decode(bytes) else {
+        return;
+    };
+    match message.body {
+        Some(v1::room_message::Body::Assign(a)) => {
+            if let Ok(assignment) = assignment_from_wire(&a) {
+                assert!(u64::from(assignment.width) * u64::from(assignment.height) <= 1 << 26);
+            }
+        }
+        Some(v1::room_message::Body::Show(s)) => {
+            if let Some(Ok(Wire::Frame(pattern))) = s
+                .pattern
+                .map(|p| pattern_from_wire(p, &s.mask, Some((5, 2))))
+            {
+                let codes = pattern.codes(5, 2).expect("an accepted pattern draws");
+                assert!(codes.iter().flatten().all(|c| (0.0..=1.0).contains(c)));
+            }
+        }
+        _ => {}
+    }
+}
+
+#[test]
+fn fuzz_the_node_agents_wire_checks() {
+    let seeds = seeds();
+    let mut m = Mutator::new(0x5EED_0003);
+    for _ in 0..iterations() {
+        node_reads(&m.input(&seeds));
+    }
+}
+
+/// A display that only counts what it is told.
+struct Count(usize);
+
+impl Display for Count {
+    fn show(&mut self, _: u32, _: LinearRgb) {
+        self.0 += 1;
+    }
+}
+
+/// State files mutated: read, or refused naming the file; a node relit from any of them never
+/// panics and shows only finite values.
+#[test]
+fn fuzz_state_files() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("f.state.json");
+    let column =
+        AttenuationColumn::new(vec![1, 4], vec![LinearRgb::splat(0.5); 2]).expect("column");
+    let valid = SavedState {
+        calibration_epoch: 2,
+        values: vec![(3, LinearRgb::splat(0.4)), (4, LinearRgb([0.1, 0.2, 0.3]))],
+        assignment: None,
+        attenuation: vec![(3, column)],
+        projector: Some("f".into()),
+    };
+    let seeds = vec![serde_json::to_vec(&valid).expect("json")];
+    let mut m = Mutator::new(0x5EED_0004);
+    for _ in 0..iterations() / 40 {
+        std::fs::write(&path, m.input(&seeds)).expect("write");
+        match SavedState::load(&path) {
+            Ok(Some(state)) => assert!(
+                state
+                    .values
+                    .iter()
+                    .all(|(_, v)| v.0.iter().all(|c| c.is_finite()))
+            ),
+            Ok(None) => {}
+            Err(e) => assert!(e.to_string().contains("f.state.json"), "{e}"),
+        }
+        let memory = Memory::relight(Some(path.clone()), &mut Count(0), "f");
+        assert!(
+            memory
+                .values
+                .values()
+                .all(|v| v.0.iter().all(|c| c.is_finite()))
+        );
+    }
+}
