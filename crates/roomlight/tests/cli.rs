@@ -822,3 +822,58 @@ fn the_debian_package_names_files_that_exist() {
         assert!(parsed.success(), "{script} does not parse");
     }
 }
+
+/// The room token can stay out of the config: read from a file, or from a systemd credential
+/// (`LoadCredential=`, `$CREDENTIALS_DIRECTORY`); a credential outside systemd, a missing file
+/// or an empty token is refused naming the config and where the token was to come from.
+#[test]
+fn the_token_comes_from_a_file_or_a_systemd_credential() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    std::fs::write(d.join("room-token"), "s3cret-from-a-file\n").expect("token file");
+    std::fs::write(d.join("empty-token"), "\n").expect("empty token file");
+    let check = |token: &str, credentials: Option<&Path>| {
+        let config = d.join("camera.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "room = \"lab\"\ntoken = {token}\nlisten = \"127.0.0.1:0\"\n\
+                 hardware = {{ sim = \"http://127.0.0.1:1\" }}\nmodel = \"m.json\"\n"
+            ),
+        )
+        .expect("config");
+        let mut command = Command::new(env!("CARGO_BIN_EXE_roomlight"));
+        command.args([
+            "camera",
+            "--check",
+            "--config",
+            config.to_str().expect("utf-8"),
+        ]);
+        command.env_remove("CREDENTIALS_DIRECTORY");
+        if let Some(dir) = credentials {
+            command.env("CREDENTIALS_DIRECTORY", dir);
+        }
+        let out = command.output().expect("run roomlight");
+        let said = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (out.status.success(), said)
+    };
+    let file = format!("{{ file = {:?} }}", d.join("room-token"));
+    let (ok, said) = check(&file, None);
+    assert!(ok, "{said}");
+    let (ok, said) = check("{ credential = \"room-token\" }", Some(d));
+    assert!(ok, "{said}");
+    let (ok, said) = check("{ credential = \"room-token\" }", None);
+    assert!(
+        !ok && said.contains("camera.toml") && said.contains("CREDENTIALS_DIRECTORY"),
+        "{said}"
+    );
+    let (ok, said) = check("{ file = \"/nonexistent/room-token\" }", None);
+    assert!(!ok && said.contains("/nonexistent/room-token"), "{said}");
+    let empty = format!("{{ file = {:?} }}", d.join("empty-token"));
+    let (ok, said) = check(&empty, None);
+    assert!(!ok && said.contains("token is empty"), "{said}");
+}

@@ -13,7 +13,7 @@ use std::time::Duration;
 #[serde(deny_unknown_fields)]
 struct CameraFile {
     room: String,
-    token: String,
+    token: super::Token,
     listen: String,
     /// The simulator's camera: `hardware = { sim = "http://host:port" }`; or `camera`.
     #[serde(default)]
@@ -80,9 +80,10 @@ fn mdns_default() -> bool {
 /// The camera agent's config file, checked and turned into the process to run.
 pub fn load_camera(path: &Path) -> Result<CameraProcess> {
     let file: CameraFile = read_toml(path)?;
+    let token = file.token.resolve(path)?;
     file.check(path)?;
     let hardware = file.hardware(path)?;
-    Ok(file.into_process(hardware))
+    Ok(file.into_process(hardware, token))
 }
 
 /// `camera` as a spec string or a `CameraConfig` table, validated.
@@ -99,7 +100,6 @@ impl CameraFile {
     fn check(&self, path: &Path) -> Result<()> {
         check_nonempty(path, "room", &self.room)?;
         check_nonempty(path, "listen", &self.listen)?;
-        super::check_token(path, &self.token)?;
         if let Some(hardware) = &self.hardware {
             check_nonempty(path, "hardware.sim", hardware.endpoint())?;
         }
@@ -187,7 +187,7 @@ impl CameraFile {
     }
 
     /// The one place a checked camera config becomes the agent's `CameraConfig` and process.
-    fn into_process(self, hardware: CameraHardware) -> CameraProcess {
+    fn into_process(self, hardware: CameraHardware, token: String) -> CameraProcess {
         let source = match (self.model, self.survey) {
             (Some(model), _) => CameraSource::Model {
                 model,
@@ -201,7 +201,7 @@ impl CameraFile {
         CameraProcess {
             agent: CameraConfig {
                 room: self.room,
-                token: self.token,
+                token,
                 heartbeat: Duration::from_millis(self.heartbeat_ms),
                 deadline: Duration::from_millis(self.deadline_ms),
                 model_rounds: self.model_rounds,

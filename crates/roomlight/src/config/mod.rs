@@ -67,6 +67,65 @@ fn check_nonempty(path: &Path, field: &str, value: &str) -> Result<()> {
     Ok(())
 }
 
+/// The room token as a config gives it: `token = "..."` in the file, or kept out of it (a
+/// config is often readable by more people than the secret should be):
+/// `token = { credential = "room-token" }`, a systemd credential (`LoadCredential=`, read from
+/// `$CREDENTIALS_DIRECTORY`), or `token = { file = "/etc/roomlight/room-token" }`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum Token {
+    Inline(String),
+    Credential { credential: String },
+    File { file: std::path::PathBuf },
+}
+
+/// The largest token file read (a token is at most `MAX_TOKEN_BYTES`; a newline may follow).
+const TOKEN_FILE_MAX: u64 = 4096;
+
+impl Token {
+    /// The token, checked; errors name the config file and where the token was to come from,
+    /// never the token.
+    fn resolve(&self, path: &Path) -> Result<String> {
+        let read = |from: &Path| -> Result<String> {
+            let mut text = String::new();
+            std::io::Read::read_to_string(
+                &mut std::io::Read::take(
+                    std::fs::File::open(from).with_context(|| {
+                        format!("{}: token from {}", path.display(), from.display())
+                    })?,
+                    TOKEN_FILE_MAX,
+                ),
+                &mut text,
+            )
+            .with_context(|| format!("{}: token from {}", path.display(), from.display()))?;
+            Ok(text.trim_end_matches(['\n', '\r']).to_string())
+        };
+        let token = match self {
+            Self::Inline(token) => token.clone(),
+            Self::File { file } => read(file)?,
+            Self::Credential { credential } => {
+                let Some(dir) = std::env::var_os("CREDENTIALS_DIRECTORY") else {
+                    bail!(
+                        "{}: token.credential {credential:?}: $CREDENTIALS_DIRECTORY is not set \
+                         (run under systemd with LoadCredential={credential}:FILE, or give \
+                         token = {{ file = \"FILE\" }})",
+                        path.display()
+                    );
+                };
+                if credential.contains('/') || credential.is_empty() {
+                    bail!(
+                        "{}: token.credential {credential:?}: expected a name",
+                        path.display()
+                    );
+                }
+                read(&Path::new(&dir).join(credential))?
+            }
+        };
+        check_token(path, &token)?;
+        Ok(token)
+    }
+}
+
 /// Refuses an empty room token (it would admit anyone who sends none) or one longer than the
 /// camera agent compares; the error never prints the token.
 fn check_token(path: &Path, token: &str) -> Result<()> {

@@ -100,7 +100,7 @@ fn settle_ms_default() -> u64 {
 #[serde(deny_unknown_fields)]
 struct NodeFile {
     room: String,
-    token: String,
+    token: super::Token,
     camera: Written,
     #[serde(default = "super::mdns_port_default")]
     mdns_port: u16,
@@ -172,15 +172,15 @@ pub struct NodeSetup {
 /// A node agent's config file, checked.
 pub fn load_node(path: &Path) -> Result<NodeSetup> {
     let file: NodeFile = read_toml(path)?;
+    let token = file.token.resolve(path)?;
     file.check(path)?;
-    file.into_setup(path)
+    file.into_setup(path, token)
 }
 
 impl NodeFile {
     fn check(&self, path: &Path) -> Result<()> {
         check_nonempty(path, "room", &self.room)?;
         check_nonempty(path, "projector", &self.projector)?;
-        super::check_token(path, &self.token)?;
         self.check_display(path)?;
         match &self.camera {
             Written::Address(a) => check_nonempty(path, "camera", a)?,
@@ -254,7 +254,7 @@ impl NodeFile {
         )
     }
 
-    fn into_setup(self, path: &Path) -> Result<NodeSetup> {
+    fn into_setup(self, path: &Path, token: String) -> Result<NodeSetup> {
         let rule = match self.rule {
             Rule::Safe => StepRule::Safe { theta: self.theta },
             Rule::Momentum => StepRule::Momentum { theta: self.theta },
@@ -299,7 +299,7 @@ impl NodeFile {
             hardware,
             display,
             room: self.room,
-            token: self.token,
+            token,
             projector: self.projector,
             kind: match self.kind {
                 Kind::Standard => v1::ProjectorKind::Standard,
