@@ -159,16 +159,31 @@ fn out_of_range_numbers_are_refused_naming_file_and_field() {
 fn empty_or_oversized_tokens_and_overflowing_waits_are_refused() {
     let empty_camera = CAMERA.replace("token = \"t\"", "token = \"\"");
     let e = camera_err("cam.toml", &empty_camera);
-    assert!(e.contains("cam.toml") && e.contains("token is empty"), "{e}");
+    assert!(
+        e.contains("cam.toml") && e.contains("token is empty"),
+        "{e}"
+    );
     let empty_node = NODE.replace("token = \"t\"", "token = \"  \"");
     let e = node_err("n.toml", &empty_node);
     assert!(e.contains("n.toml") && e.contains("token is empty"), "{e}");
-    let long = NODE.replace("token = \"t\"", &format!("token = \"{}\"", "k".repeat(2000)));
+    let long = NODE.replace(
+        "token = \"t\"",
+        &format!("token = \"{}\"", "k".repeat(2000)),
+    );
     let e = node_err("n.toml", &long);
-    assert!(e.contains("token of 2000 bytes") && !e.contains("kkkk"), "{e}");
+    assert!(
+        e.contains("token of 2000 bytes") && !e.contains("kkkk"),
+        "{e}"
+    );
     let e = node_err("n.toml", &format!("{NODE}mdns_wait_s = {}\n", u64::MAX));
-    assert!(e.contains("n.toml") && e.contains("mdns_wait_s = 18446744073709551615"), "{e}");
-    let e = camera_err("cam.toml", &format!("{CAMERA}heartbeat_ms = {}\n", u64::MAX));
+    assert!(
+        e.contains("n.toml") && e.contains("mdns_wait_s = 18446744073709551615"),
+        "{e}"
+    );
+    let e = camera_err(
+        "cam.toml",
+        &format!("{CAMERA}heartbeat_ms = {}\n", u64::MAX),
+    );
     assert!(e.contains("heartbeat_ms = 18446744073709551615"), "{e}");
 }
 
@@ -382,6 +397,97 @@ fn a_real_camera_that_contradicts_its_config_is_refused_naming_file_and_field() 
         assert!(e.contains("cam.toml"), "{text}: {e}");
         for part in parts {
             assert!(e.contains(part), "{text}: {part} in {e}");
+        }
+    }
+}
+
+/// Fuzzing the config files (issue 20): the example configs mutated line by line — values
+/// replaced by extremes, lines dropped or repeated, bytes spliced in — from a seeded generator.
+/// Every one is loaded or refused with an error (exit 1), never a panic (exit 101). A process
+/// per input (~0.3 s each on a loaded CI machine): 8 inputs here, `ROOMLIGHT_FUZZ_ITERS` per
+/// agent for a longer run.
+#[test]
+fn mutated_configs_are_loaded_or_refused_never_a_panic() {
+    let mut state = 0x5EED_0005u64;
+    let mut next = move || {
+        // SplitMix64.
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        (z ^ (z >> 31)) as usize
+    };
+    let extremes = [
+        "-1",
+        "0",
+        "18446744073709551615",
+        "18446744073709551616",
+        "1e309",
+        "nan",
+        "-inf",
+        "\"\"",
+        "\"\\u0000\\n\"",
+        "{}",
+        "[]",
+    ];
+    let keys = [
+        "deadline_ms",
+        "heartbeat_ms",
+        "mdns_wait_s",
+        "stale_frames",
+        "start",
+        "token",
+    ];
+    let iterations = std::env::var("ROOMLIGHT_FUZZ_ITERS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(4);
+    for (agent, seed) in [("camera", CAMERA), ("node", NODE)] {
+        for _ in 0..iterations {
+            let mut lines: Vec<String> = seed.lines().map(str::to_string).collect();
+            for _ in 0..=next() % 3 {
+                let at = next() % lines.len().max(1);
+                match next() % 5 {
+                    0 => {
+                        let key = lines[at].split('=').next().unwrap_or("x").to_string();
+                        lines[at] = format!("{key}= {}", extremes[next() % extremes.len()]);
+                    }
+                    1 => {
+                        lines.remove(at);
+                    }
+                    2 => lines.push(lines[at].clone()),
+                    3 => lines.push(format!(
+                        "{} = {}",
+                        keys[next() % keys.len()],
+                        extremes[next() % extremes.len()]
+                    )),
+                    _ => {
+                        let byte = char::from((next() % 128) as u8);
+                        let line = &mut lines[at];
+                        let cut = next() % (line.len() + 1);
+                        if line.is_char_boundary(cut) {
+                            line.insert(cut, byte);
+                        }
+                    }
+                }
+                if lines.is_empty() {
+                    break;
+                }
+            }
+            let text = lines.join("\n") + "\n";
+            let (_dir, path) = file("fuzz.toml", &text);
+            let out = Command::new(env!("CARGO_BIN_EXE_roomlight"))
+                .args([agent, "--config"])
+                .arg(&path)
+                .arg("--check")
+                .output()
+                .expect("running roomlight");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                matches!(out.status.code(), Some(0 | 1)) && !err.contains("panicked"),
+                "{agent} config\n{text}\nexited {:?}: {err}",
+                out.status.code()
+            );
         }
     }
 }
