@@ -23,14 +23,18 @@ const FILL_TRIES: u8 = 3;
 /// when it agrees with [`FILL_AGREEMENT`] of them and beats every candidate more than one pixel
 /// away by six noise standard deviations and half the direct light. Otherwise the pixel stays
 /// unknown: across a depth edge the prediction is wrong and no candidate agrees clearly.
+/// With [`DecodeConfig::resolve_edges`], a pixel no candidate is clear for is resolved among
+/// the coordinates its neighbours span ([`neighbour_range`], [`resolve_pixel`]): a pixel on a stripe edge that every
+/// pattern shares (XOR coding's base edges) shows no difference at all, and only its
+/// neighbours say which of those edges it is on.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn fill_from_neighbours(
     manifest: &Manifest,
-    w: usize,
-    h: usize,
+    config: &DecodeConfig,
+    (w, h): (usize, usize),
     reached: &impl Fn(usize) -> bool,
     reading: &impl Fn(usize, &mut Vec<Reading>),
-    direct: &[f32],
+    (direct, dominant): (&[f32], &[bool]),
     map: &mut [Option<(u32, u32)>],
     confidence: &mut [f32],
 ) {
@@ -63,19 +67,55 @@ pub(super) fn fill_from_neighbours(
         let mut predictions = grid.predictions(i, map);
         reading(i, &mut readings);
         let ld = direct[i];
-        let (Some((x, x_gap)), Some((y, y_gap))) = (
+        let found = match (
             best_on_axis(manifest, Axis::Column, &readings, &mut predictions[0], ld),
             best_on_axis(manifest, Axis::Row, &readings, &mut predictions[1], ld),
-        ) else {
+        ) {
+            // At most a quarter: where a measured pixel lands on the same projector pixel the
+            // inverse map mostly prefers it.
+            (Some((x, x_gap)), Some((y, y_gap))) => Some((
+                (x, y),
+                0.25 * (x_gap.min(y_gap) / (2.0 * ld).max(f32::MIN_POSITIVE)).min(1.0),
+            )),
+            // Only where direct light dominates: pattern-dependent reflected light can make a
+            // dim pixel fit a code near its neighbours' that is not its own.
+            _ if config.resolve_edges && dominant[i] => neighbour_range(grid, i, map)
+                .and_then(|near| resolve_pixel(manifest, &readings, ld, Some(near)))
+                .map(|(xy, c)| (xy, 0.25 * c)),
+            _ => None,
+        };
+        let Some((xy, c)) = found else {
             continue;
         };
-        map[i] = Some((x, y));
-        // At most a quarter: where a measured pixel lands on the same projector pixel the
-        // inverse map mostly prefers it.
-        confidence[i] = 0.25 * (x_gap.min(y_gap) / (2.0 * ld).max(f32::MIN_POSITIVE)).min(1.0);
+        map[i] = Some(xy);
+        confidence[i] = c;
         push_around(i, map, &mut tries, &mut queue);
     }
 }
+
+/// Per axis, the range of the coordinates of pixel `i`'s decoded neighbours, where at least
+/// three are decoded and they span at most [`EDGE_SPAN`] pixels: a smooth surface seen at no
+/// more than about one and a half projector pixels per camera pixel (a surface at grazing
+/// incidence, or a depth edge, is not resolved this way).
+fn neighbour_range(grid: Grid, i: usize, map: &[Option<(u32, u32)>]) -> Option<[(i64, i64); 2]> {
+    let around: Vec<(u32, u32)> = AROUND
+        .iter()
+        .filter_map(|&dir| grid.at(i, dir, 1).and_then(|j| map[j]))
+        .collect();
+    if around.len() < 3 {
+        return None;
+    }
+    let range = |f: fn(&(u32, u32)) -> u32| {
+        let lo = around.iter().map(f).min().map(i64::from)?;
+        let hi = around.iter().map(f).max().map(i64::from)?;
+        (hi - lo <= EDGE_SPAN).then_some((lo, hi))
+    };
+    Some([range(|a| a.0)?, range(|a| a.1)?])
+}
+
+/// The widest range of neighbours' coordinates [`neighbour_range`] resolves within: narrower
+/// than the four pixels between two edges every XOR-04 pattern shares.
+const EDGE_SPAN: i64 = 3;
 
 /// The eight neighbours of a pixel, as steps.
 const AROUND: [(isize, isize); 8] = [

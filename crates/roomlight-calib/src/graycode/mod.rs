@@ -13,10 +13,15 @@ use crate::nodes::dilate;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
+mod checks;
 mod fill;
+mod groups;
+mod resolve;
 mod second_pass;
 
 use fill::fill_from_neighbours;
+pub use groups::group_disjoint;
+use resolve::resolve_pixel;
 pub use second_pass::{
     COVER_SPAN, SECOND_PASS_BRIGHTER, SECOND_PASS_CROWD, SECOND_PASS_GROW, SECOND_PASS_LONGEST,
     SECOND_PASS_MARGIN, SECOND_PASS_SNR, SECOND_PASS_WORTH, SOLID_NEIGHBOURS, SecondPass,
@@ -330,6 +335,12 @@ pub struct DecodeConfig {
     /// Decode pixels with more untrusted bits from their decoded neighbours (XOR coding only;
     /// see [`decode`]).
     pub fill_from_neighbours: bool,
+    /// Resolve the bits a pixel straddling a stripe edge cannot decide, per axis, by fitting
+    /// the nearby codes to its differences (see [`decode`]).
+    pub resolve_edges: bool,
+    /// The value (per channel, capture units) at which the camera clips: a white capture at it
+    /// over a large share of the lit pixels is refused as saturated.
+    pub saturation: f32,
 }
 
 impl DecodeConfig {
@@ -340,6 +351,7 @@ impl DecodeConfig {
             min_margin_share: 0.5,
             max_uncertain_bits: 0,
             fill_from_neighbours: false,
+            resolve_edges: false,
             ..Self::default()
         }
     }
@@ -370,6 +382,8 @@ impl Default for DecodeConfig {
             min_margin_share: 0.4,
             max_uncertain_bits: 1,
             fill_from_neighbours: true,
+            resolve_edges: true,
+            saturation: 1.0,
         }
     }
 }
@@ -427,7 +441,11 @@ impl Correspondence {
 ///
 /// Two passes: each pixel on its own (at most one untrusted bit), then, with XOR coding and
 /// [`DecodeConfig::fill_from_neighbours`], pixels with more untrusted bits from their decoded
-/// neighbours ([`fill_from_neighbours`]).
+/// neighbours ([`fill_from_neighbours`]; with [`DecodeConfig::resolve_edges`] also the pixels
+/// that straddle a stripe edge, whose bits are resolved by fitting the codes near their
+/// neighbours'). The noise of each pixel is the camera model's or, where larger, what the
+/// captures themselves show. Refuses saturated captures and a projector the camera did not
+/// see (`checks`).
 pub fn decode<'a>(
     manifest: &Manifest,
     config: &DecodeConfig,
@@ -443,6 +461,19 @@ pub fn decode_where<'a>(
     manifest: &Manifest,
     config: &DecodeConfig,
     ours: Option<&[bool]>,
+    capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
+) -> Result<Correspondence, CalibError> {
+    decode_checked(manifest, config, ours, true, capture)
+}
+
+/// [`decode_where`], refusing saturated captures and a projector the camera did not see when
+/// `checked` (a second pass, which shows a few projector pixels at a long exposure whose
+/// clipped pixels it leaves unknown, is not checked).
+pub(crate) fn decode_checked<'a>(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    ours: Option<&[bool]>,
+    checked: bool,
     mut capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
 ) -> Result<Correspondence, CalibError> {
     let Captures {
@@ -450,8 +481,9 @@ pub fn decode_where<'a>(
         h,
         white,
         black,
+        clipped,
         pairs,
-    } = read_captures(manifest, &mut capture)?;
+    } = read_captures(manifest, config, &mut capture)?;
     let n = (w * h) as usize;
     if let Some(mask) = ours
         && mask.len() != n
@@ -463,18 +495,34 @@ pub fn decode_where<'a>(
     }
     let xor = manifest.coding == Coding::Xor04;
     let (direct, global) = direct_and_global(manifest, &pairs, n);
+    let noise = resolve::measured_noise(w as usize, h as usize, &white, &black, &pairs);
     let mut sorted: Vec<f32> = direct.iter().copied().filter(|v| v.is_finite()).collect();
     sorted.sort_by(f32::total_cmp);
     let p99 = sorted.get(sorted.len() * 99 / 100).copied().unwrap_or(0.0);
     let reach = (config.min_direct_share * p99).max(6.0 * config.noise_floor);
     let reading = |i: usize, out: &mut Vec<Reading>| {
-        read_pixel(config, xor, &pairs, i, (direct[i], global[i]), out);
+        read_pixel(
+            config,
+            xor,
+            &pairs,
+            i,
+            (direct[i], global[i]),
+            noise[i],
+            out,
+        );
     };
     let reached = |i: usize| {
-        // NaN (a corrupt capture) counts as not reached.
+        // NaN (a corrupt capture) counts as not reached; so does a pixel whose largest
+        // difference is within what noise alone gives over all its pairs.
         ours.is_none_or(|m| m[i])
-            && !(direct[i].is_nan() || direct[i] < reach || white[i] - black[i] < reach)
+            && !(direct[i].is_nan()
+                || direct[i] < reach
+                || white[i] - black[i] < reach
+                || direct[i] < REACH_SIGMAS * noise[i])
     };
+    if checked {
+        checks::refuse_saturated(&clipped, &reached)?;
+    }
     let mut map = vec![None; n];
     let mut confidence = vec![0.0f32; n];
     let mut readings = Vec::with_capacity(pairs.len());
@@ -483,7 +531,8 @@ pub fn decode_where<'a>(
             continue;
         }
         reading(i, &mut readings);
-        if let Some((xy, c)) = decode_pixel(manifest, config, direct[i], &readings) {
+        let decoded = decode_pixel(manifest, config, direct[i], &readings);
+        if let Some((xy, c)) = decoded {
             map[i] = Some(xy);
             confidence[i] = c;
         }
@@ -491,18 +540,23 @@ pub fn decode_where<'a>(
     // The fill correlates the differences with candidate codes: that needs every pair's sign to
     // be the direct light's, true of XOR coding's high-frequency patterns only.
     if config.fill_from_neighbours && xor {
+        // Direct light is at least half of all the projector gives the pixel (white − black):
+        // where reflected light dominates, a code near the neighbours' can fit by chance.
+        let dominant: Vec<bool> = (0..n)
+            .map(|i| direct[i] >= 0.3 * (white[i] - black[i]))
+            .collect();
         fill_from_neighbours(
             manifest,
-            w as usize,
-            h as usize,
+            config,
+            (w as usize, h as usize),
             &reached,
             &reading,
-            &direct,
+            (&direct, &dominant),
             &mut map,
             &mut confidence,
         );
     }
-    Ok(Correspondence {
+    let corr = Correspondence {
         width: w,
         height: h,
         projector_width: manifest.width,
@@ -512,8 +566,17 @@ pub fn decode_where<'a>(
         direct,
         global,
         reach,
-    })
+    };
+    if checked {
+        checks::refuse_unseen(&corr, ours)?;
+    }
+    Ok(corr)
 }
+
+/// A reached pixel's direct light must stand this many noise standard deviations (of one
+/// difference, [`resolve::measured_noise`]) above zero: the largest of some twenty differences
+/// of pure noise is about 2.5 of them.
+const REACH_SIGMAS: f32 = 6.0;
 
 /// A pattern and its inverse, each less the black capture: `(axis, bit, pattern, inverse)`.
 type Pair = (Axis, u32, Vec<f32>, Vec<f32>);
@@ -524,6 +587,8 @@ struct Captures {
     h: u32,
     white: Vec<f32>,
     black: Vec<f32>,
+    /// Pixels of the white capture at its largest value in some channel (clipped).
+    clipped: Vec<bool>,
     pairs: Vec<Pair>,
 }
 
@@ -543,11 +608,13 @@ fn find(manifest: &Manifest, pattern: Pattern) -> Result<&PatternFile, CalibErro
 /// order a rig that shows them one by one expects; every capture must have white's size.
 fn read_captures<'a>(
     manifest: &Manifest,
+    config: &DecodeConfig,
     capture: &mut impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
 ) -> Result<Captures, CalibError> {
     let white_file = find(manifest, Pattern::White)?;
     let white = capture(white_file)?;
     let (w, h) = (white.width, white.height);
+    let clipped = checks::clipped(white, config.saturation);
     let mut intensity = |p: &PatternFile| -> Result<Vec<f32>, CalibError> {
         let img = capture(p)?;
         img.expect_size(w, h, &p.file)?;
@@ -587,6 +654,7 @@ fn read_captures<'a>(
         h,
         white,
         black,
+        clipped,
         pairs,
     })
 }
@@ -624,13 +692,15 @@ fn direct_and_global(manifest: &Manifest, pairs: &[Pair], n: usize) -> (Vec<f32>
 
 /// One reading per pattern pair at pixel `i` with direct and global light `(ld, lg)`: the
 /// difference `d` and, where the direct light decides it, the encoded value it shows
-/// (`None`: untrusted), with the noise of the difference.
+/// (`None`: untrusted), with the noise of the difference (the camera's model, or the noise
+/// `measured` in the captures where that is larger).
 fn read_pixel(
     config: &DecodeConfig,
     xor: bool,
     pairs: &[Pair],
     i: usize,
     (ld, lg): (f32, f32),
+    measured: f32,
     out: &mut Vec<Reading>,
 ) {
     out.clear();
@@ -642,7 +712,8 @@ fn read_pixel(
         let sigma = (2.0
             * (config.noise_floor * config.noise_floor
                 + config.shot_noise * config.shot_noise * level))
-            .sqrt();
+            .sqrt()
+            .max(measured);
         let margin = (config.min_margin_share * ld).max(3.0 * sigma);
         let trusted = if d.abs() < margin {
             None
@@ -726,25 +797,4 @@ struct Reading {
     d: f32,
     sigma: f32,
     trusted: Option<bool>,
-}
-
-/// Groups projectors whose footprints (camera pixels each lights directly) do not overlap, so
-/// that each group shows its patterns at the same time. Greedy, in the given order.
-pub fn group_disjoint(footprints: &[Vec<bool>]) -> Vec<Vec<usize>> {
-    let mut groups: Vec<(Vec<usize>, Vec<bool>)> = Vec::new();
-    for (k, fp) in footprints.iter().enumerate() {
-        match groups
-            .iter_mut()
-            .find(|(_, used)| used.iter().zip(fp).all(|(a, b)| !(*a && *b)))
-        {
-            Some((members, used)) => {
-                members.push(k);
-                for (u, f) in used.iter_mut().zip(fp) {
-                    *u |= *f;
-                }
-            }
-            None => groups.push((vec![k], fp.clone())),
-        }
-    }
-    groups.into_iter().map(|(m, _)| m).collect()
 }

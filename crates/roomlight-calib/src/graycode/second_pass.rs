@@ -389,10 +389,11 @@ impl SecondPassPlan {
         exposure: f32,
         captures: &[LinearImage],
     ) -> Result<SecondPass, CalibError> {
-        let second = decode_where(
+        let second = decode_checked(
             manifest,
             &config.exposed_longer(exposure),
             Some(&self.todo),
+            false,
             |f| {
                 manifest
                     .patterns

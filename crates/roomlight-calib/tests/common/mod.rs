@@ -2,6 +2,8 @@
 //! (captures and the room config), never simulator internals in the code under test.
 #![allow(dead_code)]
 
+pub mod photo;
+
 use roomlight_calib::charts::ChartCorners;
 use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig, Manifest, decode};
 use roomlight_calib::image_io::LinearImage;

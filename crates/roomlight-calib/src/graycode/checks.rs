@@ -1,0 +1,109 @@
+//! What a decode refuses to turn into a map: captures whose white frame is clipped over a large
+//! share of the lit pixels (the differences there are the camera's ceiling, not the light),
+//! and a projector the camera did not see (cable out, wrong output, patterns below the noise),
+//! which would otherwise decode noise into a wrong map. It owns those two decisions and their
+//! messages; it must not know how frames are shown or captured.
+
+use super::Correspondence;
+use crate::CalibError;
+use crate::image_io::LinearImage;
+
+/// Refused as saturated when more than this share of the lit (reached) pixels is clipped in
+/// the white capture. Binary patterns still decode where white clips (pattern and inverse
+/// differ all the same), so only most of the footprint clipped is refused: the simulated
+/// small room clips 5.6% of a projector's lit pixels under its LEDs, and its texture
+/// projector, close to the bust, 41%.
+pub const SATURATED_SHARE: f64 = 0.5;
+/// A projector is not seen when fewer camera pixels than this decode…
+pub const MIN_SEEN_PIXELS: usize = 16;
+/// …or they land on fewer than this share of its pixels (a footprint of a few hundred
+/// pixels of a 1024×768 projector is not one to calibrate from).
+pub const MIN_SEEN_SHARE: f64 = 0.002;
+
+/// The pixels of `white` at the camera's ceiling `saturation` in some channel (within one part
+/// in a thousand: an 8-bit file's top code is 1 and the next 0.991). A ceiling that is not a
+/// positive number clips nothing.
+pub(super) fn clipped(white: &LinearImage, saturation: f32) -> Vec<bool> {
+    let ceiling = saturation * (1.0 - 1e-3);
+    white
+        .pixels
+        .iter()
+        .map(|p| saturation > 0.0 && p.iter().any(|&v| v >= ceiling))
+        .collect()
+}
+
+/// Refuses captures whose white frame is clipped on more than [`SATURATED_SHARE`] of the
+/// pixels `reached` marks.
+pub(super) fn refuse_saturated(
+    clipped: &[bool],
+    reached: &impl Fn(usize) -> bool,
+) -> Result<(), CalibError> {
+    let (mut lit, mut at_top) = (0usize, 0usize);
+    for (i, &c) in clipped.iter().enumerate() {
+        if reached(i) {
+            lit += 1;
+            at_top += usize::from(c);
+        }
+    }
+    // No lit pixel: nothing is saturated (the unseen check speaks for that case).
+    let share = at_top as f64 / lit.max(1) as f64;
+    if at_top >= MIN_SEEN_PIXELS && share > SATURATED_SHARE {
+        return Err(CalibError::Invalid {
+            field: "structured-light captures",
+            problem: format!(
+                "saturated: {:.1}% of the {lit} lit camera pixels are at the camera's largest \
+                 value in the white capture (at most {:.0}% may be); lower the camera's exposure or the \
+                 projector's brightness and capture again",
+                100.0 * share,
+                100.0 * SATURATED_SHARE
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Refuses a decode in which the projector was not seen: fewer than [`MIN_SEEN_PIXELS`]
+/// camera pixels decoded (among those `ours` marks), or fewer than [`MIN_SEEN_SHARE`] of its
+/// pixels among them.
+pub(super) fn refuse_unseen(
+    corr: &Correspondence,
+    ours: Option<&[bool]>,
+) -> Result<(), CalibError> {
+    let decoded = corr.map.iter().filter(|m| m.is_some()).count();
+    let share = corr.seen_share();
+    if decoded >= MIN_SEEN_PIXELS && share >= MIN_SEEN_SHARE {
+        return Ok(());
+    }
+    let considered = ours.map_or(corr.map.len(), |m| m.iter().filter(|o| **o).count());
+    Err(CalibError::Invalid {
+        field: "projector",
+        problem: format!(
+            "not seen: {decoded} of {considered} camera pixels decoded onto it, {:.2}% of its \
+             {}x{} pixels (at least {MIN_SEEN_PIXELS} camera pixels and {:.1}% of its pixels \
+             are needed: its patterns did not change the captures beyond their noise); check \
+             that it is on, shows the patterns and lights what the camera sees",
+            100.0 * share,
+            corr.projector_width,
+            corr.projector_height,
+            100.0 * MIN_SEEN_SHARE
+        ),
+    })
+}
+
+impl Correspondence {
+    /// Share of the projector's pixels some camera pixel decoded onto (0 for a projector of
+    /// no pixels).
+    pub fn seen_share(&self) -> f64 {
+        let (pw, ph) = (
+            self.projector_width as usize,
+            self.projector_height as usize,
+        );
+        let mut seen = vec![false; pw * ph];
+        for &(x, y) in self.map.iter().flatten() {
+            if let Some(s) = seen.get_mut(y as usize * pw + x as usize) {
+                *s = true;
+            }
+        }
+        seen.iter().filter(|s| **s).count() as f64 / (pw * ph).max(1) as f64
+    }
+}
