@@ -50,6 +50,13 @@ enum Command {
         #[arg(long)]
         check: bool,
     },
+    /// The pre-flight of one PC: a camera agent's or node agent's config checked against the
+    /// room (camera agent found and accepting, display, camera, files); a checklist, and a
+    /// non-zero exit naming the first item that failed.
+    Check {
+        #[arg(long)]
+        config: PathBuf,
+    },
     /// Prints a model file's size and its optimum G* (to read the camera agent's objective
     /// against), e.g. the `model_out` of a room calibrated over the wire.
     Optimum {
@@ -273,6 +280,7 @@ fn main() -> Result<()> {
         Command::Calibrate(args) => procs::calibrate(&args),
         Command::Camera { config, check } => procs::camera(&config, check),
         Command::Node { config, check } => procs::node(&config, check),
+        Command::Check { config } => procs::check(&config),
         Command::Optimum { model } => procs::optimum(&model),
         Command::Graycode { which } => graycode_cmd::run(which),
         Command::Bench(args) => bench(args),

@@ -235,6 +235,36 @@ pub fn camera(path: &Path, check: bool) -> Result<()> {
     })
 }
 
+/// `roomlight check --config FILE`: a camera agent's config (it has `listen`) or a node's.
+pub fn check(path: &Path) -> Result<()> {
+    let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+    let table = text.parse::<toml::Table>();
+    let list = if table.is_ok_and(|t| t.contains_key("listen")) {
+        runtime()?.block_on(process::check_camera(&config::load_camera(path)?))
+    } else {
+        let n = config::load_node(path)?;
+        let camera = match &n.camera {
+            CameraLocation::Address(a) => process::CameraAt::Address(a.clone()),
+            CameraLocation::Mdns(r) => {
+                process::CameraAt::Mdns(r.clone(), n.mdns.clone(), n.mdns_wait)
+            }
+        };
+        let agent = n.agent_config(String::new());
+        runtime()?.block_on(process::check_node(
+            &agent,
+            &camera,
+            &n.hardware,
+            &n.display,
+        ))
+    };
+    print!("{list}");
+    if let Some(failed) = list.first_failure() {
+        bail!("{}: {failed}", path.display());
+    }
+    println!("{}: every check passed", path.display());
+    Ok(())
+}
+
 pub fn node(path: &Path, check: bool) -> Result<()> {
     let setup = config::load_node(path)?;
     if check {

@@ -877,3 +877,84 @@ fn the_token_comes_from_a_file_or_a_systemd_credential() {
     let (ok, said) = check(&empty, None);
     assert!(!ok && said.contains("token is empty"), "{said}");
 }
+
+/// `roomlight check` on a PC whose room is not there: every item is reported, the exit is
+/// non-zero, and the first failure names what failed (the unreachable camera agent, the missing
+/// model); a camera that answers passes.
+#[test]
+fn check_reports_each_item_and_names_the_first_failure() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    let run = |config: &str| {
+        let out = Command::new(env!("CARGO_BIN_EXE_roomlight"))
+            .args(["check", "--config", config])
+            .env_remove("RUST_BACKTRACE")
+            .env_remove("RUST_LIB_BACKTRACE")
+            .current_dir(d)
+            .output()
+            .expect("run roomlight check");
+        let said = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (out.status.success(), said)
+    };
+    std::fs::write(
+        d.join("node.toml"),
+        "room = \"lab\"\ntoken = \"t\"\ncamera = \"http://127.0.0.1:1\"\n\
+         hardware = { sim = \"http://127.0.0.1:1\" }\nprojector = \"p0\"\n\
+         state_file = \"p0.state.json\"\n",
+    )
+    .expect("node config");
+    let (ok, said) = run("node.toml");
+    assert!(!ok, "{said}");
+    assert!(
+        said.contains("ok    camera agent: http://127.0.0.1:1 (as configured)"),
+        "{said}"
+    );
+    assert!(
+        said.contains("FAIL  display: simulator") || said.contains("FAIL  display"),
+        "{said}"
+    );
+    assert!(
+        said.contains("ok    state file p0.state.json: writable"),
+        "{said}"
+    );
+    let last = said
+        .lines()
+        .find(|l| l.starts_with("Error:"))
+        .unwrap_or_default();
+    assert!(
+        last.contains("node.toml")
+            && last.contains("attach as projector")
+            && last.contains("127.0.0.1:1"),
+        "the first failure is named last: {last}"
+    );
+
+    let photo = d.join("photo.png");
+    image::RgbImage::from_pixel(4, 3, image::Rgb([90, 90, 90]))
+        .save(&photo)
+        .expect("png");
+    std::fs::write(
+        d.join("camera.toml"),
+        format!(
+            "room = \"lab\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\nmodel = \"missing.json\"\n\
+             charts = \"charts.json\"\ncamera = {:?}\n",
+            format!("command:cp {} {{out}}", photo.display())
+        ),
+    )
+    .expect("camera config");
+    let (ok, said) = run("camera.toml");
+    assert!(!ok, "{said}");
+    assert!(said.contains("ok    listen on 127.0.0.1:0: free"), "{said}");
+    assert!(
+        said.contains("ok    camera command:cp") && said.contains("4×3"),
+        "{said}"
+    );
+    let last = said
+        .lines()
+        .find(|l| l.starts_with("Error:"))
+        .unwrap_or_default();
+    assert!(last.contains("model missing.json"), "{last}");
+}

@@ -345,6 +345,35 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
         "{ready}"
     );
     cam_notify.wait_for("WATCHDOG=1", Duration::from_secs(10));
+    // The pre-flight of p0's PC, before its node agent starts: welcomed by the camera agent,
+    // its simulator reached, its state file writable; with a wrong token, refused by name.
+    write_node(d, "p0", &camera, &sim);
+    let check = |config: &str| {
+        Command::new(env!("CARGO_BIN_EXE_roomlight"))
+            .args(["check", "--config", config])
+            .current_dir(d)
+            .output()
+            .expect("run roomlight check")
+    };
+    let passed = check("p0.toml");
+    let said = String::from_utf8_lossy(&passed.stdout);
+    assert!(
+        passed.status.success(),
+        "{said}{}",
+        String::from_utf8_lossy(&passed.stderr)
+    );
+    assert!(
+        said.contains("welcomed (protocol version") && said.contains("every check passed"),
+        "{said}"
+    );
+    let p0 = std::fs::read_to_string(d.join("p0.toml")).expect("p0 config");
+    std::fs::write(d.join("bad.toml"), p0.replace("t0k3n", "wrong")).expect("bad config");
+    let refused = check("bad.toml");
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && said.contains("wrong room token"),
+        "{said}"
+    );
     for p in ["p0", "p1", "p2"] {
         write_node(d, p, &camera, &sim);
         let env: &[(&str, &Path)] = if p == "p0" {

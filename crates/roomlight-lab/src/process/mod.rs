@@ -7,6 +7,7 @@
 
 mod calibrate;
 mod camera;
+mod check;
 mod files;
 mod node;
 mod photos;
@@ -16,6 +17,7 @@ mod systemd;
 
 pub use calibrate::{CalibrateOptions, calibrate_to_files};
 pub use camera::{CameraHardware, CameraProcess, CameraSource, serve_camera};
+pub use check::{CameraAt, Checklist, check_camera, check_node};
 pub use files::{ChartsFile, ModelFile, SurveyFile, load_model, load_scene, optimum_summary};
 pub use node::{NodeDisplay, run_node};
 pub use photos::GrabMode;
