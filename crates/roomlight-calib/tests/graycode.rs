@@ -595,7 +595,7 @@ fn decode_photographs(
 #[test]
 fn photographs_decode_within_a_pixel_or_unknown_never_wrong() {
     use common::photo::{Shot, photograph, tally};
-    // Before resolving edges from the neighbours (15:5x UTC, 2026-11-25): 78.72% within ±1,
+    // Before resolving edges from the neighbours (16:54 UTC, 2026-11-25): 78.72% within ±1,
     // 21.22% unknown, in a lattice beside the edges every XOR-04 pattern shares.
     let manifest = Manifest::new(256, 192).expect("manifest");
     let photos = photograph(&manifest, &Shot::default());
@@ -616,4 +616,61 @@ fn photographs_decode_within_a_pixel_or_unknown_never_wrong() {
     // Unlit pixels (the occluder's shadow, outside the image) decode only where the blur
     // spills direct light onto them, and then within reach of their true coordinate.
     assert!(t.unlit_gross as f64 <= 0.001 * t.lit as f64, "{t:?}");
+}
+
+#[test]
+fn a_projector_that_shows_nothing_is_not_seen_and_saturated_captures_are_refused() {
+    use common::photo::{Shot, photograph};
+    // Small: the refusals need no resolution.
+    let manifest = Manifest::new(64, 48).expect("manifest");
+    // Cable out: the photographs see the room only (its ambient light and noise). Before this
+    // check it decoded noise into a map of every pixel.
+    let dark = photograph(
+        &manifest,
+        &Shot {
+            projector_on: false,
+            ..Shot::default()
+        },
+    );
+    let err = decode_photographs(&manifest, &dark)
+        .map(|c| c.decoded_share())
+        .expect_err("a projector not seen");
+    let text = err.to_string();
+    assert!(
+        text.contains("not seen") && text.contains("0.00% of its 64x48 pixels"),
+        "{text}"
+    );
+    // Shown, but so faint that its patterns stay below the noise.
+    let faint = photograph(
+        &manifest,
+        &Shot {
+            exposure: 0.002,
+            ..Shot::default()
+        },
+    );
+    let text = decode_photographs(&manifest, &faint)
+        .map(|c| c.decoded_share())
+        .expect_err("below the noise")
+        .to_string();
+    assert!(text.contains("not seen"), "{text}");
+    // Overexposed: most of the lit pixels clip in the white capture.
+    let bright = photograph(
+        &manifest,
+        &Shot {
+            exposure: 4.0,
+            ..Shot::default()
+        },
+    );
+    let text = decode_photographs(&manifest, &bright)
+        .map(|c| c.decoded_share())
+        .expect_err("saturated")
+        .to_string();
+    assert!(
+        text.contains("saturated") && text.contains("lower the camera's exposure"),
+        "{text}"
+    );
+    // The same scene well exposed decodes.
+    let good = photograph(&manifest, &Shot::default());
+    let decoded = decode_photographs(&manifest, &good).expect("decodes");
+    assert!(decoded.seen_share() > 0.9, "{}", decoded.seen_share());
 }

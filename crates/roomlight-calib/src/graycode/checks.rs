@@ -32,15 +32,30 @@ pub(super) fn clipped(white: &LinearImage, saturation: f32) -> Vec<bool> {
         .collect()
 }
 
+/// The pixels (among `ours`, all when `None`) white raises by at least a quarter of what it
+/// raises the brightest (the 99th percentile) and at least `reach`: the saturation check's
+/// lit pixels. Not the decoder's reached pixels, whose noise test clipping upsets, nor the
+/// rest of the room, which reflected light raises a little.
+pub(super) fn lit(white: &[f32], black: &[f32], reach: f32, ours: Option<&[bool]>) -> Vec<bool> {
+    let raised: Vec<f32> = white.iter().zip(black).map(|(w, b)| w - b).collect();
+    let mut sorted: Vec<f32> = raised.iter().copied().filter(|v| v.is_finite()).collect();
+    sorted.sort_by(f32::total_cmp);
+    let top = sorted.get(sorted.len() * 99 / 100).copied().unwrap_or(0.0);
+    let threshold = (0.25 * top).max(reach);
+    raised
+        .iter()
+        .enumerate()
+        // NaN is not lit.
+        .map(|(i, &r)| ours.is_none_or(|m| m[i]) && r >= threshold)
+        .collect()
+}
+
 /// Refuses captures whose white frame is clipped on more than [`SATURATED_SHARE`] of the
-/// pixels `reached` marks.
-pub(super) fn refuse_saturated(
-    clipped: &[bool],
-    reached: &impl Fn(usize) -> bool,
-) -> Result<(), CalibError> {
+/// pixels `is_lit` marks.
+pub(super) fn refuse_saturated(clipped: &[bool], is_lit: &[bool]) -> Result<(), CalibError> {
     let (mut lit, mut at_top) = (0usize, 0usize);
-    for (i, &c) in clipped.iter().enumerate() {
-        if reached(i) {
+    for (&c, &l) in clipped.iter().zip(is_lit) {
+        if l {
             lit += 1;
             at_top += usize::from(c);
         }

@@ -441,11 +441,10 @@ impl Correspondence {
 ///
 /// Two passes: each pixel on its own (at most one untrusted bit), then, with XOR coding and
 /// [`DecodeConfig::fill_from_neighbours`], pixels with more untrusted bits from their decoded
-/// neighbours ([`fill_from_neighbours`]; with [`DecodeConfig::resolve_edges`] also the pixels
-/// that straddle a stripe edge, whose bits are resolved by fitting the codes near their
-/// neighbours'). The noise of each pixel is the camera model's or, where larger, what the
-/// captures themselves show. Refuses saturated captures and a projector the camera did not
-/// see (`checks`).
+/// neighbours ([`fill_from_neighbours`]; with [`DecodeConfig::resolve_edges`] also pixels on a
+/// stripe edge, by fitting the codes near their neighbours'). A pixel's noise is the camera
+/// model's or, where larger, the captures' own. Refuses saturated captures and a projector the
+/// camera did not see (`checks`).
 pub fn decode<'a>(
     manifest: &Manifest,
     config: &DecodeConfig,
@@ -521,7 +520,8 @@ pub(crate) fn decode_checked<'a>(
                 || direct[i] < REACH_SIGMAS * noise[i])
     };
     if checked {
-        checks::refuse_saturated(&clipped, &reached)?;
+        let lit = checks::lit(&white, &black, reach, ours);
+        checks::refuse_saturated(&clipped, &lit)?;
     }
     let mut map = vec![None; n];
     let mut confidence = vec![0.0f32; n];

@@ -182,8 +182,7 @@ pub fn photograph(manifest: &Manifest, shot: &Shot) -> Photographs {
                             (shot.noise.0.powi(2) + shot.noise.1.powi(2) * value.max(0.0)).sqrt();
                         let noisy = (value + sigma * rng.normal()).clamp(0.0, 1.0);
                         let code = (srgb_encode(noisy) * 255.0).round() / 255.0;
-                        // One third per channel: the decoder sums the channels.
-                        srgb_decode(code) / 3.0
+                        srgb_decode(code)
                     })
                 })
                 .collect();
