@@ -363,6 +363,7 @@ fn rogue(
 async fn a_node_sending_garbage_is_disconnected_and_the_rounds_go_on() {
     let log = Captured::default();
     let _default = tracing::subscriber::set_default(log.clone());
+    let started = tokio::time::Instant::now();
     let mut room = start(8, 2, Duration::from_secs(2)).await;
     let _honest = room.node("p0");
     let settled = wait(&mut room.status, Duration::from_secs(20), |s| {
@@ -415,6 +416,14 @@ async fn a_node_sending_garbage_is_disconnected_and_the_rounds_go_on() {
         .filter(|l| l.contains("disconnected for a malformed contribution"))
         .count();
     assert_eq!(warnings, 1, "{:#?}", log.lines());
+    // Past the handshake timeout (the deadline, 2 s) the honest node is still on its first
+    // connection: an admitted connection is not closed by the listener.
+    wait(&mut room.status, Duration::from_secs(10), |_| {
+        started.elapsed() > Duration::from_millis(2500)
+    })
+    .await;
+    let joined = log.lines().iter().filter(|l| l.contains("joined")).count();
+    assert_eq!(joined, 2, "p0 once, p1 once: {:#?}", log.lines());
 }
 
 /// Item 5: two simultaneous Hellos of one projector: exactly one is admitted, every time.
