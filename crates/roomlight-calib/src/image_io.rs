@@ -1,4 +1,5 @@
-//! Linear RGB images and PNG input/output with the encodings real cameras deliver.
+//! Linear RGB images and PNG input/output with the encodings real cameras deliver; files too
+//! large to decode are refused from their header.
 
 use crate::CalibError;
 use std::path::Path;
@@ -34,6 +35,12 @@ pub enum Depth {
     Any,
 }
 
+/// The largest side of a capture or pattern file read (a 100-megapixel camera's is 11 648).
+pub const MAX_LOAD_SIDE: u32 = 12_000;
+/// The most a read file may take decoded: its linear copy at 12 bytes per pixel (1.5 GiB, a
+/// 100-megapixel photograph); a 20 000² file would take 4.8 GB.
+pub const MAX_LOAD_BYTES: u64 = 3 << 29;
+
 fn srgb_decode(v: f32) -> f32 {
     if v <= 0.040_45 {
         v / 12.92
@@ -60,13 +67,42 @@ impl LinearImage {
         }
     }
 
-    /// Reads a PNG, decoding its transfer curve; refuses a depth other than the promised one.
+    /// Reads a PNG, decoding its transfer curve; refuses a depth other than the promised one,
+    /// and an image beyond [`MAX_LOAD_SIDE`] per side or [`MAX_LOAD_BYTES`] to decode, from its
+    /// header, before anything is allocated.
     pub fn load_png(path: &Path, encoding: Encoding, depth: Depth) -> Result<Self, CalibError> {
         let file = path.display().to_string();
-        let img = image::open(path).map_err(|e| CalibError::File {
+        let failed = |e: &dyn std::fmt::Display| CalibError::File {
             file: file.clone(),
             problem: e.to_string(),
-        })?;
+        };
+        let open = || {
+            image::ImageReader::open(path)
+                .and_then(image::ImageReader::with_guessed_format)
+                .map_err(|e| failed(&e))
+        };
+        let (w, h) = open()?.into_dimensions().map_err(|e| failed(&e))?;
+        // The decoded image is 4 bytes per channel and a linear copy 12 bytes per pixel.
+        if w > MAX_LOAD_SIDE
+            || h > MAX_LOAD_SIDE
+            || 12 * u64::from(w) * u64::from(h) > MAX_LOAD_BYTES
+        {
+            return Err(CalibError::File {
+                file,
+                problem: format!(
+                    "is {w}x{h}, larger than the cap of {MAX_LOAD_SIDE} per side and {} MB \
+                     decoded",
+                    MAX_LOAD_BYTES >> 20
+                ),
+            });
+        }
+        let mut reader = open()?;
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_LOAD_SIDE);
+        limits.max_image_height = Some(MAX_LOAD_SIDE);
+        limits.max_alloc = Some(MAX_LOAD_BYTES);
+        reader.limits(limits);
+        let img = reader.decode().map_err(|e| failed(&e))?;
         let sixteen = matches!(
             img.color(),
             image::ColorType::Rgb16

@@ -674,3 +674,73 @@ fn a_projector_that_shows_nothing_is_not_seen_and_saturated_captures_are_refused
     let decoded = decode_photographs(&manifest, &good).expect("decodes");
     assert!(decoded.seen_share() > 0.9, "{}", decoded.seen_share());
 }
+
+/// CRC-32 (ISO-HDLC, as PNG chunks use) of `bytes`.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = 0xffff_ffffu32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xedb8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+/// A PNG chunk: length, type, data, CRC of type and data.
+fn chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
+    let mut body = kind.to_vec();
+    body.extend_from_slice(data);
+    let mut out = (data.len() as u32).to_be_bytes().to_vec();
+    out.extend_from_slice(&body);
+    out.extend_from_slice(&crc32(&body).to_be_bytes());
+    out
+}
+
+#[test]
+fn oversized_pattern_sets_and_captures_are_refused_before_allocating() {
+    use roomlight_calib::graycode::MAX_SIDE;
+    use roomlight_calib::image_io::{Depth, Encoding, MAX_LOAD_SIDE};
+    // `graycode generate` at 65535² would render 65535² × 12 bytes per pattern.
+    let err = Manifest::new(65_535, 65_535).expect_err("too large");
+    let text = err.to_string();
+    assert!(
+        text.contains("65535x65535") && text.contains(&MAX_SIDE.to_string()),
+        "{text}"
+    );
+    assert!(Manifest::new(MAX_SIDE, 16).is_ok());
+    // A PNG whose header claims 20000² (a few dozen bytes on disk; ~4.8 GB decoded).
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("white.png");
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = 20_000u32.to_be_bytes().to_vec();
+    ihdr.extend_from_slice(&20_000u32.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]); // 8-bit RGB
+    png.extend(chunk(b"IHDR", &ihdr));
+    png.extend(chunk(
+        b"IDAT",
+        &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01],
+    ));
+    png.extend(chunk(b"IEND", &[]));
+    std::fs::write(&path, &png).expect("write");
+    let started = std::time::Instant::now();
+    let err = LinearImage::load_png(&path, Encoding::Srgb, Depth::Any)
+        .map(|i| i.width)
+        .expect_err("too large");
+    let text = err.to_string();
+    assert!(
+        text.contains("white.png")
+            && text.contains("20000x20000")
+            && text.contains(&MAX_LOAD_SIDE.to_string()),
+        "{text}"
+    );
+    assert!(
+        started.elapsed().as_secs_f64() < 1.0,
+        "{:?}",
+        started.elapsed()
+    );
+}

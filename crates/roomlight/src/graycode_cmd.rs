@@ -22,10 +22,10 @@ pub enum DepthArg {
 pub enum GraycodeCommand {
     /// Writes the patterns of a projector as PNG and DIR/patterns.json.
     Generate {
-        /// Projector width in pixels.
+        /// Projector width in pixels (at most 8192, refused before anything is rendered).
         #[arg(long)]
         width: u32,
-        /// Projector height in pixels.
+        /// Projector height in pixels (at most 8192).
         #[arg(long)]
         height: u32,
         /// Output folder.
@@ -33,7 +33,8 @@ pub enum GraycodeCommand {
         out: PathBuf,
     },
     /// Decodes captures named like the patterns into a 16-bit map
-    /// (R = column + 1, G = row + 1, 0 where unknown, B = confidence × 65535).
+    /// (R = column + 1, G = row + 1, 0 where unknown, B = confidence × 65535). Refuses captures
+    /// over 12000 pixels a side, saturated ones, and a projector the captures did not see.
     Decode {
         /// The patterns.json written by `generate`.
         #[arg(long)]

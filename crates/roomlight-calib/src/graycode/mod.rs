@@ -14,11 +14,13 @@ use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
 mod checks;
+mod code;
 mod fill;
 mod groups;
 mod resolve;
 mod second_pass;
 
+pub use code::{bits_for, gray, gray_inverse};
 use fill::fill_from_neighbours;
 pub use groups::group_disjoint;
 use resolve::resolve_pixel;
@@ -102,26 +104,9 @@ fn gray_coding() -> Coding {
     Coding::Gray
 }
 
-/// Bits needed to code `n` positions (at least 1).
-pub fn bits_for(n: u32) -> u32 {
-    (32 - n.saturating_sub(1).leading_zeros()).max(1)
-}
-
-/// The reflected binary (Gray) code of `v`.
-pub fn gray(v: u32) -> u32 {
-    v ^ (v >> 1)
-}
-
-/// The value whose Gray code is `g`.
-pub fn gray_inverse(g: u32) -> u32 {
-    let mut v = g;
-    let mut shift = g >> 1;
-    while shift != 0 {
-        v ^= shift;
-        shift >>= 1;
-    }
-    v
-}
+/// The largest projector side a pattern set is made for (8K): one pattern of it as an image is
+/// 8192² × 12 bytes = 805 MB, so larger sizes are refused before anything is allocated.
+pub const MAX_SIDE: u32 = 8192;
 
 impl Manifest {
     /// The pattern set for a `width × height` projector: white, black, then each column bit and
@@ -132,10 +117,10 @@ impl Manifest {
 
     /// The pattern set with a chosen coding.
     pub fn with_coding(width: u32, height: u32, coding: Coding) -> Result<Self, CalibError> {
-        if width == 0 || height == 0 || width > 65_535 || height > 65_535 {
+        if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
             return Err(CalibError::Invalid {
                 field: "projector resolution",
-                problem: format!("{width}x{height}, expected 1 to 65535 per side"),
+                problem: format!("{width}x{height}, expected 1 to {MAX_SIDE} per side (the cap)"),
             });
         }
         let (column_bits, row_bits) = (bits_for(width), bits_for(height));
