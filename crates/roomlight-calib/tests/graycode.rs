@@ -595,10 +595,18 @@ fn decode_photographs(
 #[test]
 fn photographs_decode_within_a_pixel_or_unknown_never_wrong() {
     use common::photo::{Shot, photograph, tally};
-    // Before resolving edges from the neighbours (16:54 UTC, 2026-11-25): 78.72% within ±1,
-    // 21.22% unknown, in a lattice beside the edges every XOR-04 pattern shares.
-    let manifest = Manifest::new(256, 192).expect("manifest");
-    let photos = photograph(&manifest, &Shot::default());
+    // 256×192 through 320×240 (17:41 and 17:44 UTC, 2026-11-25): before resolving edges from
+    // the neighbours 78.79% within ±1, 21.14% unknown, in a lattice beside the edges every
+    // XOR-04 pattern shares; after, 99.25% within ±1, none gross, 0.69% unknown. Here half
+    // that size, to stay near a second: 99.26%, 1 pixel gross (0.006%), 0.70% unknown.
+    let manifest = Manifest::new(128, 96).expect("manifest");
+    let photos = photograph(
+        &manifest,
+        &Shot {
+            camera: (160, 120),
+            ..Shot::default()
+        },
+    );
     let decoded = decode_photographs(&manifest, &photos).expect("decode");
     let t = tally(&photos, &decoded);
     println!(
@@ -610,7 +618,7 @@ fn photographs_decode_within_a_pixel_or_unknown_never_wrong() {
         t.unlit_decoded,
         t.unlit_gross
     );
-    assert!(t.lit > 50_000, "{t:?}");
+    assert!(t.lit > 12_000, "{t:?}");
     assert!(t.close >= 0.99, "{t:?}");
     assert!(t.gross <= 0.001, "{t:?}");
     // Unlit pixels (the occluder's shadow, outside the image) decode only where the blur
@@ -623,13 +631,17 @@ fn a_projector_that_shows_nothing_is_not_seen_and_saturated_captures_are_refused
     use common::photo::{Shot, photograph};
     // Small: the refusals need no resolution.
     let manifest = Manifest::new(64, 48).expect("manifest");
+    let small = Shot {
+        camera: (96, 72),
+        ..Shot::default()
+    };
     // Cable out: the photographs see the room only (its ambient light and noise). Before this
     // check it decoded noise into a map of every pixel.
     let dark = photograph(
         &manifest,
         &Shot {
             projector_on: false,
-            ..Shot::default()
+            ..small
         },
     );
     let err = decode_photographs(&manifest, &dark)
@@ -645,7 +657,7 @@ fn a_projector_that_shows_nothing_is_not_seen_and_saturated_captures_are_refused
         &manifest,
         &Shot {
             exposure: 0.002,
-            ..Shot::default()
+            ..small
         },
     );
     let text = decode_photographs(&manifest, &faint)
@@ -658,7 +670,7 @@ fn a_projector_that_shows_nothing_is_not_seen_and_saturated_captures_are_refused
         &manifest,
         &Shot {
             exposure: 4.0,
-            ..Shot::default()
+            ..small
         },
     );
     let text = decode_photographs(&manifest, &bright)
@@ -670,9 +682,9 @@ fn a_projector_that_shows_nothing_is_not_seen_and_saturated_captures_are_refused
         "{text}"
     );
     // The same scene well exposed decodes.
-    let good = photograph(&manifest, &Shot::default());
+    let good = photograph(&manifest, &small);
     let decoded = decode_photographs(&manifest, &good).expect("decodes");
-    assert!(decoded.seen_share() > 0.9, "{}", decoded.seen_share());
+    assert!(decoded.seen_share() > 0.75, "{}", decoded.seen_share());
 }
 
 /// CRC-32 (ISO-HDLC, as PNG chunks use) of `bytes`.

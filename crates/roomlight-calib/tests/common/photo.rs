@@ -9,9 +9,6 @@ use roomlight_calib::charts::Homography;
 use roomlight_calib::graycode::{Correspondence, Manifest};
 use roomlight_calib::image_io::LinearImage;
 
-/// Camera size of the photographs.
-pub const CAMERA: (u32, u32) = (320, 240);
-
 /// What the photographs show and how they are taken.
 #[derive(Debug, Clone, Copy)]
 pub struct Shot {
@@ -29,6 +26,8 @@ pub struct Shot {
     pub projector_on: bool,
     /// Seed of the noise.
     pub seed: u64,
+    /// Camera size.
+    pub camera: (u32, u32),
 }
 
 impl Default for Shot {
@@ -41,6 +40,7 @@ impl Default for Shot {
             noise: (0.003, 0.012),
             projector_on: true,
             seed: 1,
+            camera: (320, 240),
         }
     }
 }
@@ -59,7 +59,7 @@ pub struct Photographs {
 
 /// The camera → projector map: a plane seen in perspective, the projector's image filling most
 /// of the frame at about 1.2 camera pixels per projector pixel (less on the far side).
-fn warp(manifest: &Manifest) -> impl Fn(f64, f64) -> (f64, f64) {
+fn warp(manifest: &Manifest, camera: (u32, u32)) -> impl Fn(f64, f64) -> (f64, f64) {
     let (pw, ph) = (f64::from(manifest.width), f64::from(manifest.height));
     // Where the camera's corners fall in the projector's image, in projector pixels.
     let corners = [
@@ -69,7 +69,7 @@ fn warp(manifest: &Manifest) -> impl Fn(f64, f64) -> (f64, f64) {
         [-0.02 * pw, 1.04 * ph],
     ];
     let h = Homography::from_corners(&corners).expect("a proper quadrilateral");
-    let (cw, ch) = (f64::from(CAMERA.0), f64::from(CAMERA.1));
+    let (cw, ch) = (f64::from(camera.0), f64::from(camera.1));
     move |u, v| {
         let [x, y] = h.apply(u * 6.0 / cw, v * 4.0 / ch);
         (x, y)
@@ -96,9 +96,9 @@ fn shadowed(u: f64, v: f64) -> bool {
 
 /// Photographs every pattern of `manifest` under `shot`.
 pub fn photograph(manifest: &Manifest, shot: &Shot) -> Photographs {
-    let (cw, ch) = (CAMERA.0 as usize, CAMERA.1 as usize);
+    let (cw, ch) = (shot.camera.0 as usize, shot.camera.1 as usize);
     let (pw, ph) = (manifest.width as usize, manifest.height as usize);
-    let to_projector = warp(manifest);
+    let to_projector = warp(manifest, shot.camera);
     let inside = |(x, y): (f64, f64)| x >= 0.0 && y >= 0.0 && x < pw as f64 && y < ph as f64;
     // 3×3 samples per camera pixel: the projector pixel each falls on (None: outside or shadow).
     const SS: usize = 3;
@@ -177,18 +177,18 @@ pub fn photograph(manifest: &Manifest, shot: &Shot) -> Photographs {
             let pixels = blurred
                 .iter()
                 .map(|&value| {
+                    let sigma =
+                        (shot.noise.0.powi(2) + shot.noise.1.powi(2) * value.max(0.0)).sqrt();
+                    // Each channel's own noise and quantisation.
                     [0; 3].map(|_: u8| {
-                        let sigma =
-                            (shot.noise.0.powi(2) + shot.noise.1.powi(2) * value.max(0.0)).sqrt();
                         let noisy = (value + sigma * rng.normal()).clamp(0.0, 1.0);
-                        let code = (srgb_encode(noisy) * 255.0).round() / 255.0;
-                        srgb_decode(code)
+                        srgb_decode((srgb_encode(noisy) * 255.0).round() / 255.0)
                     })
                 })
                 .collect();
             LinearImage {
-                width: CAMERA.0,
-                height: CAMERA.1,
+                width: shot.camera.0,
+                height: shot.camera.1,
                 pixels,
             }
         })
