@@ -20,13 +20,23 @@ const FIT_RESIDUAL: f32 = 0.08;
 /// of the difference of their residuals.
 const GAP_SIGMAS: f32 = 6.0;
 
-/// The sign (±1) the encoded pattern `bit` of `axis` shows at coordinate `v`.
-fn sign(manifest: &Manifest, axis: Axis, bit: u32, v: u32) -> f32 {
-    if manifest.encoded_bit(axis, bit, v) {
-        1.0
-    } else {
-        -1.0
+/// The most bits per axis resolved (a side of [`super::MAX_SIDE`] needs 13).
+const MAX_BITS: usize = 16;
+
+/// Per bit, a value of one axis (signs, differences): fixed-size, no allocation per candidate.
+type Bits = [f32; MAX_BITS];
+
+/// The signs (±1) the encoded patterns of `readings` show at coordinate `v` (0 beyond them).
+fn signs(manifest: &Manifest, axis: Axis, readings: &[&Reading], v: u32) -> Bits {
+    let mut out = [0.0; MAX_BITS];
+    for (o, r) in out.iter_mut().zip(readings) {
+        *o = if manifest.encoded_bit(axis, r.bit, v) {
+            1.0
+        } else {
+            -1.0
+        };
     }
+    out
 }
 
 /// Residual of the least-squares fit of `d` by `a·p + b·q` with `a ≥ b ≥ 0`, where `p` and `q`
@@ -35,7 +45,7 @@ fn sign(manifest: &Manifest, axis: Axis, bit: u32, v: u32) -> f32 {
 /// within `[ld/2, ld]` of the direct light `ld` measured over every pair (so that a pixel
 /// whose differences all vanish fits only a code whose every bit flips beside it); bits where
 /// they differ show `a − b`.
-fn mixed_fit(d: &[f32], p: &[f32], q: &[f32], ld: f32) -> Fit {
+fn mixed_fit(d: &[f32], p: &Bits, q: &Bits, ld: f32) -> Fit {
     let (mut same, mut ns, mut diff, mut nd) = (0.0f32, 0usize, 0.0f32, 0usize);
     for ((d, p), q) in d.iter().zip(p).zip(q) {
         if same_sign(*p, *q) {
@@ -49,11 +59,10 @@ fn mixed_fit(d: &[f32], p: &[f32], q: &[f32], ld: f32) -> Fit {
     // Means of the projected differences; an empty set fits nothing (0 bits, no residual).
     let u = if ns == 0 { ld } else { same / ns as f32 }.clamp(0.5 * ld, ld);
     let w = if nd == 0 { 0.0 } else { diff / nd as f32 }.clamp(0.0, u);
-    let predicted: Vec<f32> = p
-        .iter()
-        .zip(q)
-        .map(|(p, q)| if same_sign(*p, *q) { u * p } else { w * p })
-        .collect();
+    let mut predicted = [0.0; MAX_BITS];
+    for ((e, p), q) in predicted.iter_mut().zip(p).zip(q).take(d.len()) {
+        *e = if same_sign(*p, *q) { u * p } else { w * p };
+    }
     let residual = d.iter().zip(&predicted).map(|(d, e)| (d - e).powi(2)).sum();
     Fit {
         residual,
@@ -73,8 +82,8 @@ struct Fit {
     residual: f32,
     /// Every bit differs between the two mixed pixels (an edge every pattern shares).
     shared_edge: bool,
-    /// The differences it predicts.
-    predicted: Vec<f32>,
+    /// The differences it predicts (0 beyond the axis's bits).
+    predicted: Bits,
 }
 
 /// One candidate of [`resolve_axis`]: its coordinate and its best mixed fit.
@@ -105,7 +114,7 @@ pub(super) fn resolve_axis(
         Axis::Column => manifest.width,
         Axis::Row => manifest.height,
     };
-    if n == 0 || ld.is_nan() || ld <= 0.0 || !sigma.is_finite() {
+    if n == 0 || n > MAX_BITS || ld.is_nan() || ld <= 0.0 || !sigma.is_finite() {
         return None;
     }
     let d: Vec<f32> = readings.iter().map(|r| r.d).collect();
@@ -125,12 +134,7 @@ pub(super) fn resolve_axis(
             .collect(),
         None => enumerate(manifest, axis, readings)?,
     };
-    let pattern = |v: u32| -> Vec<f32> {
-        readings
-            .iter()
-            .map(|r| sign(manifest, axis, r.bit, v))
-            .collect()
-    };
+    let pattern = |v: u32| signs(manifest, axis, readings, v);
     let candidates: Vec<Candidate> = coords
         .into_iter()
         .map(|v| {
@@ -185,10 +189,10 @@ pub(super) fn resolve_axis(
     (worst >= GAP_SIGMAS).then(|| (best.v, (worst / (4.0 * GAP_SIGMAS)).min(1.0)))
 }
 
-/// Both axes of a pixel resolved separately ([`resolve_axis`]): on its own (and, given
-/// `near`, within a pixel of that axis's range), else within the range (an edge every pattern
-/// shares, which the neighbours place). The confidence is
-/// the smaller, halved (it ranks below a pixel whose every bit was decided).
+/// Both axes of a pixel resolved separately ([`resolve_axis`]): within the range `near` gives
+/// (on an edge every pattern shares, which the neighbours place), else on its own (within a
+/// pixel of that range). The confidence is the smaller, halved (it ranks below a pixel whose
+/// every bit was decided).
 pub(super) fn resolve_pixel(
     manifest: &Manifest,
     readings: &[Reading],
@@ -200,13 +204,14 @@ pub(super) fn resolve_pixel(
     for (k, axis) in [Axis::Column, Axis::Row].into_iter().enumerate() {
         let ours: Vec<&Reading> = readings.iter().filter(|r| r.axis == axis).collect();
         let range = near.map(|n| n[k]);
-        let alone = resolve_axis(manifest, axis, &ours, ld, sigma, None).filter(|(v, _)| {
-            range.is_none_or(|(lo, hi)| (lo - 1..=hi + 1).contains(&i64::from(*v)))
-        });
-        out[k] = match (alone, range) {
-            (Some(found), _) => found,
-            (None, Some(range)) => resolve_axis(manifest, axis, &ours, ld, sigma, Some(range))?,
-            (None, None) => return None,
+        // On a shared edge within the neighbours' range (cheap: a few candidates), else on its
+        // own within a pixel of that range.
+        let beside = range.and_then(|r| resolve_axis(manifest, axis, &ours, ld, sigma, Some(r)));
+        out[k] = match beside {
+            Some(found) => found,
+            None => resolve_axis(manifest, axis, &ours, ld, sigma, None).filter(|(v, _)| {
+                range.is_none_or(|(lo, hi)| (lo - 1..=hi + 1).contains(&i64::from(*v)))
+            })?,
         };
     }
     Some(((out[0].0, out[1].0), 0.5 * out[0].1.min(out[1].1)))
