@@ -296,3 +296,85 @@ pub(super) fn measured_noise(
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reading of `d` with nothing trusted.
+    fn open(bit: u32, d: f32) -> Reading {
+        Reading {
+            axis: Axis::Column,
+            bit,
+            d,
+            sigma: 0.01,
+            trusted: None,
+        }
+    }
+
+    #[test]
+    fn a_pixel_on_a_shared_edge_is_placed_by_its_neighbours_and_only_there() {
+        let manifest = Manifest::new(64, 4).expect("manifest");
+        // XOR-04's base bit (4 of 6) flips between 5 and 6 and with it every pattern: a
+        // camera pixel half on each shows no difference at all.
+        let flips = |v: u32| {
+            (0..6).all(|b| {
+                manifest.encoded_bit(Axis::Column, b, v)
+                    != manifest.encoded_bit(Axis::Column, b, v + 1)
+            })
+        };
+        assert!(flips(5) && flips(9) && !flips(6) && !flips(7));
+        let readings: Vec<Reading> = (0..6).map(|b| open(b, 0.0)).collect();
+        let ours: Vec<&Reading> = readings.iter().collect();
+        // On its own it could be on any shared edge: unknown.
+        assert_eq!(
+            resolve_axis(&manifest, Axis::Column, &ours, 0.5, 0.01, None),
+            None
+        );
+        // Between neighbours at 4 and 7, it is on the edge 5|6.
+        let (v, _) =
+            resolve_axis(&manifest, Axis::Column, &ours, 0.5, 0.01, Some((4, 7))).expect("placed");
+        assert!(v == 5 || v == 6, "{v}");
+        // Neighbours spanning two shared edges (5|6 and 9|10) cannot place it.
+        assert_eq!(
+            resolve_axis(&manifest, Axis::Column, &ours, 0.5, 0.01, Some((4, 10))),
+            None
+        );
+        // A pixel at 7, a quarter of the way to 8, shows its own code (weaker on the bits that
+        // flip between 7 and 8) and is resolved on its own.
+        let readings: Vec<Reading> = (0..6)
+            .map(|b| {
+                let (a, c) = (
+                    manifest.encoded_bit(Axis::Column, b, 7),
+                    manifest.encoded_bit(Axis::Column, b, 8),
+                );
+                let s = |on: bool| if on { 1.0 } else { -1.0 };
+                open(b, 0.5 * (0.75 * s(a) + 0.25 * s(c)))
+            })
+            .collect();
+        let ours: Vec<&Reading> = readings.iter().collect();
+        let (v, c) =
+            resolve_axis(&manifest, Axis::Column, &ours, 0.5, 0.01, None).expect("resolved");
+        assert_eq!(v, 7);
+        assert!(c > 0.0 && c <= 1.0, "{c}");
+    }
+
+    #[test]
+    fn the_noise_is_measured_from_pattern_plus_inverse_against_white() {
+        // One pixel, white 1, black 0; pairs whose sum strays by ±e from white: the sum's
+        // spread is e (about twice a difference's variance), so a difference's σ is e/√2.
+        let e = 0.02f32;
+        let pairs: Vec<(Axis, u32, Vec<f32>, Vec<f32>)> = (0..8)
+            .map(|k| {
+                let stray = if k % 2 == 0 { e } else { -e };
+                (Axis::Column, k, vec![0.7 + stray], vec![0.3])
+            })
+            .collect();
+        let sigma = measured_noise(1, 1, &[1.0], &[0.0], &pairs)[0];
+        // Sample variance over 8 pairs of ±e: e²·8/7.
+        let expected = (0.5 * e * e * 8.0 / 7.0).sqrt();
+        assert!((sigma - expected).abs() < 1e-6, "{sigma} vs {expected}");
+        // Fewer than two pairs: no estimate (0).
+        assert!(measured_noise(1, 1, &[1.0], &[0.0], &pairs[..1])[0].abs() < f32::EPSILON);
+    }
+}
