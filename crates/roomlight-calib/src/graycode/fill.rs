@@ -23,10 +23,10 @@ const FILL_TRIES: u8 = 3;
 /// when it agrees with [`FILL_AGREEMENT`] of them and beats every candidate more than one pixel
 /// away by six noise standard deviations and half the direct light. Otherwise the pixel stays
 /// unknown: across a depth edge the prediction is wrong and no candidate agrees clearly.
-/// With [`DecodeConfig::resolve_edges`], a pixel no candidate is clear for is resolved among
-/// the coordinates its neighbours span ([`neighbour_range`], [`resolve_pixel`]): a pixel on a stripe edge that every
-/// pattern shares (XOR coding's base edges) shows no difference at all, and only its
-/// neighbours say which of those edges it is on.
+/// With [`DecodeConfig::resolve_edges`], a pixel no candidate is clear for, whose direct light
+/// dominates, is resolved among the coordinates its neighbours span ([`neighbour_range`],
+/// [`resolve_pixel`]): a pixel on a stripe edge that every pattern shares (XOR coding's base
+/// edges) shows no difference at all, and only its neighbours say which edge it is on.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn fill_from_neighbours(
     manifest: &Manifest,

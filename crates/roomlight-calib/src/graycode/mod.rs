@@ -460,6 +460,8 @@ pub(crate) fn decode_checked<'a>(
     checked: bool,
     mut capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
 ) -> Result<Correspondence, CalibError> {
+    // Over 80 lines: the decode's steps in their order (captures, light, noise, reach, the
+    // saturation check, both passes, the unseen check), each a call, read best in one place.
     let Captures {
         w,
         h,

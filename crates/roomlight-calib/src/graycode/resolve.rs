@@ -165,8 +165,14 @@ pub(super) fn resolve_axis(
     {
         return None;
     }
-    // The best rival more than one pixel away, by its lead over noise: residuals of two fits
-    // differ by `2·Σ (e − e')·noise`, of standard deviation `2σ·|e − e'|`.
+    let worst = lead_sigmas(&candidates, best, sigma);
+    (worst >= GAP_SIGMAS).then(|| (best.v, (worst / (4.0 * GAP_SIGMAS)).min(1.0)))
+}
+
+/// The least lead, in noise standard deviations, of `best`'s fit over the candidates more
+/// than one pixel away (infinite without such rivals): residuals of two fits differ by
+/// `2·Σ (e − e')·noise`, of standard deviation `2σ·|e − e'|`.
+fn lead_sigmas(candidates: &[Candidate], best: &Candidate, sigma: f32) -> f32 {
     let mut worst = f32::INFINITY;
     for c in candidates.iter().filter(|c| c.v.abs_diff(best.v) > 1) {
         let apart: f32 = c
@@ -186,7 +192,7 @@ pub(super) fn resolve_axis(
         };
         worst = worst.min(sigmas);
     }
-    (worst >= GAP_SIGMAS).then(|| (best.v, (worst / (4.0 * GAP_SIGMAS)).min(1.0)))
+    worst
 }
 
 /// Both axes of a pixel resolved separately ([`resolve_axis`]): within the range `near` gives
