@@ -755,4 +755,13 @@ fn oversized_pattern_sets_and_captures_are_refused_before_allocating() {
         "{:?}",
         started.elapsed()
     );
+
+    // An ordinary capture still reads, through the same limits.
+    let small = dir.path().join("small.png");
+    let mut img = LinearImage::new(5, 3);
+    img.pixels[7] = [1.0, 0.5, 0.0];
+    img.save_png_srgb8(&small).expect("save");
+    let back = LinearImage::load_png(&small, Encoding::Srgb, Depth::Eight).expect("load");
+    assert_eq!((back.width, back.height), (5, 3));
+    assert!((back.pixels[7][0] - 1.0).abs() < 1e-6 && back.pixels[7][2].abs() < 1e-6);
 }
