@@ -15,6 +15,17 @@ pub const MAX_PROJECTOR_ID: usize = 128;
 /// Longest peer-chosen string a log line carries (escaped), in characters.
 pub const MAX_LOGGED_CHARS: usize = 64;
 
+/// A room token held by a process: its `Debug` prints `<secret>`, so printing a config (e.g.
+/// `roomlight node --check`) never shows it.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Secret(pub String);
+
+impl std::fmt::Debug for Secret {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("<secret>")
+    }
+}
+
 /// Whether `given` is `expected`, in time independent of both contents and of `given`'s length
 /// (up to [`MAX_TOKEN_BYTES`]; a longer one is wrong anyway, since no config token is longer).
 /// An empty `expected` matches nothing (configs refuse it; this is the second line).

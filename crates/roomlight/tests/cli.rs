@@ -864,6 +864,7 @@ fn the_token_comes_from_a_file_or_a_systemd_credential() {
     let file = format!("{{ file = {:?} }}", d.join("room-token"));
     let (ok, said) = check(&file, None);
     assert!(ok, "{said}");
+    assert!(!said.contains("s3cret"), "--check prints the token: {said}");
     let (ok, said) = check("{ credential = \"room-token\" }", Some(d));
     assert!(ok, "{said}");
     let (ok, said) = check("{ credential = \"room-token\" }", None);
@@ -957,4 +958,28 @@ fn check_reports_each_item_and_names_the_first_failure() {
         .find(|l| l.starts_with("Error:"))
         .unwrap_or_default();
     assert!(last.contains("model missing.json"), "{last}");
+}
+
+/// `roomlight node --check` prints the node's setup without its token.
+#[test]
+fn node_check_prints_the_setup_but_not_the_token() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = dir.path().join("node.toml");
+    std::fs::write(
+        &config,
+        "room = \"lab\"\ntoken = \"s3cret-node-token\"\ncamera = \"http://127.0.0.1:1\"\n\
+         hardware = { sim = \"http://127.0.0.1:1\" }\nprojector = \"p0\"\n",
+    )
+    .expect("config");
+    let printed = roomlight(&[
+        "node",
+        "--check",
+        "--config",
+        config.to_str().expect("utf-8"),
+    ]);
+    assert!(
+        printed.contains("p0") && printed.contains("<secret>"),
+        "{printed}"
+    );
+    assert!(!printed.contains("s3cret-node-token"), "{printed}");
 }

@@ -44,8 +44,9 @@ use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
-/// How the camera agent runs.
-#[derive(Debug, Clone)]
+/// How the camera agent runs. Its `Debug` leaves the token out (`roomlight camera --check`
+/// prints it).
+#[derive(Clone)]
 pub struct CameraConfig {
     /// The room's name; node agents must name it.
     pub room: String,
@@ -67,6 +68,21 @@ pub struct CameraConfig {
     /// projector calibrated over the wire or hot, and after patches left the model; `None`:
     /// nowhere.
     pub model_out: Option<std::path::PathBuf>,
+}
+
+impl std::fmt::Debug for CameraConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CameraConfig")
+            .field("room", &self.room)
+            .field("token", &"<secret>")
+            .field("heartbeat", &self.heartbeat)
+            .field("deadline", &self.deadline)
+            .field("model_rounds", &self.model_rounds)
+            .field("calibration_epoch", &self.calibration_epoch)
+            .field("stale_frames", &self.stale_frames)
+            .field("model_out", &self.model_out)
+            .finish()
+    }
 }
 
 /// The calibrated room the camera agent holds: every node's attenuation, and which projector

@@ -32,8 +32,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 use tokio_util::sync::CancellationToken;
 
-/// How a node agent runs.
-#[derive(Debug, Clone)]
+/// How a node agent runs. Its `Debug` leaves the token out (`roomlight node --check` prints
+/// it).
+#[derive(Clone)]
 pub struct NodeConfig {
     /// The camera agent, e.g. `http://127.0.0.1:50051`.
     pub endpoint: String,
@@ -53,6 +54,21 @@ pub struct NodeConfig {
     /// Where the node keeps its values between runs (written atomically, at most once a second
     /// and when it stops); `None` keeps nothing.
     pub state_file: Option<PathBuf>,
+}
+
+impl std::fmt::Debug for NodeConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NodeConfig")
+            .field("endpoint", &self.endpoint)
+            .field("room", &self.room)
+            .field("token", &"<secret>")
+            .field("projector_id", &self.projector_id)
+            .field("kind", &self.kind)
+            .field("rule", &self.rule)
+            .field("start", &self.start)
+            .field("state_file", &self.state_file)
+            .finish()
+    }
 }
 
 /// Runs one node agent until `cancel`. When the camera agent goes away the display keeps its last

@@ -161,7 +161,7 @@ pub struct NodeSetup {
     pub hardware: String,
     pub display: NodeDisplay,
     room: String,
-    token: String,
+    token: roomlight_proto::bounds::Secret,
     projector: String,
     kind: v1::ProjectorKind,
     rule: StepRule,
@@ -299,7 +299,7 @@ impl NodeFile {
             hardware,
             display,
             room: self.room,
-            token,
+            token: roomlight_proto::bounds::Secret(token),
             projector: self.projector,
             kind: match self.kind {
                 Kind::Standard => v1::ProjectorKind::Standard,
@@ -319,7 +319,7 @@ impl NodeSetup {
         NodeConfig {
             endpoint,
             room: self.room.clone(),
-            token: self.token.clone(),
+            token: self.token.0.clone(),
             projector_id: self.projector.clone(),
             kind: self.kind,
             rule: self.rule,
