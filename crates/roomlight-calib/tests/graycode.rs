@@ -5,8 +5,8 @@ mod common;
 use common::pattern_captures;
 
 use roomlight_calib::graycode::{
-    DecodeConfig, Manifest, Pattern, bits_for, decode_where, gray, gray_inverse, group_disjoint,
-    second_pass, second_pass_exposure,
+    Axis, DecodeConfig, Manifest, Pattern, bits_for, decode_where, gray, gray_inverse,
+    group_disjoint, second_pass, second_pass_exposure,
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_sim::{Room, scenes};
@@ -764,4 +764,25 @@ fn oversized_pattern_sets_and_captures_are_refused_before_allocating() {
     let back = LinearImage::load_png(&small, Encoding::Srgb, Depth::Eight).expect("load");
     assert_eq!((back.width, back.height), (5, 3));
     assert!((back.pixels[7][0] - 1.0).abs() < 1e-6 && back.pixels[7][2].abs() < 1e-6);
+}
+
+/// A bit beyond an axis's count (a peer's Show can name one) is dark, not an underflow; the
+/// bits inside keep their codes.
+#[test]
+fn a_bit_beyond_the_axis_is_dark_not_a_panic() {
+    let m = Manifest::new(256, 4).expect("manifest");
+    for v in [0, 1, 100, 255] {
+        for bit in [m.column_bits, m.column_bits + 1, 31, 32, u32::MAX] {
+            assert!(!m.encoded_bit(Axis::Column, bit, v), "bit {bit} at {v}");
+        }
+    }
+    // Inside the axis the codes still tell neighbours apart.
+    let codes: std::collections::HashSet<Vec<bool>> = (0..256)
+        .map(|v| {
+            (0..m.column_bits)
+                .map(|b| m.encoded_bit(Axis::Column, b, v))
+                .collect()
+        })
+        .collect();
+    assert_eq!(codes.len(), 256);
 }

@@ -8,12 +8,12 @@ use super::Correspondence;
 use crate::CalibError;
 use crate::image_io::LinearImage;
 
-/// Refused as saturated when more than this share of the lit (reached) pixels is clipped in
-/// the white capture. Binary patterns still decode where white clips (pattern and inverse
-/// differ all the same), so only most of the footprint clipped is refused: the simulated
-/// small room clips 5.6% of a projector's lit pixels under its LEDs, and its texture
-/// projector, close to the bust, 41%.
-pub const SATURATED_SHARE: f64 = 0.5;
+/// Refused as saturated when more than this share of the lit pixels is clipped in the white
+/// capture *and* left undecoded. Binary patterns still decode where white clips (pattern and
+/// inverse differ all the same: the simulator's calibration clips up to 76% of a texture
+/// projector's lit pixels and decodes them all), so clipping alone is no reason to refuse;
+/// clipping that cost the code (pattern and inverse both at the ceiling) is.
+pub const SATURATED_SHARE: f64 = 0.25;
 /// A projector is not seen when fewer camera pixels than this decode…
 pub const MIN_SEEN_PIXELS: usize = 16;
 /// …or they land on fewer than this share of its pixels (a footprint of a few hundred
@@ -50,14 +50,18 @@ pub(super) fn lit(white: &[f32], black: &[f32], reach: f32, ours: Option<&[bool]
         .collect()
 }
 
-/// Refuses captures whose white frame is clipped on more than [`SATURATED_SHARE`] of the
-/// pixels `is_lit` marks.
-pub(super) fn refuse_saturated(clipped: &[bool], is_lit: &[bool]) -> Result<(), CalibError> {
+/// Refuses captures whose white frame is clipped, and the code lost, on more than
+/// [`SATURATED_SHARE`] of the pixels `is_lit` marks.
+pub(super) fn refuse_saturated<T>(
+    clipped: &[bool],
+    is_lit: &[bool],
+    map: &[Option<T>],
+) -> Result<(), CalibError> {
     let (mut lit, mut at_top) = (0usize, 0usize);
-    for (&c, &l) in clipped.iter().zip(is_lit) {
+    for ((&c, &l), decoded) in clipped.iter().zip(is_lit).zip(map) {
         if l {
             lit += 1;
-            at_top += usize::from(c);
+            at_top += usize::from(c && decoded.is_none());
         }
     }
     // No lit pixel: nothing is saturated (the unseen check speaks for that case).
@@ -67,8 +71,8 @@ pub(super) fn refuse_saturated(clipped: &[bool], is_lit: &[bool]) -> Result<(), 
             field: "structured-light captures",
             problem: format!(
                 "saturated: {:.1}% of the {lit} lit camera pixels are at the camera's largest \
-                 value in the white capture (at most {:.0}% may be); lower the camera's exposure or the \
-                 projector's brightness and capture again",
+                 value in the white capture and lost their code (at most {:.0}% may); lower the \
+                 camera's exposure or the projector's brightness and capture again",
                 100.0 * share,
                 100.0 * SATURATED_SHARE
             ),

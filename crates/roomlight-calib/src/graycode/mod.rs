@@ -240,12 +240,16 @@ impl Manifest {
     }
 
     /// The value `bit` of `axis` shows at projector coordinate `v` (before the inverse): the
-    /// Gray code's bit, XOR-ed with the base bit under XOR coding.
+    /// Gray code's bit, XOR-ed with the base bit under XOR coding. A bit beyond the axis's
+    /// count (which no pattern of this manifest has) shows dark rather than underflowing.
     pub fn encoded_bit(&self, axis: Axis, bit: u32, v: u32) -> bool {
         let bits = match axis {
             Axis::Column => self.column_bits,
             Axis::Row => self.row_bits,
         };
+        if bit >= bits {
+            return false;
+        }
         let g = |b: u32| (gray(v) >> (bits - 1 - b)) & 1 == 1;
         match self.base_bit(bits) {
             Some(base) if base != bit => g(bit) != g(base),
@@ -326,6 +330,10 @@ pub struct DecodeConfig {
     /// The value (per channel, capture units) at which the camera clips: a white capture at it
     /// over a large share of the lit pixels is refused as saturated.
     pub saturation: f32,
+    /// Refuse saturated captures (see `saturation`). The calibration procedure's first pass
+    /// does not: it plans second passes at other exposures around what clipped, and refusing
+    /// there stopped the simulated rooms whose reflective walls clip (small-reflective).
+    pub refuse_saturated: bool,
 }
 
 impl DecodeConfig {
@@ -369,6 +377,7 @@ impl Default for DecodeConfig {
             fill_from_neighbours: true,
             resolve_edges: true,
             saturation: 1.0,
+            refuse_saturated: true,
         }
     }
 }
@@ -506,10 +515,7 @@ pub(crate) fn decode_checked<'a>(
                 || white[i] - black[i] < reach
                 || direct[i] < REACH_SIGMAS * noise[i])
     };
-    if checked {
-        let lit = checks::lit(&white, &black, reach, ours);
-        checks::refuse_saturated(&clipped, &lit)?;
-    }
+    let lit = checked.then(|| checks::lit(&white, &black, reach, ours));
     let mut map = vec![None; n];
     let mut confidence = vec![0.0f32; n];
     let mut readings = Vec::with_capacity(pairs.len());
@@ -542,6 +548,9 @@ pub(crate) fn decode_checked<'a>(
             &mut map,
             &mut confidence,
         );
+    }
+    if let Some(lit) = lit.as_ref().filter(|_| config.refuse_saturated) {
+        checks::refuse_saturated(&clipped, lit, &map)?;
     }
     let corr = Correspondence {
         width: w,

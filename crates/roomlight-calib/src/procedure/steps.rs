@@ -227,7 +227,11 @@ impl<'a, R: Rig> Procedure<'a, R> {
             .zip(owned_pixels(group, gains))
             .map(|(&k, ours)| {
                 let p = &projectors[k];
-                let config = self.settings.decoder(p);
+                // Clipping here is planned around by the second passes, not refused.
+                let config = DecodeConfig {
+                    refuse_saturated: false,
+                    ..self.settings.decoder(p)
+                };
                 (p.clone(), manifests[k].clone(), config, ours)
             })
             .collect();
