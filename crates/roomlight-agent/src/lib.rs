@@ -9,6 +9,7 @@
 //!   drives its display, acknowledges frames and reports contributions.
 //!
 //! - [`discovery`]: the camera agent advertised over mDNS, and node agents finding it.
+//! - [`tls`]: the room's certificates, a config's TLS files, the plaintext rule.
 //! - `throttle`: repeated warnings logged at a limited rate (a flood must not fill the disk).
 //!
 //! Measured and model rounds run over gRPC with joins (a projector not yet measured is
@@ -21,6 +22,7 @@ pub mod hardware;
 pub mod node;
 pub mod remote;
 mod throttle;
+pub mod tls;
 
 /// What went wrong in an agent.
 #[derive(Debug, thiserror::Error)]

@@ -139,6 +139,11 @@ refusals! {
     LeftDuringHandshake
         => "left-during-handshake", Unavailable, fatal: false,
         "the node left during the handshake";
+    /// mTLS: the node's client certificate (verified against the room CA) is not valid for the
+    /// projector its Hello names.
+    CertificateName { projector: String, certificate: String }
+        => "certificate-name", PermissionDenied, fatal: true,
+        "projector {projector:?}: the client certificate is for {certificate}, not this projector";
     /// The node read too slowly: its queue of messages filled up and it was dropped, so that
     /// the room does not wait for it. It reconnects and starts from what it shows.
     Lagging { queue: usize }

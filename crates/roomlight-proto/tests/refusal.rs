@@ -33,6 +33,10 @@ fn every_refusal() -> Vec<Refusal> {
         Refusal::FirstNotHello,
         Refusal::EndedBeforeHello,
         Refusal::LeftDuringHandshake,
+        Refusal::CertificateName {
+            projector: "p2".into(),
+            certificate: "p1, node-pc.local".into(),
+        },
         Refusal::Lagging { queue: 256 },
         Refusal::Malformed {
             what: "contribution: patches not increasing".into(),
@@ -120,6 +124,7 @@ fn fatality_follows_the_reason() {
             "no-resolution",
             "first-not-hello",
             "ended-before-hello",
+            "certificate-name",
             "malformed"
         ]
     );

@@ -287,13 +287,28 @@ impl Shared {
     }
 }
 
-/// Serves the Room service on `listener` and runs rounds until `cancel`. Returns the status
-/// watch and the task's handle.
+/// Serves the Room service on `listener` in plaintext and runs rounds until `cancel`. Returns
+/// the status watch and the task's handle.
 pub fn serve(
     config: CameraConfig,
     model: RoomModel,
     camera: impl Camera,
     listener: tokio::net::TcpListener,
+    cancel: CancellationToken,
+) -> (
+    watch::Receiver<RoomStatus>,
+    tokio::task::JoinHandle<Result<(), crate::AgentError>>,
+) {
+    serve_tls(config, model, camera, listener, None, cancel)
+}
+
+/// [`serve`], over TLS when `tls` is given (the listener accepts only TLS then).
+pub fn serve_tls(
+    config: CameraConfig,
+    model: RoomModel,
+    camera: impl Camera,
+    listener: tokio::net::TcpListener,
+    tls: Option<crate::tls::ServerTls>,
     cancel: CancellationToken,
 ) -> (
     watch::Receiver<RoomStatus>,
@@ -322,7 +337,7 @@ pub fn serve(
         status,
     });
     let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx);
-    let handle = tokio::spawn(run(shared, rounds, (listener, connections), cancel));
+    let handle = tokio::spawn(run(shared, rounds, (listener, connections, tls), cancel));
     (status_rx, handle)
 }
 
@@ -330,19 +345,23 @@ pub fn serve(
 /// a round waits at most a deadline for the acknowledgements and one per model round for the
 /// contributions), then every node is told goodbye and the server drains.
 ///
-/// Every connection counts against the limit (`listener`'s second half) and is closed unless a
+/// Every connection counts against the limit (`listener`'s second part) and is closed unless a
 /// node is admitted on it within the handshake timeout (as long as a Hello may take, the
-/// deadline and at least a second); a node agent's messages are bounded by the room's size;
+/// deadline and at least a second), its TLS handshake (third part) included; a node agent's messages are bounded by the room's size;
 /// a dead connection is found by HTTP/2 keepalive.
 async fn run<C: Camera>(
     shared: Arc<Shared>,
     rounds: rounds::Rounds<C>,
-    listener: (tokio::net::TcpListener, usize),
+    listener: (
+        tokio::net::TcpListener,
+        usize,
+        Option<crate::tls::ServerTls>,
+    ),
     cancel: CancellationToken,
 ) -> Result<(), crate::AgentError> {
-    let (listener, limit) = listener;
+    let (listener, limit, tls) = listener;
     let handshake = shared.config.deadline.max(Duration::from_secs(1));
-    let incoming = listener::guarded(listener, limit, handshake, shared.cancel.clone());
+    let incoming = listener::guarded(listener, limit, handshake, tls, shared.cancel.clone());
     let service = v1::room_server::RoomServer::new(service::Service::new(shared.clone()))
         .max_decoding_message_size(shared.max_message);
     let server = tonic::transport::Server::builder()

@@ -4,6 +4,11 @@
 //! contributions. It knows nothing of rounds or
 //! the camera: the round loop reads what the readers leave in the registry and the channel.
 //!
+//! The token comes as `authorization: Bearer TOKEN` metadata, checked before any message of the
+//! stream is read; a stream without it is authenticated by its Hello's token (node agents that
+//! predate the metadata). With mTLS, a node's certificate must be valid for the projector its
+//! Hello names.
+//!
 //! Nothing a peer chose is logged or echoed before its token is checked (in constant time):
 //! refusals are logged at a limited rate with the peer's id escaped and cut. An admitted peer
 //! that sends what the protocol forbids (nodes it does not own, values that are not finite or
@@ -59,6 +64,25 @@ impl v1::room_server::Room for Service {
     ) -> Result<Response<AttachStream>, Status> {
         let shared = self.0.clone();
         let handshake = request.extensions().get::<Handshake>().cloned();
+        // The metadata's token, before anything of the stream is read.
+        let bearer = match request.metadata().get("authorization") {
+            None => false,
+            Some(value) => {
+                let token = value.to_str().ok().and_then(|v| v.strip_prefix("Bearer "));
+                if !token.is_some_and(|t| token_matches(t, &shared.config.token)) {
+                    if let Some(count) = shared.refusals.hit() {
+                        let refusal = Refusal::WrongToken.row().key;
+                        tracing::warn!(
+                            refusal,
+                            count,
+                            "refused before the Hello: bearer metadata (count since the last report)"
+                        );
+                    }
+                    return Err(Refusal::WrongToken.into());
+                }
+                true
+            }
+        };
         let mut inbound = request.into_inner();
         let first = tokio::time::timeout(
             shared.config.deadline.max(Duration::from_secs(1)),
@@ -70,7 +94,10 @@ impl v1::room_server::Room for Service {
         let Some(v1::node_message::Body::Hello(hello)) = first.body else {
             return Err(Refusal::FirstNotHello.into());
         };
-        let nodes = check_hello(&shared, &hello).inspect_err(|refusal| {
+        let client_cert = handshake.as_ref().and_then(Handshake::client_cert);
+        let checked = check_hello(&shared, &hello, bearer)
+            .and_then(|nodes| check_certificate(client_cert, &hello).map(|()| nodes));
+        let nodes = checked.inspect_err(|refusal| {
             if let Some(count) = shared.refusals.hit() {
                 // The id is the peer's choice: escaped and cut, never raw.
                 let projector = escaped(&hello.projector_id);
@@ -119,13 +146,33 @@ impl v1::room_server::Room for Service {
     }
 }
 
+/// mTLS: a node that showed a certificate (verified against the room CA by the TLS handshake)
+/// may only be the projector it names.
+fn check_certificate(
+    cert: Option<&tokio_rustls::rustls::pki_types::CertificateDer<'static>>,
+    hello: &v1::Hello,
+) -> Result<(), Refusal> {
+    let Some(cert) = cert else {
+        return Ok(());
+    };
+    crate::tls::certificate_names(cert, &hello.projector_id).map_err(|names| {
+        Refusal::CertificateName {
+            projector: cut(&hello.projector_id, MAX_PROJECTOR_ID).to_string(),
+            certificate: names,
+        }
+    })
+}
+
 /// Checks a Hello: the token first (in constant time: nothing the peer chose is read, logged
 /// or echoed before), then protocol version, room, the projector id's form, and that the
 /// projector is known (or can be calibrated over the wire, then marked uncalibrated). Its
 /// nodes (none yet for a projector to calibrate). The caller logs a refusal, rate-limited.
-fn check_hello(shared: &Shared, hello: &v1::Hello) -> Result<Vec<u32>, Refusal> {
+///
+/// `bearer`: the stream's metadata carried the token (checked already); the Hello's is then not
+/// read.
+fn check_hello(shared: &Shared, hello: &v1::Hello, bearer: bool) -> Result<Vec<u32>, Refusal> {
     let config = &shared.config;
-    if !token_matches(&hello.token, &config.token) {
+    if !bearer && !token_matches(&hello.token, &config.token) {
         return Err(Refusal::WrongToken);
     }
     if hello.protocol_version != PROTOCOL_VERSION {

@@ -22,6 +22,7 @@ pub use state::SavedState;
 
 use crate::AgentError;
 use crate::hardware::Display;
+use crate::tls::ClientTls;
 use backoff::Backoff;
 use roomlight_core::{LinearRgb, StepRule};
 use roomlight_proto::refusal::Refusal;
@@ -84,6 +85,18 @@ pub async fn run(
     display: impl Display,
     cancel: CancellationToken,
 ) -> Result<(), AgentError> {
+    run_tls(config, None, display, cancel).await
+}
+
+/// [`run`], over TLS when `tls` is given: the camera agent's certificate is verified against
+/// the room CA and must carry its name (`tls.camera_name`, else the endpoint's host, or the
+/// room's name for a camera agent found over mDNS) before anything is sent.
+pub async fn run_tls(
+    config: NodeConfig,
+    tls: Option<ClientTls>,
+    display: impl Display,
+    cancel: CancellationToken,
+) -> Result<(), AgentError> {
     match crate::discovery::parse_mdns_endpoint(&config.endpoint) {
         Some((room, mdns, within)) => {
             let find = move |skip: &[String]| {
@@ -91,13 +104,45 @@ pub async fn run(
                     .inspect_err(|e| tracing::warn!(error = %e, "no camera agent candidate"))
                     .ok()
             };
-            run_with_candidates(config, find, display, cancel).await
+            let link = Link {
+                name: tls.as_ref().map(|_| config.room.clone()),
+                tls,
+            };
+            candidates(config, link, find, display, cancel).await
         }
         None => {
-            let endpoint = endpoint(&config.endpoint)?;
-            sessions(&config, Target::Fixed(Box::new(endpoint)), display, cancel).await
+            let link = Link { tls, name: None };
+            let endpoint = endpoint(&config.endpoint, &link)?;
+            let target = Target::Fixed(Box::new(endpoint));
+            sessions(&config, &link, target, display, cancel).await
         }
     }
+}
+
+/// Connects to the camera agent at `address` as a node agent does (plaintext, or TLS with
+/// `tls`), for a tool or a test that speaks to it itself (`roomlight check`): the channel, or
+/// the failure, said as a plaintext/TLS mismatch when it most likely is one.
+pub async fn connect(
+    address: &str,
+    tls: Option<&ClientTls>,
+) -> Result<tonic::transport::Channel, AgentError> {
+    let link = Link {
+        tls: tls.cloned(),
+        name: None,
+    };
+    let endpoint = endpoint(address, &link)?;
+    endpoint
+        .connect()
+        .await
+        .map_err(|e| session::mismatch(&endpoint, e.into()))
+}
+
+/// How the node agent reaches a camera agent: plaintext, or TLS with the name a camera agent
+/// must carry when the endpoint's host is not it (found over mDNS: the room's name).
+#[derive(Debug, Clone, Default)]
+struct Link {
+    tls: Option<ClientTls>,
+    name: Option<String>,
 }
 
 /// Runs one node agent whose camera agent is one of the candidates `find` returns (it blocks
@@ -111,9 +156,20 @@ pub async fn run_with_candidates(
     display: impl Display,
     cancel: CancellationToken,
 ) -> Result<(), AgentError> {
+    candidates(config, Link::default(), find, display, cancel).await
+}
+
+async fn candidates(
+    config: NodeConfig,
+    link: Link,
+    find: impl FnMut(&[String]) -> Option<String> + Send + 'static,
+    display: impl Display,
+    cancel: CancellationToken,
+) -> Result<(), AgentError> {
     let find = std::sync::Arc::new(std::sync::Mutex::new(find));
     sessions(
         &config,
+        &link,
         Target::Candidates(Box::new(move |skip: Vec<String>| {
             let find = find.clone();
             tokio::task::spawn_blocking(move || {
@@ -154,6 +210,7 @@ enum Next {
 /// The fixed endpoint, the candidate that admitted the node last, or a new candidate (one not
 /// skipped; when there is none, the skipped ones are tried again after a wait).
 async fn next_endpoint(
+    link: &Link,
     target: &mut Target,
     current: &mut Option<(String, tonic::transport::Endpoint)>,
     skipped: &mut Vec<String>,
@@ -170,7 +227,7 @@ async fn next_endpoint(
         () = cancel.cancelled() => return Next::Stop,
         found = search(skipped.clone()) => found.ok().flatten(),
     };
-    match found.map(|a| endpoint(&a).map(|e| (a, e))) {
+    match found.map(|a| endpoint(&a, link).map(|e| (a, e))) {
         Some(Ok((address, endpoint))) => {
             *current = Some((address.clone(), endpoint.clone()));
             Next::Try(Some(address), Box::new(endpoint))
@@ -190,6 +247,7 @@ async fn next_endpoint(
 /// Relights from the state file, then runs sessions until cancelled (see [`run`]).
 async fn sessions(
     config: &NodeConfig,
+    link: &Link,
     mut target: Target,
     mut display: impl Display,
     cancel: CancellationToken,
@@ -205,7 +263,7 @@ async fn sessions(
     let mut current: Option<(String, tonic::transport::Endpoint)> = None;
     loop {
         let (candidate, endpoint) =
-            match next_endpoint(&mut target, &mut current, &mut skipped, &cancel).await {
+            match next_endpoint(link, &mut target, &mut current, &mut skipped, &cancel).await {
                 Next::Try(candidate, endpoint) => (candidate, endpoint),
                 Next::Wait => {
                     if !backoff.sleep(&cancel).await {
@@ -268,22 +326,37 @@ async fn sessions(
     }
 }
 
-/// The camera agent's address, with the connection's keepalive. A malformed address cannot heal
-/// by retrying. HTTP/2 pings notice a camera host that vanished without closing the connection
+/// The camera agent's address, with the connection's keepalive and, over TLS, the room CA
+/// (an `http://` address is then reached as `https://`). A malformed address cannot heal by
+/// retrying. HTTP/2 pings notice a camera host that vanished without closing the connection
 /// (power loss, cable pulled): the session ends and the agent reconnects, and the lights stay on
 /// meanwhile.
-fn endpoint(address: &str) -> Result<tonic::transport::Endpoint, AgentError> {
-    Ok(tonic::transport::Endpoint::from_shared(address.to_string())
-        .map_err(|e| {
-            AgentError::Protocol(format!(
-                "camera endpoint {address:?}: {e}; expected an address like http://host:port"
-            ))
-        })?
+fn endpoint(address: &str, link: &Link) -> Result<tonic::transport::Endpoint, AgentError> {
+    let malformed = |e: &dyn std::fmt::Display| {
+        AgentError::Protocol(format!(
+            "camera endpoint {address:?}: {e}; expected an address like http://host:port"
+        ))
+    };
+    let uri = match (&link.tls, address.strip_prefix("http://")) {
+        (Some(_), Some(rest)) => format!("https://{rest}"),
+        _ => address.to_string(),
+    };
+    let endpoint = tonic::transport::Endpoint::from_shared(uri)
+        .map_err(|e| malformed(&e))?
         .connect_timeout(Duration::from_secs(5))
         .http2_keep_alive_interval(Duration::from_secs(5))
         .keep_alive_timeout(Duration::from_secs(10))
         .keep_alive_while_idle(true)
-        .tcp_nodelay(true))
+        .tcp_nodelay(true);
+    match &link.tls {
+        Some(tls) => {
+            let name = tls.camera_name.as_deref().or(link.name.as_deref());
+            endpoint
+                .tls_config(tls.tonic(name))
+                .map_err(|e| malformed(&e))
+        }
+        None => Ok(endpoint),
+    }
 }
 
 /// Logs a status from the camera agent by its refusal when it carries one, so the node's log

@@ -17,6 +17,7 @@ use roomlight_core::{AttenuationColumn, LinearRgb, NodeState};
 use roomlight_proto::convert::{
     from_node_errors, from_rgb, from_sparse, node_change, to_rgb, to_sparse,
 };
+use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::collections::HashMap;
 use std::time::Duration;
@@ -64,11 +65,24 @@ pub(super) async fn run(
     // The largest message is an Assign of this projector's weights (8 bytes a pixel) or a
     // node's attenuation: refused from its length prefix, before anything is allocated.
     let limit = roomlight_proto::bounds::room_message_limit(display.resolution());
-    let mut client = v1::room_client::RoomClient::new(endpoint.connect().await?)
-        .max_decoding_message_size(limit);
+    let channel = endpoint
+        .connect()
+        .await
+        .map_err(|e| mismatch(endpoint, e.into()))?;
+    let mut client = v1::room_client::RoomClient::new(channel).max_decoding_message_size(limit);
     let (tx, rx) = mpsc::channel(256);
     send(&tx, hello(config, display, memory)).await?;
-    let mut inbound = client.attach(ReceiverStream::new(rx)).await?.into_inner();
+    let mut request = tonic::Request::new(ReceiverStream::new(rx));
+    // The token before any message (docs/protocol.md); a token that is no header value goes in
+    // the Hello only.
+    if let Ok(bearer) = format!("Bearer {}", config.token).parse() {
+        request.metadata_mut().insert("authorization", bearer);
+    }
+    let mut inbound = client
+        .attach(request)
+        .await
+        .map_err(|e| mismatch(endpoint, e.into()))?
+        .into_inner();
     // The side tasks end with the session, whichever way it ends.
     let side = cancel.child_token();
     let _stop_side = side.clone().drop_guard();
@@ -116,6 +130,53 @@ pub(super) async fn run(
             None => {}
         }
     }
+}
+
+/// A failure to reach the camera agent, said as what it most likely is when the two ends do
+/// not speak the same (plaintext against TLS, or the other way round): the connection was made
+/// and then closed or garbled, with no refusal. Other errors are returned unchanged.
+pub(super) fn mismatch(endpoint: &tonic::transport::Endpoint, e: AgentError) -> AgentError {
+    if let AgentError::Status(status) = &e
+        && (Refusal::from_status(status).is_some()
+            || !matches!(
+                status.code(),
+                tonic::Code::Unavailable
+                    | tonic::Code::Unknown
+                    | tonic::Code::Internal
+                    | tonic::Code::Cancelled
+            ))
+    {
+        return e;
+    }
+    let mut causes = e.to_string();
+    let mut source = std::error::Error::source(&e);
+    while let Some(s) = source {
+        causes.push_str(": ");
+        causes.push_str(&s.to_string());
+        source = s.source();
+    }
+    let lower = causes.to_lowercase();
+    let elsewhere = [
+        "connection refused",
+        "timed out",
+        "dns error",
+        "no route",
+        "unreachable",
+        "certificate",
+    ];
+    if elsewhere.iter().any(|w| lower.contains(w)) {
+        return e;
+    }
+    let at = endpoint.uri();
+    AgentError::Protocol(if at.scheme_str() == Some("https") {
+        format!(
+            "the camera agent at {at} did not answer in TLS; does it lack tls in its config? ({causes})"
+        )
+    } else {
+        format!(
+            "the camera agent at {at} did not answer in plaintext; does it need tls? ({causes})"
+        )
+    })
 }
 
 /// Sends a heartbeat every period (the latest `period` says) until `stop`, the end of the
