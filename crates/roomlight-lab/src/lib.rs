@@ -15,3 +15,4 @@ pub mod process;
 pub mod rendered;
 pub mod report;
 pub mod shadow;
+pub mod soak;

@@ -78,6 +78,9 @@ enum Command {
     /// Real hardware: the outputs a projector can be on, an image or the identify pattern on one;
     /// the cameras, one capture, a camera's response curve.
     Hw(HwArgs),
+    /// A room of processes for thousands of rounds with kills, restarts, additions and a
+    /// misbehaving peer (issue 20): memory, descriptors, logs, final excess; fails naming why.
+    Soak(roomlight_lab::soak::SoakArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -285,6 +288,7 @@ fn main() -> Result<()> {
         Command::Graycode { which } => graycode_cmd::run(which),
         Command::Bench(args) => bench(args),
         Command::Hw(args) => hw(args),
+        Command::Soak(args) => roomlight_lab::soak::run(&args, &std::env::current_exe()?),
     }
 }
 

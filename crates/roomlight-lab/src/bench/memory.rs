@@ -14,7 +14,16 @@ pub struct Resident {
 
 /// Reads `VmRSS` and `VmHWM`; `None` where `/proc/self/status` does not exist or lacks them.
 pub fn resident() -> Option<Resident> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    resident_in("/proc/self/status")
+}
+
+/// The same of another process (`/proc/PID/status`); `None` once it has gone.
+pub fn resident_of(pid: u32) -> Option<Resident> {
+    resident_in(&format!("/proc/{pid}/status"))
+}
+
+fn resident_in(path: &str) -> Option<Resident> {
+    let status = std::fs::read_to_string(path).ok()?;
     let field = |name: &str| {
         status
             .lines()

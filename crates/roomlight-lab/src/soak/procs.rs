@@ -1,0 +1,297 @@
+//! The soak's children: `roomlight sim`, `camera` and `node` started from the binary as a real
+//! installation runs them, each incarnation's stderr (the tracing log) appended to `NAME.log`
+//! and its stdout to `NAME.out` (its lines also handed to the driver), killed with SIGKILL,
+//! stopped with SIGTERM, and measured from `/proc/PID` (resident set, open file descriptors).
+
+use crate::bench::memory;
+use anyhow::{Context, Result};
+use serde::Serialize;
+use std::fs::{File, OpenOptions};
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// One reading of a process.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Sample {
+    /// Rounds the room had run when it was taken.
+    pub at_round: u64,
+    pub rss_kb: u64,
+    /// Entries of `/proc/PID/fd`.
+    pub fds: u64,
+    /// The peers this process is expected to hold one socket each for at that moment (the camera
+    /// agent: projectors attached; the simulator: agents connected to it; a node: none).
+    pub peers: u64,
+}
+
+/// One run of an agent, from its start to its end.
+#[derive(Debug, Clone, Serialize)]
+pub struct Incarnation {
+    pub pid: u32,
+    pub started_at_round: u64,
+    /// The first reading once the room had run the warm-up past this incarnation's start.
+    pub warm: Option<Sample>,
+    /// The last reading.
+    pub last: Option<Sample>,
+    pub max_rss_kb: u64,
+    /// How it ended: `killed` (SIGKILL by the soak), `stopped` (exited 0 after SIGTERM), or
+    /// what went wrong.
+    pub end: Option<String>,
+}
+
+/// An agent of the room (one name, restarted any number of times).
+#[derive(Debug)]
+pub struct Agent {
+    pub name: String,
+    args: Vec<String>,
+    dir: PathBuf,
+    exe: PathBuf,
+    child: Option<Child>,
+    lines: Option<mpsc::Receiver<String>>,
+    pub incarnations: Vec<Incarnation>,
+}
+
+impl Agent {
+    pub fn new(exe: &Path, dir: &Path, name: &str, args: &[&str]) -> Self {
+        Self {
+            name: name.to_string(),
+            args: args.iter().map(|a| a.to_string()).collect(),
+            dir: dir.to_path_buf(),
+            exe: exe.to_path_buf(),
+            child: None,
+            lines: None,
+            incarnations: Vec::new(),
+        }
+    }
+
+    pub fn log_path(&self) -> PathBuf {
+        self.dir.join(format!("{}.log", self.name))
+    }
+
+    pub fn out_path(&self) -> PathBuf {
+        self.dir.join(format!("{}.out", self.name))
+    }
+
+    /// Starts a new incarnation. Logs at `info`, the level the systemd units run the agents at.
+    pub fn start(&mut self, at_round: u64) -> Result<()> {
+        let append = |path: PathBuf| -> Result<File> {
+            OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&path)
+                .with_context(|| format!("opening {}", path.display()))
+        };
+        let mut child = Command::new(&self.exe)
+            .args(&self.args)
+            .current_dir(&self.dir)
+            .env("RUST_LOG", "info")
+            .env("NO_COLOR", "1")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(append(self.log_path())?)
+            .spawn()
+            .with_context(|| format!("starting {} ({})", self.name, self.exe.display()))?;
+        let stdout = child.stdout.take().context("piped stdout")?;
+        let mut out = append(self.out_path())?;
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                let _ = writeln!(out, "{line}");
+                // The driver may have moved on to the next incarnation: keep writing the file.
+                let _ = tx.send(line);
+            }
+        });
+        self.incarnations.push(Incarnation {
+            pid: child.id(),
+            started_at_round: at_round,
+            warm: None,
+            last: None,
+            max_rss_kb: 0,
+            end: None,
+        });
+        self.child = Some(child);
+        self.lines = Some(rx);
+        Ok(())
+    }
+
+    pub fn running(&self) -> bool {
+        self.child.is_some()
+    }
+
+    /// The stdout lines printed since the last call.
+    pub fn new_lines(&mut self) -> Vec<String> {
+        self.lines
+            .as_ref()
+            .map(|rx| rx.try_iter().collect())
+            .unwrap_or_default()
+    }
+
+    /// Waits (at most `within`) for a stdout line starting with `prefix`; the line.
+    pub fn wait_line(&mut self, prefix: &str, within: Duration) -> Result<String> {
+        let rx = self.lines.as_ref().context("not started")?;
+        let until = Instant::now() + within;
+        loop {
+            let left = until.saturating_duration_since(Instant::now());
+            match rx.recv_timeout(left) {
+                Ok(line) if line.starts_with(prefix) => return Ok(line),
+                Ok(_) => {}
+                Err(_) => anyhow::bail!(
+                    "{}: no line {prefix:?} within {within:?} (see {})",
+                    self.name,
+                    self.log_path().display()
+                ),
+            }
+        }
+    }
+
+    /// Whether the running incarnation has exited on its own; it is reaped and its end noted.
+    pub fn exited(&mut self) -> Option<String> {
+        let status = self.child.as_mut()?.try_wait().ok()??;
+        let end = format!("exited on its own: {status}");
+        self.ended(end.clone());
+        Some(end)
+    }
+
+    /// SIGKILL, as a crash or `kill -9` ends a process.
+    pub fn kill(&mut self) {
+        if let Some(child) = self.child.as_mut() {
+            let _ = child.kill();
+            let _ = child.wait();
+            self.ended("killed".into());
+        }
+    }
+
+    /// SIGTERM, as systemd stops a service; SIGKILL if it has not exited within `within`.
+    pub fn terminate(&mut self, within: Duration) {
+        let Some(child) = self.child.as_mut() else {
+            return;
+        };
+        let sent = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status()
+            .is_ok_and(|s| s.success());
+        let until = Instant::now() + within;
+        let end = loop {
+            match child.try_wait() {
+                Ok(Some(s)) if s.success() => break "stopped".to_string(),
+                Ok(Some(s)) => break format!("exited after SIGTERM: {s}"),
+                Ok(None) if sent && Instant::now() < until => {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                _ => {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    break format!("did not stop within {within:?} of SIGTERM: killed");
+                }
+            }
+        };
+        self.ended(end);
+    }
+
+    fn ended(&mut self, end: String) {
+        self.child = None;
+        if let Some(i) = self.incarnations.last_mut() {
+            i.end = Some(end);
+        }
+    }
+
+    /// Reads the running incarnation's resident set and descriptors; the first reading taken
+    /// `warm_up` rounds after its start is its warm one.
+    pub fn sample(&mut self, at_round: u64, warm_up: u64, peers: u64) {
+        let Some(child) = self.child.as_ref() else {
+            return;
+        };
+        let pid = child.id();
+        let (Some(resident), Some(fds)) = (memory::resident_of(pid), open_fds(pid)) else {
+            return;
+        };
+        let sample = Sample {
+            at_round,
+            rss_kb: resident.now / 1024,
+            fds,
+            peers,
+        };
+        if let Some(i) = self.incarnations.last_mut() {
+            i.max_rss_kb = i.max_rss_kb.max(sample.rss_kb);
+            if i.warm.is_none() && at_round >= i.started_at_round + warm_up {
+                i.warm = Some(sample);
+            }
+            i.last = Some(sample);
+        }
+    }
+
+    /// Bytes this agent has written to its log (stderr) and to its stdout, every incarnation.
+    pub fn written(&self) -> (u64, u64) {
+        let size = |p: PathBuf| std::fs::metadata(p).map_or(0, |m| m.len());
+        (size(self.log_path()), size(self.out_path()))
+    }
+}
+
+impl Drop for Agent {
+    /// Nothing is left behind, whatever happened.
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// Entries of `/proc/PID/fd`; `None` once the process has gone (or off Linux).
+fn open_fds(pid: u32) -> Option<u64> {
+    Some(std::fs::read_dir(format!("/proc/{pid}/fd")).ok()?.count() as u64)
+}
+
+/// The camera agent's status line, `round R captures C objective G live L calibrated H`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Status {
+    pub round: u64,
+    pub captures: u64,
+    pub objective: f64,
+    pub live: usize,
+}
+
+impl Status {
+    pub fn parse(line: &str) -> Option<Self> {
+        let w: Vec<&str> = line.split_whitespace().collect();
+        match w.as_slice() {
+            [
+                "round",
+                r,
+                "captures",
+                c,
+                "objective",
+                g,
+                "live",
+                l,
+                "calibrated",
+                _,
+            ] => Some(Self {
+                round: r.parse().ok()?,
+                captures: c.parse().ok()?,
+                objective: g.parse().ok()?,
+                live: l.parse().ok()?,
+            }),
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_status_line_is_read_and_anything_else_is_not() {
+        let s = Status::parse("round 42 captures 7 objective 1.250000e-2 live 3 calibrated 0");
+        assert_eq!(
+            s,
+            Some(Status {
+                round: 42,
+                captures: 7,
+                objective: 0.0125,
+                live: 3
+            })
+        );
+        assert_eq!(Status::parse("camera listening on 127.0.0.1:5"), None);
+    }
+}
