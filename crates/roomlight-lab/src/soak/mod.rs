@@ -59,7 +59,7 @@ const PRESENT: usize = 3;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Kind {
-    /// SIGKILL a running node agent, then start it again.
+    /// SIGKILL a running node agent that has written its state file, then start it again.
     KillNode,
     /// Start a spare projector's node agent.
     AddProjector,
@@ -237,9 +237,12 @@ fn apply(room: &mut Room, kind: Kind, rng: &mut ChaCha8Rng) -> Result<Event> {
             let running: Vec<String> = room
                 .nodes
                 .iter()
-                .filter(|(_, a)| a.running())
+                .filter(|(p, a)| a.running() && room.has_state(p))
                 .map(|(p, _)| p.clone())
                 .collect();
+            if running.is_empty() {
+                bail!("no running node agent has a state file to relight from");
+            }
             let p = running[rng.random_range(0..running.len())].clone();
             let seen = kill_node(room, &p, live);
             (Some(p), seen)

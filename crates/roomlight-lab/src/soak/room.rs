@@ -254,6 +254,11 @@ impl Room {
         self.sim.terminate(Duration::from_secs(10));
     }
 
+    /// Whether `projector`'s node agent has written its state file (what it relights from).
+    pub fn has_state(&self, projector: &str) -> bool {
+        self.dir.join(format!("{projector}.state.json")).exists()
+    }
+
     /// How many lines of `agent`'s log contain `text`.
     pub fn log_count(&self, agent: &str, text: &str) -> usize {
         let path = self.dir.join(format!("{agent}.log"));
