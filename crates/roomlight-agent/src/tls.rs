@@ -277,6 +277,34 @@ impl TlsFiles {
     }
 }
 
+/// The camera agent's side of a config: its `tls` table loaded, or plaintext where the rule
+/// allows it (`listen` on loopback, or `insecure`).
+pub fn server(
+    config: &Path,
+    files: Option<&TlsFiles>,
+    listen: &str,
+    insecure: bool,
+) -> Result<Option<ServerTls>, TlsError> {
+    match files {
+        Some(files) => files.server(config).map(Some),
+        None => check_plaintext(config, "listen", Some(listen), insecure).map(|()| None),
+    }
+}
+
+/// A node agent's side of a config: its `tls` table loaded, or plaintext where the rule allows
+/// it (`to`: the field and the address it connects to, `None` over mDNS on every interface).
+pub fn client(
+    config: &Path,
+    files: Option<&TlsFiles>,
+    to: (&str, Option<&str>),
+    insecure: bool,
+) -> Result<Option<ClientTls>, TlsError> {
+    match files {
+        Some(files) => files.client(config).map(Some),
+        None => check_plaintext(config, to.0, to.1, insecure).map(|()| None),
+    }
+}
+
 /// Plaintext is allowed only on loopback, or with `insecure = true` (which warns at every
 /// start): `address` is what `field` of `config` listens on or connects to (`host:port`,
 /// `http://host:port`, or `None` for a camera agent found over mDNS on every interface).

@@ -7,6 +7,7 @@
 //! `roomlight` binary parses arguments and configuration and calls in here with plain options.
 
 pub mod bench;
+pub mod commands;
 pub mod demo;
 pub mod graycode_files;
 pub mod pipeline;

@@ -1,7 +1,6 @@
 //! The `roomlight` command: a thin clap front over the crates.
 
 mod config;
-mod graycode_cmd;
 mod procs;
 
 use anyhow::{Context, Result};
@@ -68,7 +67,12 @@ enum Command {
     /// Gray-code structured light for real photographs.
     Graycode {
         #[command(subcommand)]
-        which: graycode_cmd::GraycodeCommand,
+        which: roomlight_lab::commands::GraycodeCommand,
+    },
+    /// The room's TLS certificates: its CA (`init`), a certificate per camera agent or node.
+    Certs {
+        #[command(subcommand)]
+        which: roomlight_lab::commands::CertsCommand,
     },
     /// Benchmarks: speed against error. Without a subcommand: the whole evidence — the core,
     /// the default room's presets, the hard cases, a thousand-node room and sparsity (a table,
@@ -285,7 +289,8 @@ fn main() -> Result<()> {
         Command::Node { config, check } => procs::node(&config, check),
         Command::Check { config } => procs::check(&config),
         Command::Optimum { model } => procs::optimum(&model),
-        Command::Graycode { which } => graycode_cmd::run(which),
+        Command::Graycode { which } => roomlight_lab::commands::graycode(which),
+        Command::Certs { which } => roomlight_lab::commands::certs(which),
         Command::Bench(args) => bench(args),
         Command::Hw(args) => hw(args),
         Command::Soak(args) => roomlight_lab::soak::run(&args, &std::env::current_exe()?),

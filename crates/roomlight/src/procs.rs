@@ -252,6 +252,7 @@ pub fn check(path: &Path) -> Result<()> {
         let agent = n.agent_config(String::new());
         runtime()?.block_on(process::check_node(
             &agent,
+            n.tls.as_ref(),
             &camera,
             &n.hardware,
             &n.display,
@@ -280,8 +281,14 @@ pub fn node(path: &Path, check: bool) -> Result<()> {
     runtime()?.block_on(async {
         let cancel = CancellationToken::new();
         stop_on_signals(cancel.clone());
-        process::run_node(agent, &setup.hardware, &setup.display, cancel)
-            .await
-            .with_context(|| format!("the node agent of {}", path.display()))
+        process::run_node(
+            agent,
+            setup.tls.clone(),
+            &setup.hardware,
+            &setup.display,
+            cancel,
+        )
+        .await
+        .with_context(|| format!("the node agent of {}", path.display()))
     })
 }

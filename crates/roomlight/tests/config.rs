@@ -193,7 +193,8 @@ fn the_camera_is_found_by_address_or_over_mdns() {
         "n.toml",
         &NODE.replace(
             "\"http://127.0.0.1:1\"\nhardware",
-            "{ mdns = \"lab\" }\nhardware",
+            // Over mDNS on every interface: plaintext needs insecure (no tls here).
+            "{ mdns = \"lab\" }\ninsecure = true\nhardware",
         ),
     );
     let node = load_node(&path).expect("mdns table");
@@ -201,7 +202,10 @@ fn the_camera_is_found_by_address_or_over_mdns() {
     // The old form: the agent of the node's own room.
     let (_d, path) = file(
         "n.toml",
-        &NODE.replace("\"http://127.0.0.1:1\"\nhardware", "\"mdns\"\nhardware"),
+        &NODE.replace(
+            "\"http://127.0.0.1:1\"\nhardware",
+            "\"mdns\"\ninsecure = true\nhardware",
+        ),
     );
     let node = load_node(&path).expect("mdns string");
     assert!(node.contains("camera:Mdns(\"r\")"), "{node}");

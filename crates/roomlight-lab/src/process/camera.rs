@@ -63,6 +63,8 @@ pub struct CameraProcess {
     pub listen: String,
     /// Advertise the agent over mDNS.
     pub advertise: Option<MdnsConfig>,
+    /// TLS (plaintext when `None`: loopback, or `insecure` in its config).
+    pub tls: Option<roomlight_agent::tls::ServerTls>,
 }
 
 /// The camera agent's camera: the synthetic room's patches, a rendered room's images sampled
@@ -253,8 +255,14 @@ pub async fn serve_camera(
         ),
         None => None,
     };
-    let (mut status, handle) =
-        camera::serve(process.agent, model, camera, listener, cancel.clone());
+    let (mut status, handle) = camera::serve_tls(
+        process.agent,
+        model,
+        camera,
+        listener,
+        process.tls,
+        cancel.clone(),
+    );
     super::systemd::ready(&format!("camera agent of room {room:?} serving on {addr}"));
     super::systemd::with_watchdog(async {
         loop {

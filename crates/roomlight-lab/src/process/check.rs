@@ -96,6 +96,7 @@ pub enum CameraAt {
 /// (protocol version, room, token), its display there, its state file writable.
 pub async fn check_node(
     config: &NodeConfig,
+    tls: Option<&roomlight_agent::tls::ClientTls>,
     camera: &CameraAt,
     hardware: &str,
     display: &NodeDisplay,
@@ -120,7 +121,7 @@ pub async fn check_node(
     );
     match endpoint.filter(|_| found) {
         Some(e) => {
-            list.item(handshake, attach(&e, config)).await;
+            list.item(handshake, attach(&e, config, tls)).await;
         }
         None => list.skipped(handshake, "no camera agent"),
     }
@@ -218,12 +219,13 @@ async fn resolve(camera: &CameraAt) -> Result<String, String> {
 
 /// Hello as the node would send it (no state), and the camera agent's first answer: a Welcome
 /// (protocol version, room and token accepted) or its refusal, by name.
-async fn attach(endpoint: &str, config: &NodeConfig) -> Result<String, String> {
+async fn attach(
+    endpoint: &str,
+    config: &NodeConfig,
+    tls: Option<&roomlight_agent::tls::ClientTls>,
+) -> Result<String, String> {
     let work = async {
-        let channel = tonic::transport::Endpoint::from_shared(endpoint.to_string())
-            .map_err(|e| format!("{endpoint:?} is not an endpoint: {e}"))?
-            .connect_timeout(NETWORK_DEADLINE)
-            .connect()
+        let channel = roomlight_agent::node::connect(endpoint, tls)
             .await
             .map_err(|e| format!("{endpoint}: unreachable: {}", causes(&e)))?;
         let mut client = v1::room_client::RoomClient::new(channel);

@@ -30,9 +30,11 @@ pub enum NodeDisplay {
 const OPEN_FIRST: std::time::Duration = std::time::Duration::from_millis(200);
 const OPEN_MAX: std::time::Duration = std::time::Duration::from_secs(5);
 
-/// Connects the display at `hardware` and runs the node agent until `cancel`.
+/// Connects the display at `hardware` and runs the node agent until `cancel` (over TLS with
+/// `tls`).
 pub async fn run_node(
     config: NodeConfig,
+    tls: Option<roomlight_agent::tls::ClientTls>,
     hardware: &str,
     display: &NodeDisplay,
     cancel: CancellationToken,
@@ -43,12 +45,12 @@ pub async fn run_node(
             return Ok(());
         };
         let window = ReadyOnShow::new(window, &projector);
-        with_watchdog(node::run(config, window, cancel)).await?;
+        with_watchdog(node::run_tls(config, tls, window, cancel)).await?;
         return Ok(());
     }
     let display = connect(hardware, display, &projector, &cancel).await?;
     let display = ReadyOnShow::new(display, &projector);
-    with_watchdog(node::run(config, display, cancel)).await?;
+    with_watchdog(node::run_tls(config, tls, display, cancel)).await?;
     Ok(())
 }
 

@@ -9,6 +9,8 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+type Tls = Option<roomlight_agent::tls::ServerTls>;
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CameraFile {
@@ -62,6 +64,11 @@ struct CameraFile {
     /// mDNS on the loopback interface only (one machine).
     #[serde(default)]
     mdns_loopback_only: bool,
+    /// `tls = { cert, key, ca, require_client_cert }`, or plaintext: loopback or `insecure`.
+    #[serde(default)]
+    tls: Option<roomlight_agent::tls::TlsFiles>,
+    #[serde(default)]
+    insecure: bool,
 }
 
 fn heartbeat_default() -> u64 {
@@ -83,7 +90,8 @@ pub fn load_camera(path: &Path) -> Result<CameraProcess> {
     let token = file.token.resolve(path)?;
     file.check(path)?;
     let hardware = file.hardware(path)?;
-    Ok(file.into_process(hardware, token))
+    let tls = roomlight_agent::tls::server(path, file.tls.as_ref(), &file.listen, file.insecure)?;
+    Ok(file.into_process(hardware, token, tls))
 }
 
 /// `camera` as a spec string or a `CameraConfig` table, validated.
@@ -187,7 +195,7 @@ impl CameraFile {
     }
 
     /// The one place a checked camera config becomes the agent's `CameraConfig` and process.
-    fn into_process(self, hardware: CameraHardware, token: String) -> CameraProcess {
+    fn into_process(self, hardware: CameraHardware, token: String, tls: Tls) -> CameraProcess {
         let source = match (self.model, self.survey) {
             (Some(model), _) => CameraSource::Model {
                 model,
@@ -212,6 +220,7 @@ impl CameraFile {
             hardware,
             source,
             listen: self.listen,
+            tls,
             advertise: self.mdns.then_some(MdnsConfig {
                 port: self.mdns_port,
                 loopback_only: self.mdns_loopback_only,

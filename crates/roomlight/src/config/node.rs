@@ -132,6 +132,11 @@ struct NodeFile {
     theta: f64,
     #[serde(default = "start_default")]
     start: f64,
+    /// `tls = { ca, cert, key, camera_name }`, or plaintext: loopback or `insecure`.
+    #[serde(default)]
+    tls: Option<roomlight_agent::tls::TlsFiles>,
+    #[serde(default)]
+    insecure: bool,
 }
 
 fn mdns_wait_default() -> u64 {
@@ -160,6 +165,7 @@ pub struct NodeSetup {
     /// The endpoint of the display's `roomlight sim` process (empty for a window display).
     pub hardware: String,
     pub display: NodeDisplay,
+    pub tls: Option<roomlight_agent::tls::ClientTls>,
     room: String,
     token: roomlight_proto::bounds::Secret,
     projector: String,
@@ -289,7 +295,13 @@ impl NodeFile {
             Some(Hardware::Sim(endpoint)) => endpoint,
             None => String::new(),
         };
+        let to = match &camera {
+            CameraLocation::Address(a) => ("camera", Some(a.as_str())),
+            CameraLocation::Mdns(_) => ("camera.mdns", self.mdns_loopback_only.then_some("::1")),
+        };
+        let tls = roomlight_agent::tls::client(path, self.tls.as_ref(), to, self.insecure)?;
         Ok(NodeSetup {
+            tls,
             camera,
             mdns: MdnsConfig {
                 port: self.mdns_port,

@@ -1,9 +1,14 @@
-//! `roomlight graycode generate|decode`: structured light on real photographs.
+//! The arguments of the commands whose bodies live in this crate or below it, and their
+//! dispatch: `roomlight graycode` (roomlight-calib through `graycode_files`) and `roomlight certs`
+//! (the room's CA and certificates, `roomlight_agent::tls`). The binary only names them; nothing
+//! here knows config files.
 
+use crate::graycode_files::{decode_folder, generate};
 use anyhow::Result;
 use clap::{Subcommand, ValueEnum};
+use roomlight_agent::tls;
 use roomlight_calib::image_io::{Depth, Encoding};
-use roomlight_lab::graycode_files::{decode_folder, generate};
+use std::net::IpAddr;
 use std::path::PathBuf;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -54,7 +59,8 @@ pub enum GraycodeCommand {
     },
 }
 
-pub fn run(command: GraycodeCommand) -> Result<()> {
+/// `roomlight graycode generate|decode`: structured light on real photographs.
+pub fn graycode(command: GraycodeCommand) -> Result<()> {
     match command {
         GraycodeCommand::Generate { width, height, out } => {
             println!("{}", generate(width, height, &out)?);
@@ -81,6 +87,52 @@ pub fn run(command: GraycodeCommand) -> Result<()> {
                 decode_folder(&patterns, &captures, &out, encoding, depth)?
             );
         }
+    }
+    Ok(())
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CertsCommand {
+    /// Makes the room's CA: DIR/ca.pem and DIR/ca.key (0600). Keep the key off the room's PCs.
+    Init {
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Issues a certificate signed by the room's CA: OUT/NAME.pem and OUT/NAME.key (0600), and
+    /// the CA's certificate as OUT/ca.pem (what one PC needs).
+    Issue {
+        /// The folder of `certs init`.
+        #[arg(long)]
+        ca: PathBuf,
+        /// A node's projector id, or the camera agent's name (node agents that find it over
+        /// mDNS expect the room's name; see docs/operations.md).
+        #[arg(long)]
+        name: String,
+        /// Another DNS name the agent is reached by (repeatable).
+        #[arg(long)]
+        dns: Vec<String>,
+        /// An IP address the agent is reached by, for nodes that name it (repeatable).
+        #[arg(long)]
+        ip: Vec<IpAddr>,
+        #[arg(long, default_value = ".")]
+        out: PathBuf,
+    },
+}
+
+/// `roomlight certs init|issue`: prints the files written.
+pub fn certs(command: CertsCommand) -> Result<()> {
+    let wrote = match command {
+        CertsCommand::Init { out } => tls::init_ca(&out)?,
+        CertsCommand::Issue {
+            ca,
+            name,
+            dns,
+            ip,
+            out,
+        } => tls::issue(&ca, &tls::Subject { name, dns, ip }, &out)?,
+    };
+    for path in wrote {
+        println!("wrote {}", path.display());
     }
     Ok(())
 }
