@@ -84,6 +84,10 @@ wait_line() {
 wait_line "$work/sim.log" "listening on" 30 "the simulator to listen"
 gstar=$("$bin" optimum --model "$work/model.json" | sed -E 's/.*G\* ([^,]+),.*/\1/')
 
+# TLS with client certificates, made by roomlight certs: the camera agent's name is the room's
+# (what a node that finds it over mDNS verifies), with its address for tools that name it.
+"$bin" certs init --out "$work/ca" > /dev/null
+"$bin" certs issue --ca "$work/ca" --name netns --ip "$cam" --out "$work/camera" > /dev/null
 cat > "$work/camera.toml" <<CONF
 room = "netns"
 token = "netns-t0k3n"
@@ -94,6 +98,7 @@ heartbeat_ms = 200
 deadline_ms = 1000
 model_rounds = 5
 mdns = true
+tls = { cert = "$work/camera/netns.pem", key = "$work/camera/netns.key", ca = "$work/camera/ca.pem", require_client_cert = true }
 CONF
 in_ns cam env RUST_LOG=info "$bin" camera --config "$work/camera.toml" > "$work/cam.log" 2> "$work/cam.err" &
 pids+=($!)
@@ -102,6 +107,7 @@ wait_line "$work/cam.log" "camera listening on" 30 "the camera agent to listen"
 node_pid=()
 start_node() {
     local k=$1
+    [ -f "$work/p$k/p$k.pem" ] || "$bin" certs issue --ca "$work/ca" --name "p$k" --out "$work/p$k" > /dev/null
     cat > "$work/p$k.toml" <<CONF
 room = "netns"
 token = "netns-t0k3n"
@@ -110,6 +116,7 @@ mdns_wait_s = 10
 hardware = { sim = "http://$sim:50050" }
 projector = "p$k"
 state_file = "$work/p$k.state.json"
+tls = { ca = "$work/p$k/ca.pem", cert = "$work/p$k/p$k.pem", key = "$work/p$k/p$k.key" }
 CONF
     in_ns "n$k" env RUST_LOG=info "$bin" node --config "$work/p$k.toml" > "$work/p$k.log" 2>&1 &
     pids+=($!)
