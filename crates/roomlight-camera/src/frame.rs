@@ -47,11 +47,17 @@ impl Frame {
 /// EXIF, when the file has some, gives the shot's settings and the exposure used; EXIF that
 /// does not parse is an error.
 pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
+    let data = read_bounded(path, max_pixels)?;
+    decode_bytes(path, data, max_pixels)
+}
+
+/// Decodes an image file's bytes as [`decode_file`] does (`path` only names it in errors): the
+/// one entry for whatever a camera delivered, fuzzed in tests/fuzz.rs.
+pub fn decode_bytes(path: &Path, data: Vec<u8>, max_pixels: u64) -> Result<Frame, CameraError> {
     let bad = |reason: String| CameraError::Decode {
         path: path.to_path_buf(),
         reason,
     };
-    let data = read_bounded(path, max_pixels)?;
     if crate::dng::is_dng(&data) {
         let frame = crate::dng::decode(path, &data, max_pixels)?;
         // A DNG is itself the TIFF structure EXIF is read from; TIFF/EP keeps the settings in

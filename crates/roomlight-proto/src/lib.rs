@@ -17,6 +17,8 @@ pub mod bounds;
 pub mod convert;
 #[cfg(test)]
 mod fuzz;
+#[cfg(any(test, feature = "fuzzing"))]
+pub mod mutate;
 pub mod refusal;
 
 /// The protocol version this build speaks. 3: a node's errors travel without their patch ids

@@ -1,12 +1,12 @@
 //! Fuzzing of the node agent's own decoders of a camera agent's messages — Assign weights, Show
 //! patterns and their masks, as `wire` checks them and a display then draws them — and of its
-//! state file (JSON), as `state` reads it. Inputs are valid messages and files mutated, from a
-//! seeded generator; zero panics, and what passes the checks is drawable. The protobuf messages'
-//! common checks are fuzzed in roomlight-proto.
+//! state file (JSON), as `state` reads it. Inputs are valid messages and files changed by
+//! bolero-generated edits (`roomlight_proto::mutate`); zero panics, and what passes the checks
+//! is drawable. The protobuf messages' common checks are fuzzed in roomlight-proto.
 //!
-//! `cargo test -p roomlight-agent fuzz` runs 20 000 messages and 500 state files;
-//! `ROOMLIGHT_FUZZ_ITERS=10000000 cargo test --release -p roomlight-agent fuzz` the long run.
-//! Test-only.
+//! `cargo test -p roomlight-agent fuzz` runs each target for a second of random inputs;
+//! `BOLERO_RANDOM_ITERATIONS=10000000 cargo test --release -p roomlight-agent fuzz` a long run,
+//! `cargo bolero test` the same targets under libFuzzer. Test-only.
 
 use super::state::{Memory, SavedState};
 use super::wire::{Wire, assignment_from_wire, pattern_from_wire};
@@ -14,68 +14,8 @@ use crate::hardware::Display;
 use prost::Message;
 use roomlight_core::{AttenuationColumn, LinearRgb};
 use roomlight_proto::convert::to_rgb;
+use roomlight_proto::mutate::{Edits, mutate};
 use roomlight_proto::v1;
-
-/// A seeded generator (SplitMix64) and a byte mutator, a copy of roomlight-proto's (test code is not shared across crates).
-pub(crate) struct Mutator(u64);
-
-impl Mutator {
-    pub(crate) fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `0..n` (`n = 0`: 0).
-    fn below(&mut self, n: usize) -> usize {
-        if n == 0 {
-            0
-        } else {
-            (self.next() % n as u64) as usize
-        }
-    }
-
-    /// One of `seeds` mutated a few times, or (one time in eight) random bytes.
-    pub(crate) fn input(&mut self, seeds: &[Vec<u8>]) -> Vec<u8> {
-        if seeds.is_empty() || self.below(8) == 0 {
-            let len = self.below(256);
-            return (0..len).map(|_| self.next() as u8).collect();
-        }
-        let mut bytes = seeds[self.below(seeds.len())].clone();
-        for _ in 0..=self.below(4) {
-            let at = self.below(bytes.len() + 1);
-            match self.below(5) {
-                0 if at < bytes.len() => bytes[at] ^= 1 << self.below(8),
-                1 if at < bytes.len() => bytes[at] = self.next() as u8,
-                2 => bytes.truncate(at),
-                3 => {
-                    let extra: Vec<u8> = (0..self.below(16)).map(|_| self.next() as u8).collect();
-                    bytes.splice(at..at, extra);
-                }
-                _ => {
-                    let end = (at + self.below(32)).min(bytes.len());
-                    let repeated = bytes[at..end].to_vec();
-                    bytes.splice(at..at, repeated);
-                }
-            }
-        }
-        bytes
-    }
-}
-
-/// Inputs per target: `ROOMLIGHT_FUZZ_ITERS`, else 3 000.
-pub(crate) fn iterations() -> usize {
-    std::env::var("ROOMLIGHT_FUZZ_ITERS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(20_000)
-}
 
 fn seeds() -> Vec<Vec<u8>> {
     let bodies = [
@@ -142,10 +82,9 @@ fn node_reads(bytes: &[u8]) {
 #[test]
 fn fuzz_the_node_agents_wire_checks() {
     let seeds = seeds();
-    let mut m = Mutator::new(0x5EED_0003);
-    for _ in 0..iterations() {
-        node_reads(&m.input(&seeds));
-    }
+    bolero::check!()
+        .with_type::<Edits>()
+        .for_each(|edits| node_reads(&mutate(&seeds, edits)));
 }
 
 /// A display that only counts what it is told.
@@ -173,9 +112,8 @@ fn fuzz_state_files() {
         projector: Some("f".into()),
     };
     let seeds = vec![serde_json::to_vec(&valid).expect("json")];
-    let mut m = Mutator::new(0x5EED_0004);
-    for _ in 0..iterations() / 40 {
-        std::fs::write(&path, m.input(&seeds)).expect("write");
+    bolero::check!().with_type::<Edits>().for_each(|edits| {
+        std::fs::write(&path, mutate(&seeds, edits)).expect("write");
         match SavedState::load(&path) {
             Ok(Some(state)) => assert!(
                 state
@@ -193,5 +131,5 @@ fn fuzz_state_files() {
                 .values()
                 .all(|v| v.0.iter().all(|c| c.is_finite()))
         );
-    }
+    });
 }

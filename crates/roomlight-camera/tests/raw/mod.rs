@@ -2,6 +2,8 @@
 //! every backend's files take). The DNGs are written here by a small TIFF writer of the test's
 //! own, independent of the decoder's reader, with known sensor values, black and white levels.
 
+mod fuzz;
+
 use roomlight_camera::frame::decode_file;
 use roomlight_camera::{CameraError, Samples};
 use std::path::Path;

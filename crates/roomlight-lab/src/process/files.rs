@@ -3,6 +3,7 @@
 
 use anyhow::{Context, Result, bail};
 use roomlight_calib::charts::{ChartCorners, SampleConfig};
+use roomlight_calib::image_io::MAX_LOAD_SIDE;
 use roomlight_core::{LinearRgb, Problem};
 use roomlight_sim::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -47,6 +48,99 @@ pub struct SurveyFile {
     pub target_pixels: Vec<u32>,
 }
 
+/// The most charts a survey may name (a room has a few dozen).
+pub const MAX_CHARTS: usize = 1024;
+
+impl SurveyFile {
+    /// A survey file's text, parsed and checked before anything is allocated from it: the
+    /// camera's size (1 to [`MAX_LOAD_SIDE`] a side, as for captures), the target's pixels
+    /// inside it and increasing, charts named, distinct, at most [`MAX_CHARTS`], their corners
+    /// finite and inside the image, the sampling's levels finite and in range. `source` names
+    /// the file in every error.
+    pub fn parse(text: &str, source: &Path) -> Result<Self> {
+        let at = source.display();
+        let survey: Self =
+            serde_json::from_str(text).with_context(|| format!("{at}: not a survey file"))?;
+        let (w, h) = (survey.camera_width, survey.camera_height);
+        if !(1..=MAX_LOAD_SIDE).contains(&w) || !(1..=MAX_LOAD_SIDE).contains(&h) {
+            bail!(
+                "{at}: camera_width × camera_height {w}×{h}, expected 1 to {MAX_LOAD_SIDE} a side"
+            );
+        }
+        let pixels = u64::from(w) * u64::from(h);
+        if let Some(pair) = survey.target_pixels.windows(2).find(|p| p[0] >= p[1]) {
+            bail!(
+                "{at}: target_pixels not increasing ({} then {})",
+                pair[0],
+                pair[1]
+            );
+        }
+        if let Some(&bad) = survey
+            .target_pixels
+            .last()
+            .filter(|&&i| u64::from(i) >= pixels)
+        {
+            bail!("{at}: target pixel {bad} outside the {w}×{h} camera");
+        }
+        if survey.corners.len() > MAX_CHARTS {
+            bail!(
+                "{at}: {} charts, at most {MAX_CHARTS}",
+                survey.corners.len()
+            );
+        }
+        let mut names = std::collections::HashSet::new();
+        for (i, chart) in survey.corners.iter().enumerate() {
+            if chart.name.is_empty() || !names.insert(chart.name.as_str()) {
+                bail!(
+                    "{at}: corners[{i}]: a chart needs a name of its own, got {:?}",
+                    chart.name
+                );
+            }
+            let inside = |&[x, y]: &[f64; 2]| {
+                x.is_finite()
+                    && y.is_finite()
+                    && (0.0..=f64::from(w)).contains(&x)
+                    && (0.0..=f64::from(h)).contains(&y)
+            };
+            if let Some(c) = chart.corners.iter().find(|c| !inside(c)) {
+                bail!(
+                    "{at}: chart {:?}: corner {c:?} outside the {w}×{h} image",
+                    chart.name
+                );
+            }
+        }
+        let s = &survey.sample;
+        let level = |v: f64| v.is_finite() && v >= 0.0;
+        if !(s.saturation > 0.0 && s.saturation <= 1.0) {
+            bail!(
+                "{at}: sample.saturation {}, expected in (0, 1]",
+                s.saturation
+            );
+        }
+        for (field, v) in [
+            ("read_noise", f64::from(s.read_noise)),
+            ("shot_noise", f64::from(s.shot_noise)),
+            ("max_nonuniformity", s.max_nonuniformity),
+        ] {
+            if !level(v) {
+                bail!("{at}: sample.{field} {v}, expected a finite value ≥ 0");
+            }
+        }
+        Ok(survey)
+    }
+
+    /// The target as a row-major camera mask (its pixels were checked by [`Self::parse`]).
+    pub fn target_mask(&self) -> Vec<bool> {
+        let mut mask = vec![false; self.camera_width as usize * self.camera_height as usize];
+        for &i in &self.target_pixels {
+            if let Some(m) = mask.get_mut(i as usize) {
+                *m = true;
+            }
+        }
+        mask
+    }
+}
+
 pub(super) fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
@@ -83,21 +177,64 @@ pub fn load_scene(which: &str, camera: Option<[u32; 2]>) -> Result<Scene> {
 
 /// A calibrated model file, checked.
 pub fn load_model(path: &Path) -> Result<ModelFile> {
-    let model: ModelFile = read_json(path, "a room model")?;
-    let problem = model
-        .problem
-        .revalidate()
-        .with_context(|| format!("{}: invalid model", path.display()))?;
-    for (p, nodes) in &model.owners {
-        if let Some(n) = nodes.iter().find(|&&n| n as usize >= problem.nodes()) {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    ModelFile::parse(&text, path)
+}
+
+/// A survey file, checked ([`SurveyFile::parse`]).
+pub fn load_survey(path: &Path) -> Result<SurveyFile> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    SurveyFile::parse(&text, path)
+}
+
+impl ModelFile {
+    /// A model file's text, parsed and checked: the problem revalidated (finite, sizes that
+    /// agree), every owned node inside it, starts one per node within [0, 1], patches one per
+    /// model patch. `source` names the file in every error.
+    pub fn parse(text: &str, source: &Path) -> Result<Self> {
+        let at = source.display();
+        let model: Self =
+            serde_json::from_str(text).with_context(|| format!("{at}: not a room model"))?;
+        let problem = model
+            .problem
+            .revalidate()
+            .with_context(|| format!("{at}: invalid model"))?;
+        for (p, nodes) in &model.owners {
+            if let Some(n) = nodes.iter().find(|&&n| n as usize >= problem.nodes()) {
+                bail!(
+                    "{at}: projector {p:?} owns node {n}, the model has {} nodes",
+                    problem.nodes()
+                );
+            }
+        }
+        if let Some(start) = &model.start {
+            if start.len() != problem.nodes() {
+                bail!(
+                    "{at}: start has {} values, the model {} nodes",
+                    start.len(),
+                    problem.nodes()
+                );
+            }
+            if let Some(n) = start.iter().position(|v| {
+                v.0.iter()
+                    .any(|c| !(c.is_finite() && (0.0..=1.0).contains(c)))
+            }) {
+                bail!("{at}: start[{n}] {:?}, expected values in [0, 1]", start[n]);
+            }
+        }
+        if let Some(patches) = &model.patches
+            && patches.len() != problem.patches()
+        {
             bail!(
-                "{}: projector {p} owns node {n}, the model has {} nodes",
-                path.display(),
-                problem.nodes()
+                "{at}: {} patches listed, the model has {}",
+                patches.len(),
+                problem.patches()
             );
         }
+        Ok(Self { problem, ..model })
     }
-    Ok(ModelFile { problem, ..model })
 }
 
 /// A model file's nodes, projectors, patches (and those left out), G* and G with every node

@@ -18,7 +18,10 @@ mod systemd;
 pub use calibrate::{CalibrateOptions, calibrate_to_files};
 pub use camera::{CameraHardware, CameraProcess, CameraSource, serve_camera};
 pub use check::{CameraAt, Checklist, check_camera, check_node};
-pub use files::{ChartsFile, ModelFile, SurveyFile, load_model, load_scene, optimum_summary};
+pub use files::{
+    ChartsFile, MAX_CHARTS, ModelFile, SurveyFile, load_model, load_scene, load_survey,
+    optimum_summary,
+};
 pub use node::{NodeDisplay, run_node};
 pub use photos::GrabMode;
 pub use sim::{PreparedSim, SimRoom, SyntheticSim, prepare_sim};

@@ -5,7 +5,7 @@
 //! (`eye`).
 
 use super::camera::AnyCamera;
-use super::files::{ModelFile, SurveyFile, read_json};
+use super::files::{ModelFile, SurveyFile};
 use crate::rendered::{Client, RenderedCamera};
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::{self, RoomModel};
@@ -74,24 +74,8 @@ pub(super) async fn survey_model(
 }
 
 async fn check(survey_path: &Path, client: &Client) -> Result<Checked> {
-    let survey: SurveyFile = read_json(survey_path, "a survey file")?;
-    let pixels = u64::from(survey.camera_width) * u64::from(survey.camera_height);
-    if let Some(&bad) = survey
-        .target_pixels
-        .iter()
-        .find(|&&i| u64::from(i) >= pixels)
-    {
-        bail!(
-            "{}: target pixel {bad} outside the {}×{} camera",
-            survey_path.display(),
-            survey.camera_width,
-            survey.camera_height
-        );
-    }
-    let mut target_mask = vec![false; pixels as usize];
-    for &i in &survey.target_pixels {
-        target_mask[i as usize] = true;
-    }
+    let survey = super::files::load_survey(survey_path)?;
+    let target_mask = survey.target_mask();
     let description = client
         .clone()
         .describe(v1::DescribeRequest {})
