@@ -158,7 +158,8 @@ pub fn soak(args: &SoakArgs, exe: &Path) -> Result<SoakReport> {
 
 /// The events: when (in rounds, between twice the warm-up and 85% of the rounds, so that the
 /// room settles before the end) and what. The first four are one of each kind in a random
-/// order; then node kills are likeliest, and additions stop when the spares are used up.
+/// order; then node kills are likeliest, additions stop when the spares are used up, and the
+/// camera agent is not restarted past half the rounds.
 fn plan(rng: &mut ChaCha8Rng, args: &SoakArgs, warm_up: u64) -> Vec<(u64, Kind)> {
     let n = args
         .events
@@ -177,7 +178,7 @@ fn plan(rng: &mut ChaCha8Rng, args: &SoakArgs, warm_up: u64) -> Vec<(u64, Kind)>
     }
     let mut spares = PROJECTORS - PRESENT - 1;
     let mut kinds = Vec::with_capacity(n);
-    for k in 0..n {
+    for (k, &round) in at.iter().enumerate() {
         let kind = match first.get(k) {
             Some(&kind) => kind,
             None => match rng.random_range(0..10) {
@@ -189,6 +190,9 @@ fn plan(rng: &mut ChaCha8Rng, args: &SoakArgs, warm_up: u64) -> Vec<(u64, Kind)>
         };
         let kind = match kind {
             Kind::AddProjector if spares == 0 => Kind::KillNode,
+            // The camera agent's last run must be long enough to be held to the memory
+            // criterion: past half the rounds it is restarted only as the first of its kind.
+            Kind::RestartCamera if k >= first.len() && round > args.rounds / 2 => Kind::KillNode,
             Kind::AddProjector => {
                 spares -= 1;
                 kind
@@ -333,4 +337,46 @@ fn misbehave(room: &mut Room, live: usize) -> Result<String> {
             .is_some_and(|s| s.captures > captures && s.live == live)
     })?;
     Ok(format!("told {reason:?} and dropped"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(rounds: u64, events: usize, seed: u64) -> SoakArgs {
+        SoakArgs {
+            rounds,
+            seed,
+            events: Some(events),
+            out: PathBuf::new(),
+            max_minutes: 1,
+        }
+    }
+
+    #[test]
+    fn a_seed_gives_one_plan_with_every_kind_first_inside_its_window() {
+        for seed in 0..50 {
+            let a = args(10_000, 40, seed);
+            let p = plan(&mut ChaCha8Rng::seed_from_u64(seed), &a, 500);
+            assert_eq!(p, plan(&mut ChaCha8Rng::seed_from_u64(seed), &a, 500));
+            assert_eq!(p.len(), 40);
+            let first: Vec<Kind> = p[..4].iter().map(|e| e.1).collect();
+            for kind in [
+                Kind::KillNode,
+                Kind::AddProjector,
+                Kind::RestartCamera,
+                Kind::Misbehave,
+            ] {
+                assert!(first.contains(&kind), "seed {seed}: {first:?}");
+            }
+            assert!(p.windows(2).all(|w| w[0].0 <= w[1].0));
+            assert!(p.iter().all(|e| (1000..8500).contains(&e.0)), "{p:?}");
+            let added = p.iter().filter(|e| e.1 == Kind::AddProjector).count();
+            assert!(added < PROJECTORS - PRESENT, "p5 is never added: {p:?}");
+            let late = p[4..]
+                .iter()
+                .filter(|e| e.1 == Kind::RestartCamera && e.0 > 5000);
+            assert_eq!(late.count(), 0, "seed {seed}: {p:?}");
+        }
+    }
 }
