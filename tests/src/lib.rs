@@ -26,6 +26,9 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
+mod link;
+pub use link::{Link, LinkState};
+
 /// The sandbox's room name.
 pub const ROOM: &str = "lab";
 /// The sandbox's room token.
@@ -329,6 +332,18 @@ impl Sandbox {
             start: LinearRgb::splat(0.5),
             state_file: self.state_files.get(projector).cloned(),
         }
+    }
+
+    /// Starts a node agent for `projector` that reaches the camera agent through a link of
+    /// its own, which the test cuts and restores (a network partition); the link must outlive
+    /// the node agent's use of it.
+    pub async fn add_node_behind_link(&mut self, projector: &str) -> Link {
+        let link = Link::new(self.address).await;
+        self.add_node_with(NodeConfig {
+            endpoint: link.endpoint(),
+            ..self.node_config(projector)
+        });
+        link
     }
 
     /// Starts a node agent for `projector` (with the state file it was given before, if any).
