@@ -338,12 +338,22 @@ impl Sandbox {
     /// its own, which the test cuts and restores (a network partition); the link must outlive
     /// the node agent's use of it.
     pub async fn add_node_behind_link(&mut self, projector: &str) -> Link {
-        let link = Link::new(self.address).await;
+        let link = self.link().await;
+        self.add_node_via(projector, &link);
+        link
+    }
+
+    /// A new link to the camera agent (up), for [`Sandbox::add_node_via`].
+    pub async fn link(&self) -> Link {
+        Link::new(self.address).await
+    }
+
+    /// Starts a node agent for `projector` that reaches the camera agent through `link`.
+    pub fn add_node_via(&mut self, projector: &str, link: &Link) {
         self.add_node_with(NodeConfig {
             endpoint: link.endpoint(),
             ..self.node_config(projector)
         });
-        link
     }
 
     /// Starts a node agent for `projector` (with the state file it was given before, if any).

@@ -8,6 +8,8 @@
 //!   agent's heartbeat deadline, the node's HTTP/2 keepalive), as on a real LAN.
 //! - [`LinkState::Up`] plugs it back: held bytes flow again, so a side that gave up meanwhile
 //!   tells the other (an HTTP/2 reset or goodbye), as after a real reconnection.
+//! - [`LinkState::Impaired`] delays every byte and loses some (what `tc netem` does on a real
+//!   interface, for the machines whose kernel has no `sch_netem`).
 //!
 //! Hand-written: turmoil simulates the network instead, but only for code generic over its own
 //! socket types, and the camera agent's listener (connection limit, first-byte peek, TLS) and
@@ -18,15 +20,28 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::watch;
 use tokio::task::JoinSet;
+use tokio::time::Instant;
 
-/// Whether bytes cross the link.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Whether and how bytes cross the link.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum LinkState {
     /// Bytes cross.
     Up,
     /// Nothing crosses; connections stay open (a pulled cable, a dead switch port).
     Down,
+    /// Bytes cross `delay` late each way; a share `loss` of the chunks is lost once and
+    /// resent a retransmission timeout (200 ms, Linux's least) later, holding back what
+    /// follows it on that connection as TCP does.
+    Impaired {
+        /// One-way delay.
+        delay: std::time::Duration,
+        /// Share of chunks lost once, in [0, 1].
+        loss: f64,
+    },
 }
+
+/// TCP's least retransmission timeout on Linux.
+const RETRANSMISSION: std::time::Duration = std::time::Duration::from_millis(200);
 
 /// A relay to `upstream` that can be cut; dropping it closes every connection through it.
 #[derive(Debug)]
@@ -70,10 +85,14 @@ impl Drop for Link {
     }
 }
 
-/// Waits until the link is up.
-async fn up(state: &mut watch::Receiver<LinkState>) {
+/// Waits until bytes cross the link; how late they arrive then.
+async fn up(state: &mut watch::Receiver<LinkState>) -> (std::time::Duration, f64) {
     // The sender lives as long as the relay's tasks (they are aborted with the link).
-    let _ = state.wait_for(|s| *s == LinkState::Up).await;
+    let _ = state.wait_for(|s| *s != LinkState::Down).await;
+    match *state.borrow() {
+        LinkState::Impaired { delay, loss } => (delay, loss),
+        _ => (std::time::Duration::ZERO, 0.0),
+    }
 }
 
 async fn accept(listener: TcpListener, upstream: SocketAddr, state: watch::Receiver<LinkState>) {
@@ -97,27 +116,57 @@ async fn accept(listener: TcpListener, upstream: SocketAddr, state: watch::Recei
     }
 }
 
-/// Copies `from` to `to` while the link is up; while it is down, reads nothing.
+/// Copies `from` to `to` while bytes cross the link (each chunk due its delay later, a lost one
+/// a retransmission later still, never before the chunk ahead of it); while it is down, reads
+/// and writes nothing.
 async fn carry(
     mut from: tokio::net::tcp::OwnedReadHalf,
     mut to: tokio::net::tcp::OwnedWriteHalf,
     mut state: watch::Receiver<LinkState>,
 ) {
-    let mut buf = vec![0u8; 16 * 1024];
-    loop {
-        up(&mut state).await;
-        let n = tokio::select! {
-            read = from.read(&mut buf) => match read {
-                Ok(0) | Err(_) => return,
-                Ok(n) => n,
-            },
-            // Cut while waiting to read: stop reading, so bytes stay in the sender's buffers.
-            _ = state.wait_for(|s| *s == LinkState::Down) => continue,
-        };
-        // Bytes read just before a cut are delivered once the link is up again.
-        up(&mut state).await;
-        if to.write_all(&buf[..n]).await.is_err() {
-            return;
+    let (chunks, mut due) = tokio::sync::mpsc::channel::<(Instant, Vec<u8>)>(64);
+    let mut writer_state = state.clone();
+    let writer = async move {
+        while let Some((at, bytes)) = due.recv().await {
+            tokio::time::sleep_until(at).await;
+            up(&mut writer_state).await;
+            if to.write_all(&bytes).await.is_err() {
+                return;
+            }
         }
-    }
+    };
+    let reader = async move {
+        // Loss drawn from a fixed seed (xorshift): a run of the test is a run of the link.
+        let mut draw = 0x2545_F491_4F6C_DD1D_u64;
+        let mut last = Instant::now();
+        let mut buf = vec![0u8; 16 * 1024];
+        loop {
+            up(&mut state).await;
+            let n = tokio::select! {
+                read = from.read(&mut buf) => match read {
+                    Ok(0) | Err(_) => return,
+                    Ok(n) => n,
+                },
+                // Cut while waiting to read: stop reading, so bytes stay in the sender's buffers.
+                _ = state.wait_for(|s| *s == LinkState::Down) => continue,
+            };
+            let (delay, loss) = up(&mut state).await;
+            draw ^= draw << 13;
+            draw ^= draw >> 7;
+            draw ^= draw << 17;
+            let lost = ((draw >> 11) as f64 / (1u64 << 53) as f64) < loss;
+            let resent = if lost {
+                RETRANSMISSION
+            } else {
+                std::time::Duration::ZERO
+            };
+            let at = (Instant::now() + delay + resent).max(last);
+            last = at;
+            if chunks.send((at, buf[..n].to_vec())).await.is_err() {
+                return;
+            }
+        }
+    };
+    // The reader ends when its side closes, the writer once it has delivered what was read.
+    tokio::join!(writer, reader);
 }
