@@ -5,44 +5,24 @@
 //! has a deadline.
 
 use roomlight_agent::AgentError;
-use roomlight_agent::camera::{
-    self, CameraConfig, CameraState, DisplayLost, RETRY_FIRST, RoomModel, RoomStatus,
-};
+use roomlight_agent::camera::{self, CameraState, DisplayLost, RETRY_FIRST, RoomStatus};
 use roomlight_agent::hardware::{
     Camera, Display, DisplayFeed, DisplayReport, VirtualCamera, VirtualDisplay, VirtualRoom,
 };
-use roomlight_agent::node::{self, NodeConfig};
+use roomlight_agent::node;
 use roomlight_core::closed_loop::{Plant, PlantConfig};
 use roomlight_core::optimum::optimum;
-use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
-use roomlight_core::{LinearRgb, Problem, StepRule};
-use roomlight_proto::v1;
-use std::collections::{HashMap, VecDeque};
+use roomlight_core::{LinearRgb, Problem};
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 
-const TOKEN: &str = "s3cret";
+mod common;
+use common::wait;
 const LONG: Duration = Duration::from_secs(30);
-
-/// Waits (at most `within`) until the status satisfies `pred`.
-async fn wait(
-    status: &mut watch::Receiver<RoomStatus>,
-    within: Duration,
-    pred: impl Fn(&RoomStatus) -> bool,
-) -> RoomStatus {
-    let reached = tokio::time::timeout(within, status.wait_for(|s| pred(s)))
-        .await
-        .is_ok_and(|r| r.is_ok());
-    let last = status.borrow().clone();
-    assert!(
-        reached && pred(&last),
-        "condition not reached within {within:?}; last status {last:?}"
-    );
-    last
-}
 
 /// What the scripted camera does on its next captures.
 #[derive(Debug, Clone, Copy)]
@@ -131,37 +111,13 @@ async fn start(
     heartbeat: Duration,
     deadline: Duration,
 ) -> Room {
-    let problem = synthetic_room(&SyntheticConfig::new(12, 4))
-        .expect("room")
-        .problem;
-    let owners: HashMap<String, Vec<u32>> = [("p0", 0..6), ("p1", 6..12)]
-        .into_iter()
-        .map(|(id, nodes)| (id.to_string(), nodes.collect()))
-        .collect();
+    let (problem, owners) = common::split_room(12, 4, 2);
     let room =
         VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .expect("bind");
-    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+    let (listener, endpoint) = common::listen().await;
     let cancel = CancellationToken::new();
-    let config = CameraConfig {
-        room: "lab".into(),
-        token: TOKEN.into(),
-        heartbeat,
-        deadline,
-        model_rounds: 3,
-        calibration_epoch: 1,
-        stale_frames: 0,
-        model_out: None,
-    };
-    let model = RoomModel {
-        problem: problem.clone(),
-        owners,
-        start: None,
-        hot: Default::default(),
-        survey: None,
-    };
+    let config = common::camera_config(heartbeat, deadline, 3);
+    let model = common::model(problem.clone(), owners);
     let (status, _task) = camera::serve(
         config,
         model,
@@ -180,16 +136,7 @@ async fn start(
 
 impl Room {
     fn node(&self, projector: &str, display: impl Display) {
-        let config = NodeConfig {
-            endpoint: self.endpoint.clone(),
-            room: "lab".into(),
-            token: TOKEN.into(),
-            projector_id: projector.into(),
-            kind: v1::ProjectorKind::Standard,
-            rule: StepRule::Momentum { theta: 1.0 },
-            start: LinearRgb::splat(0.5),
-            state_file: None,
-        };
+        let config = common::node_config(&self.endpoint, projector);
         tokio::spawn(node::run(config, display, self.cancel.child_token()));
     }
 

@@ -3,7 +3,7 @@
 //! a logged-in node sending garbage, and a fake camera agent sending a huge assignment. Every
 //! wait has a deadline.
 
-use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
+use roomlight_agent::camera::{self, RoomModel, RoomStatus};
 use roomlight_agent::hardware::VirtualRoom;
 use roomlight_agent::node::{self, NodeConfig};
 use roomlight_core::closed_loop::{Plant, PlantConfig};
@@ -18,24 +18,8 @@ use tokio_stream::StreamExt;
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::sync::CancellationToken;
 
-const TOKEN: &str = "s3cret";
-
-/// Waits (at most `within`) until the status satisfies `pred`.
-async fn wait(
-    status: &mut watch::Receiver<RoomStatus>,
-    within: Duration,
-    pred: impl Fn(&RoomStatus) -> bool,
-) -> RoomStatus {
-    let reached = tokio::time::timeout(within, status.wait_for(|s| pred(s)))
-        .await
-        .is_ok_and(|r| r.is_ok());
-    let last = status.borrow().clone();
-    assert!(
-        reached && pred(&last),
-        "condition not reached within {within:?}; last status {last:?}"
-    );
-    last
-}
+mod common;
+use common::{TOKEN, wait};
 
 /// A camera agent over a synthetic room of `nodes` nodes split among `projectors` projectors
 /// (`p0`, `p1`, ...), stopped when dropped.
@@ -49,41 +33,13 @@ struct Room {
 }
 
 async fn start(nodes: usize, projectors: usize, deadline: Duration) -> Room {
-    let problem = synthetic_room(&SyntheticConfig::new(nodes, 7))
-        .expect("room")
-        .problem;
-    let per = nodes.div_ceil(projectors);
-    let owners: HashMap<String, Vec<u32>> = (0..projectors)
-        .map(|p| {
-            let first = p * per;
-            let last = ((p + 1) * per).min(nodes);
-            (format!("p{p}"), (first as u32..last as u32).collect())
-        })
-        .collect();
+    let (problem, owners) = common::split_room(nodes, 7, projectors);
     let room =
         VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .expect("bind");
-    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+    let (listener, endpoint) = common::listen().await;
     let cancel = CancellationToken::new();
-    let config = CameraConfig {
-        room: "lab".into(),
-        token: TOKEN.into(),
-        heartbeat: Duration::from_millis(200),
-        deadline,
-        model_rounds: 0,
-        calibration_epoch: 1,
-        stale_frames: 0,
-        model_out: None,
-    };
-    let model = RoomModel {
-        problem: problem.clone(),
-        owners: owners.clone(),
-        start: None,
-        hot: Default::default(),
-        survey: None,
-    };
+    let config = common::camera_config(Duration::from_millis(200), deadline, 0);
+    let model = common::model(problem.clone(), owners.clone());
     let (status, _task) =
         camera::serve(config, model, room.camera(), listener, cancel.child_token());
     Room {
@@ -101,18 +57,8 @@ impl Room {
         &self,
         projector: &str,
     ) -> tokio::task::JoinHandle<Result<(), roomlight_agent::AgentError>> {
-        let config = NodeConfig {
-            endpoint: self.endpoint.clone(),
-            room: "lab".into(),
-            token: TOKEN.into(),
-            projector_id: projector.into(),
-            kind: v1::ProjectorKind::Standard,
-            rule: StepRule::Momentum { theta: 1.0 },
-            start: LinearRgb::splat(0.5),
-            state_file: None,
-        };
         tokio::spawn(node::run(
-            config,
+            common::node_config(&self.endpoint, projector),
             self.room.display(),
             self.cancel.child_token(),
         ))

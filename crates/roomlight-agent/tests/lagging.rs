@@ -1,45 +1,17 @@
 //! A node agent that never reads its stream cannot hold up the room: its queue fills, it is told
 //! it lags and dropped, and the rounds go on for the others. Every wait has a deadline.
 
-use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
+use roomlight_agent::camera;
 use roomlight_agent::hardware::VirtualRoom;
-use roomlight_agent::node::{self, NodeConfig};
+use roomlight_agent::node;
 use roomlight_core::closed_loop::{Plant, PlantConfig};
-use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
-use roomlight_core::{LinearRgb, StepRule};
 use roomlight_proto::v1;
-use std::collections::HashMap;
 use std::time::Duration;
-use tokio::sync::watch;
 use tokio_stream::StreamExt;
 use tokio_util::sync::CancellationToken;
 
-const TOKEN: &str = "s3cret";
-
-/// Waits (at most `within`) until the status satisfies `pred`.
-async fn wait(
-    status: &mut watch::Receiver<RoomStatus>,
-    within: Duration,
-    pred: impl Fn(&RoomStatus) -> bool,
-) -> RoomStatus {
-    let reached = tokio::time::timeout(within, async {
-        loop {
-            if pred(&status.borrow()) {
-                return;
-            }
-            if status.changed().await.is_err() {
-                return;
-            }
-        }
-    })
-    .await;
-    let last = status.borrow().clone();
-    assert!(
-        reached.is_ok() && pred(&last),
-        "condition not reached within {within:?}; last status {last:?}"
-    );
-    last
-}
+mod common;
+use common::{TOKEN, wait};
 
 fn message(body: v1::node_message::Body) -> v1::NodeMessage {
     v1::NodeMessage { body: Some(body) }
@@ -47,51 +19,18 @@ fn message(body: v1::node_message::Body) -> v1::NodeMessage {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_node_that_never_reads_is_dropped_and_the_rounds_go_on_for_the_others() {
-    let problem = synthetic_room(&SyntheticConfig::new(40, 3))
-        .expect("room")
-        .problem;
-    let owners: HashMap<String, Vec<u32>> = [("p0", 0..20), ("p1", 20..40)]
-        .into_iter()
-        .map(|(id, nodes)| (id.to_string(), nodes.collect()))
-        .collect();
+    let (problem, owners) = common::split_room(40, 3, 2);
     let room =
         VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .expect("bind");
-    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+    let (listener, endpoint) = common::listen().await;
     let cancel = CancellationToken::new();
     let _stop = cancel.clone().drop_guard();
-    let config = CameraConfig {
-        room: "lab".into(),
-        token: TOKEN.into(),
-        heartbeat: Duration::from_millis(500),
-        deadline: Duration::from_secs(2),
-        model_rounds: 0,
-        calibration_epoch: 1,
-        stale_frames: 0,
-        model_out: None,
-    };
-    let model = RoomModel {
-        problem,
-        owners: owners.clone(),
-        start: None,
-        hot: Default::default(),
-        survey: None,
-    };
+    let config = common::camera_config(Duration::from_millis(500), Duration::from_secs(2), 0);
+    let model = common::model(problem, owners.clone());
     let (mut status, camera) =
         camera::serve(config, model, room.camera(), listener, cancel.child_token());
     let honest = tokio::spawn(node::run(
-        NodeConfig {
-            endpoint: endpoint.clone(),
-            room: "lab".into(),
-            token: TOKEN.into(),
-            projector_id: "p0".into(),
-            kind: v1::ProjectorKind::Standard,
-            rule: StepRule::Momentum { theta: 1.0 },
-            start: LinearRgb::splat(0.5),
-            state_file: None,
-        },
+        common::node_config(&endpoint, "p0"),
         room.display(),
         cancel.child_token(),
     ));

@@ -5,13 +5,11 @@
 //! against a TLS camera agent gets a clear error on both sides; a stream whose bearer metadata
 //! is wrong is refused before its Hello is read. Every wait has a deadline.
 
-use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
+use roomlight_agent::camera::{self, RoomStatus};
 use roomlight_agent::hardware::VirtualRoom;
-use roomlight_agent::node::{self, NodeConfig};
+use roomlight_agent::node;
 use roomlight_agent::tls::{self, ClientTls, ServerTls, Subject, TlsFiles};
 use roomlight_core::closed_loop::{Plant, PlantConfig};
-use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
-use roomlight_core::{LinearRgb, StepRule};
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::path::{Path, PathBuf};
@@ -21,7 +19,8 @@ use tokio::sync::watch;
 use tokio_stream::StreamExt;
 use tokio_util::sync::CancellationToken;
 
-const TOKEN: &str = "s3cret";
+mod common;
+use common::TOKEN;
 
 /// A room CA with the camera agent's certificate (`camera`, for 127.0.0.1) and `p0`'s and `p1`'s.
 struct Certs {
@@ -95,37 +94,13 @@ impl Drop for Room {
 
 /// A camera agent of two projectors (`p0`, `p1`) over TLS (or plaintext with `None`).
 async fn start(tls: Option<ServerTls>) -> Room {
-    let problem = synthetic_room(&SyntheticConfig::new(8, 7))
-        .expect("room")
-        .problem;
-    let owners = [("p0", 0..4u32), ("p1", 4..8u32)]
-        .into_iter()
-        .map(|(p, r)| (p.to_string(), r.collect()))
-        .collect();
+    let (problem, owners) = common::split_room(8, 7, 2);
     let room =
         VirtualRoom::new(Plant::new(problem.clone(), PlantConfig::default()).expect("plant"));
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .expect("bind");
-    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
+    let (listener, endpoint) = common::listen().await;
     let cancel = CancellationToken::new();
-    let config = CameraConfig {
-        room: "lab".into(),
-        token: TOKEN.into(),
-        heartbeat: Duration::from_millis(200),
-        deadline: Duration::from_secs(1),
-        model_rounds: 0,
-        calibration_epoch: 1,
-        stale_frames: 0,
-        model_out: None,
-    };
-    let model = RoomModel {
-        problem,
-        owners,
-        start: None,
-        hot: Default::default(),
-        survey: None,
-    };
+    let config = common::camera_config(Duration::from_millis(200), Duration::from_secs(1), 0);
+    let model = common::model(problem, owners);
     let (status, _task) = camera::serve_tls(
         config,
         model,
@@ -148,18 +123,8 @@ impl Room {
         projector: &str,
         tls: Option<ClientTls>,
     ) -> tokio::task::JoinHandle<Result<(), roomlight_agent::AgentError>> {
-        let config = NodeConfig {
-            endpoint: self.endpoint.clone(),
-            room: "lab".into(),
-            token: TOKEN.into(),
-            projector_id: projector.into(),
-            kind: v1::ProjectorKind::Standard,
-            rule: StepRule::Momentum { theta: 1.0 },
-            start: LinearRgb::splat(0.5),
-            state_file: None,
-        };
         tokio::spawn(node::run_tls(
-            config,
+            common::node_config(&self.endpoint, projector),
             tls,
             self.room.display(),
             self.cancel.child_token(),
@@ -167,15 +132,7 @@ impl Room {
     }
 
     async fn wait(&mut self, within: Duration, pred: impl Fn(&RoomStatus) -> bool) -> RoomStatus {
-        let reached = tokio::time::timeout(within, self.status.wait_for(|s| pred(s)))
-            .await
-            .is_ok_and(|r| r.is_ok());
-        let last = self.status.borrow().clone();
-        assert!(
-            reached,
-            "not reached within {within:?}; last status {last:?}"
-        );
-        last
+        common::wait(&mut self.status, within, pred).await
     }
 }
 
