@@ -341,11 +341,23 @@ fn a_real_camera_is_read_as_a_spec_or_a_table() {
         "timeout_s:3.0",
         "response:Gamma(2.2)",
         "settle_ms:0",
-        "lights:Some(\"http://127.0.0.1:1\")",
+        "lights:Some(Rendered(\"http://127.0.0.1:1\"))",
         "source:Survey{",
     ] {
         assert!(camera.contains(part), "{part} in {camera}");
     }
+    // A physical room's LEDs, switched by a person asked through a folder that must exist.
+    let lights = tempfile::tempdir().expect("temp dir");
+    let (_dir, path) = file(
+        "cam.toml",
+        &format!(
+            "{REAL}camera = \"folder:/tmp/photos\"\nlights = \"manual:{}\"\nsurvey = \"s.json\"\nmodel_out = \"m.json\"\n",
+            lights.path().display()
+        ),
+    );
+    let camera = load_camera(&path).expect("manual lights");
+    let part = format!("lights:Some(Manual({:?}))", lights.path());
+    assert!(camera.contains(&part), "{part} in {camera}");
 }
 
 #[test]
@@ -394,6 +406,12 @@ fn a_real_camera_that_contradicts_its_config_is_refused_naming_file_and_field() 
         (
             format!("{REAL}camera = \"folder:/p\"\nlights = \" \"\n{model}"),
             vec!["lights is empty"],
+        ),
+        (
+            format!(
+                "{REAL}camera = \"folder:/p\"\nlights = \"manual:/no/such/folder\"\nsurvey = \"s.json\"\nmodel_out = \"m.json\"\n"
+            ),
+            vec!["lights = \"manual:/no/such/folder\"", "is not a folder"],
         ),
     ];
     for (text, parts) in cases {

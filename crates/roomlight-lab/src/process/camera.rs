@@ -4,7 +4,8 @@
 //! a V4L2 device) sampled at the charts.
 
 use super::files::{ChartsFile, ModelFile, load_model, read_json};
-use super::survey::survey_model;
+use super::lights::{LightsSpec, ManualLights};
+use super::survey::{SurveyRoom, survey_model};
 use crate::rendered::RenderedCamera;
 use anyhow::{Context, Result, bail};
 use roomlight_agent::AgentError;
@@ -44,12 +45,12 @@ pub enum CameraSource {
 pub enum CameraHardware {
     /// The `roomlight sim` process at this endpoint serves the camera.
     Sim(String),
-    /// A real camera with its radiometry. `lights`: the endpoint of a rendered room (`roomlight
-    /// sim --grab`) whose LEDs the survey switches off and on to measure the room's black and
-    /// target; calibration over the wire needs it.
+    /// A real camera with its radiometry. `lights`: how the survey switches the LEDs off and
+    /// on to measure the room's black and target (a rendered room's own, `roomlight sim
+    /// --grab`, or a person asked through files); calibration over the wire needs it.
     Real {
         camera: Box<roomlight_camera::CameraConfig>,
-        lights: Option<String>,
+        lights: Option<LightsSpec>,
     },
 }
 
@@ -213,18 +214,28 @@ async fn model_and_camera(process: &CameraProcess) -> Result<(RoomModel, AnyCame
                 Some(out) if out.exists() => Some((out.as_path(), load_model(out)?)),
                 _ => None,
             };
-            let (lights, eye) = match &process.hardware {
-                CameraHardware::Sim(endpoint) => (endpoint, None),
+            let (room, eye) = match &process.hardware {
+                CameraHardware::Sim(endpoint) => (
+                    SurveyRoom::Rendered(connect_rendered(endpoint).await?),
+                    None,
+                ),
                 CameraHardware::Real {
                     camera,
                     lights: Some(lights),
-                } => (lights, Some(open_real(camera).await?)),
+                } => {
+                    let room = match lights {
+                        LightsSpec::Rendered(endpoint) => {
+                            SurveyRoom::Rendered(connect_rendered(endpoint).await?)
+                        }
+                        LightsSpec::Manual(dir) => SurveyRoom::Physical(ManualLights::new(dir)),
+                    };
+                    (room, Some(open_real(camera).await?))
+                }
                 CameraHardware::Real { lights: None, .. } => {
                     bail!("calibration over the wire with a real camera needs `lights`")
                 }
             };
-            let client = connect_rendered(lights).await?;
-            survey_model(survey, preset.as_deref(), resume, client, eye).await
+            survey_model(survey, preset.as_deref(), resume, room, eye).await
         }
     }
 }

@@ -9,6 +9,7 @@ mod calibrate;
 mod camera;
 mod check;
 mod files;
+mod lights;
 mod node;
 mod photos;
 mod sim;
@@ -22,6 +23,7 @@ pub use files::{
     ChartsFile, MAX_CHARTS, ModelFile, SurveyFile, load_model, load_scene, load_survey,
     optimum_summary,
 };
+pub use lights::{LightsSpec, ManualLights};
 pub use node::{NodeDisplay, run_node};
 pub use photos::GrabMode;
 pub use sim::{PreparedSim, SimRoom, SyntheticSim, prepare_sim};

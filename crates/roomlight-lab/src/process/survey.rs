@@ -6,6 +6,7 @@
 
 use super::camera::AnyCamera;
 use super::files::{ModelFile, SurveyFile};
+use super::lights::ManualLights;
 use crate::rendered::{Client, RenderedCamera};
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::{self, RoomModel};
@@ -16,6 +17,17 @@ use roomlight_proto::v1;
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
+
+/// The room a survey is made of, and how its LEDs are switched.
+#[derive(Debug, Clone)]
+pub enum SurveyRoom {
+    /// A rendered room (`roomlight sim`): its service describes it, photographs it (unless a
+    /// real camera does) and switches its LEDs.
+    Rendered(Client),
+    /// A physical room: a real camera photographs it and a person switches its LEDs (the
+    /// preset is the name of what they switch on).
+    Physical(ManualLights),
+}
 
 /// A survey checked against the room it was made of, with its target as a camera mask.
 struct Checked {
@@ -35,21 +47,29 @@ impl Checked {
         }
     }
 
-    /// The camera sampling `patches`: the rendered room's through `client`, or `eye`.
-    fn camera(&self, client: Client, patches: Vec<usize>, eye: Option<&HwCamera>) -> AnyCamera {
-        match eye {
-            None => AnyCamera::Rendered(RenderedCamera::new(
-                client,
-                self.survey.corners.clone(),
-                patches,
-                self.survey.sample,
-            )),
-            Some(eye) => AnyCamera::Real(eye.clone().with_charts(Charts {
+    /// The camera sampling `patches`: `eye`, else the rendered room's.
+    fn camera(
+        &self,
+        room: &SurveyRoom,
+        patches: Vec<usize>,
+        eye: Option<&HwCamera>,
+    ) -> Result<AnyCamera> {
+        Ok(match (eye, room) {
+            (Some(eye), _) => AnyCamera::Real(eye.clone().with_charts(Charts {
                 corners: Arc::new(self.survey.corners.clone()),
                 patches: Arc::new(patches),
                 sample: self.survey.sample,
             })),
-        }
+            (None, SurveyRoom::Rendered(client)) => AnyCamera::Rendered(RenderedCamera::new(
+                client.clone(),
+                self.survey.corners.clone(),
+                patches,
+                self.survey.sample,
+            )),
+            (None, SurveyRoom::Physical(_)) => {
+                bail!("a physical room is photographed by a real camera")
+            }
+        })
     }
 }
 
@@ -63,13 +83,25 @@ pub(super) async fn survey_model(
     survey_path: &Path,
     preset: Option<&str>,
     resume: Option<(&Path, ModelFile)>,
-    client: Client,
+    room: SurveyRoom,
     eye: Option<HwCamera>,
 ) -> Result<(RoomModel, AnyCamera)> {
-    let checked = check(survey_path, &client).await?;
+    let checked = match &room {
+        SurveyRoom::Rendered(client) => check(survey_path, client).await?,
+        SurveyRoom::Physical(_) => {
+            // Nothing describes a physical room: the camera's size is checked on each
+            // photograph, and the preset is what the installer names.
+            let survey = super::files::load_survey(survey_path)?;
+            Checked {
+                target_mask: survey.target_mask(),
+                survey,
+                presets: vec![preset.unwrap_or("the room's LEDs").to_string()],
+            }
+        }
+    };
     match resume {
-        Some((path, model)) => resumed(&checked, path, model, client, eye.as_ref()),
-        None => measured(&checked, preset, client, eye.as_ref()).await,
+        Some((path, model)) => resumed(&checked, path, model, &room, eye.as_ref()),
+        None => measured(&checked, preset, &room, eye.as_ref()).await,
     }
 }
 
@@ -106,7 +138,7 @@ fn resumed(
     checked: &Checked,
     path: &Path,
     model: ModelFile,
-    client: Client,
+    room: &SurveyRoom,
     eye: Option<&HwCamera>,
 ) -> Result<(RoomModel, AnyCamera)> {
     let patches = model.patches.clone().with_context(|| {
@@ -132,7 +164,7 @@ fn resumed(
         model.problem.nodes(),
         model.owners.len()
     );
-    let camera = checked.camera(client, patches.clone(), eye);
+    let camera = checked.camera(room, patches.clone(), eye)?;
     let model = RoomModel {
         problem: model.problem,
         owners: model.owners,
@@ -147,7 +179,7 @@ fn resumed(
 async fn measured(
     checked: &Checked,
     preset: Option<&str>,
-    client: Client,
+    room: &SurveyRoom,
     eye: Option<&HwCamera>,
 ) -> Result<(RoomModel, AnyCamera)> {
     let preset = match preset {
@@ -159,13 +191,7 @@ async fn measured(
             .cloned()
             .context("the room has no LED preset to reproduce")?,
     };
-    let lights = RenderedCamera::new(
-        client.clone(),
-        Vec::new(),
-        Vec::new(),
-        checked.survey.sample,
-    );
-    let mut camera = checked.camera(client.clone(), Vec::new(), eye);
+    let mut camera = checked.camera(room, Vec::new(), eye)?;
     let survey = &checked.survey;
     let mut photograph = async || -> Result<Vec<roomlight_calib::charts::PatchSample>> {
         let image = camera
@@ -184,11 +210,12 @@ async fn measured(
         roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample)
             .context("sampling the charts")
     };
-    lights.set_lights("").await?;
+    switch(room, checked, None).await?;
     let black = photograph().await?;
-    lights.set_lights(&preset).await?;
+    switch(room, checked, Some(&preset)).await?;
     let lit = photograph().await?;
-    lights.set_lights("").await?;
+    // The projectors replace the LEDs from here on.
+    switch(room, checked, None).await?;
     // The model's patches and problem as the in-process pipeline builds them; no projector
     // has joined, so no columns yet.
     let target = Target::from_samples(&black, &lit)
@@ -200,7 +227,7 @@ async fn measured(
         patches.len(),
         lit.len()
     );
-    let camera = checked.camera(client, patches.clone(), eye);
+    let camera = checked.camera(room, patches.clone(), eye)?;
     let model = RoomModel {
         problem,
         owners: HashMap::new(),
@@ -209,4 +236,22 @@ async fn measured(
         survey: Some(checked.for_patches(patches)),
     };
     Ok((model, camera))
+}
+
+/// Switches the room's LEDs to `preset` (`None`: off).
+async fn switch(room: &SurveyRoom, checked: &Checked, preset: Option<&str>) -> Result<()> {
+    match room {
+        SurveyRoom::Rendered(client) => {
+            RenderedCamera::new(
+                client.clone(),
+                Vec::new(),
+                Vec::new(),
+                checked.survey.sample,
+            )
+            .set_lights(preset.unwrap_or(""))
+            .await?;
+            Ok(())
+        }
+        SurveyRoom::Physical(lights) => lights.switch(preset.is_some(), preset.unwrap_or("")).await,
+    }
 }

@@ -4,7 +4,7 @@ use super::{Hardware, check, check_nonempty, read_toml};
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::CameraConfig;
 use roomlight_agent::discovery::MdnsConfig;
-use roomlight_lab::process::{CameraHardware, CameraProcess, CameraSource};
+use roomlight_lab::process::{CameraHardware, CameraProcess, CameraSource, LightsSpec};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -25,8 +25,9 @@ struct CameraFile {
     /// "linear", ... }`); read in `real_camera`.
     #[serde(default)]
     camera: Option<toml::Value>,
-    /// With `camera` and `survey`: the rendered room (`roomlight sim --grab`) whose LEDs the
-    /// survey switches to measure the room's black and target.
+    /// With `camera` and `survey`: how the survey switches the LEDs to measure the room's black
+    /// and target: `manual:DIR` (a person, asked through `DIR/lights-wanted`, answers in
+    /// `DIR/lights`), or the rendered room (`roomlight sim --grab`) whose LEDs it switches.
     #[serde(default)]
     lights: Option<String>,
     /// The calibrated model (`roomlight calibrate` or `roomlight sim` writes it); or `survey`.
@@ -113,6 +114,16 @@ impl CameraFile {
         }
         if let Some(lights) = &self.lights {
             check_nonempty(path, "lights", lights)?;
+            if let LightsSpec::Manual(dir) = LightsSpec::parse(lights)
+                && !dir.is_dir()
+            {
+                bail!(
+                    "{}: lights = {lights:?}: {} is not a folder (the survey asks for the LEDs \
+                     there)",
+                    path.display(),
+                    dir.display()
+                );
+            }
         }
         // Under 50 ms heartbeats swamp a large room; over a minute a dead node holds rounds.
         check(
@@ -182,7 +193,7 @@ impl CameraFile {
         };
         if self.survey.is_some() && self.lights.is_none() {
             bail!(
-                "{p}: survey with a real camera needs lights, the rendered room whose LEDs it switches"
+                "{p}: survey with a real camera needs lights: \"manual:DIR\" (a person switches the LEDs when asked) or the rendered room that switches its own"
             );
         }
         if self.model.is_some() && self.charts.is_none() {
@@ -190,7 +201,7 @@ impl CameraFile {
         }
         Ok(CameraHardware::Real {
             camera: Box::new(camera),
-            lights: self.lights.clone(),
+            lights: self.lights.as_deref().map(LightsSpec::parse),
         })
     }
 
