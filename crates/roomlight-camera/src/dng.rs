@@ -181,6 +181,8 @@ struct RawImage {
 
 impl RawImage {
     fn read(tiff: &Tiff, ifd: &Ifd, max_pixels: u64) -> Result<Self, String> {
+        // Over 80 lines: every check of the directory (size, layout, depth, compression, the
+        // pixel cap) comes before the first sample is read, in the order TIFF lays them out.
         let width = tiff.required(ifd, WIDTH, "ImageWidth")?;
         let height = tiff.required(ifd, HEIGHT, "ImageLength")?;
         let samples = tiff.uint(ifd, SAMPLES_PER_PIXEL)?.unwrap_or(1);

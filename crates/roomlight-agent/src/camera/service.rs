@@ -65,24 +65,7 @@ impl v1::room_server::Room for Service {
         let shared = self.0.clone();
         let handshake = request.extensions().get::<Handshake>().cloned();
         // The metadata's token, before anything of the stream is read.
-        let bearer = match request.metadata().get("authorization") {
-            None => false,
-            Some(value) => {
-                let token = value.to_str().ok().and_then(|v| v.strip_prefix("Bearer "));
-                if !token.is_some_and(|t| token_matches(t, &shared.config.token)) {
-                    if let Some(count) = shared.refusals.hit() {
-                        let refusal = Refusal::WrongToken.row().key;
-                        tracing::warn!(
-                            refusal,
-                            count,
-                            "refused before the Hello: bearer metadata (count since the last report)"
-                        );
-                    }
-                    return Err(Refusal::WrongToken.into());
-                }
-                true
-            }
-        };
+        let bearer = check_bearer(&shared, request.metadata())?;
         let mut inbound = request.into_inner();
         let first = tokio::time::timeout(
             shared.config.deadline.max(Duration::from_secs(1)),
@@ -144,6 +127,28 @@ impl v1::room_server::Room for Service {
         tracker.spawn(read_node(shared, guard, inbound));
         Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
     }
+}
+
+/// The `authorization: Bearer TOKEN` metadata, checked before anything of the stream is read:
+/// `Ok(true)` when it holds the room's token, `Ok(false)` when there is none (the Hello's token
+/// decides), refused when it holds anything else.
+fn check_bearer(shared: &Shared, metadata: &tonic::metadata::MetadataMap) -> Result<bool, Status> {
+    let Some(value) = metadata.get("authorization") else {
+        return Ok(false);
+    };
+    let token = value.to_str().ok().and_then(|v| v.strip_prefix("Bearer "));
+    if token.is_some_and(|t| token_matches(t, &shared.config.token)) {
+        return Ok(true);
+    }
+    if let Some(count) = shared.refusals.hit() {
+        let refusal = Refusal::WrongToken.row().key;
+        tracing::warn!(
+            refusal,
+            count,
+            "refused before the Hello: bearer metadata (count since the last report)"
+        );
+    }
+    Err(Refusal::WrongToken.into())
 }
 
 /// mTLS: a node that showed a certificate (verified against the room CA by the TLS handshake)

@@ -260,6 +260,7 @@ mod tests {
     /// (JSON has no infinity), is refused naming the file.
     #[test]
     fn missing_files_are_empty_and_broken_ones_are_named() {
+        // Over 80 lines: one case after another, each a file and what loading it must say.
         let dir = tempfile::tempdir().expect("temp dir");
         let path = dir.path().join("q.state.json");
         assert_eq!(SavedState::load(&path).expect("missing"), None);
