@@ -31,9 +31,13 @@ async fn room_behind_links() -> (Sandbox, HashMap<String, Link>) {
         let link = sb.add_node_behind_link(&p).await;
         links.insert(p, link);
     }
-    sb.wait_for(LONG, |s| s.live_projectors == 3 && s.captures >= 8)
-        .await;
-    assert!(sb.excess(&sb.problem) < 1e-3, "converged before the cut");
+    // Converged before any cut (waited for, not assumed after a fixed count of captures: a
+    // loaded machine leaves late nodes out of some rounds).
+    let best = optimum(&sb.problem).expect("optimum").objective;
+    sb.wait_for(LONG, |s| {
+        s.live_projectors == 3 && s.captures >= 8 && s.measured_objective - best < 1e-3 * best
+    })
+    .await;
     (sb, links)
 }
 
