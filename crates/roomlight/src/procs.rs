@@ -109,12 +109,15 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
 }
 
 /// Logs to stderr, filtered by `RUST_LOG` (default: warnings), for every command: the agents'
-/// warnings show in a bench or the demo as they do in a camera or node agent.
+/// warnings show in a bench or the demo as they do in a camera or node agent. Colours only on a
+/// terminal: a file, a pipe or journald gets plain text.
 pub(crate) fn init_logs() {
+    use std::io::IsTerminal as _;
     let _ = tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
         )
+        .with_ansi(std::io::stderr().is_terminal())
         .with_writer(std::io::stderr)
         .try_init();
 }

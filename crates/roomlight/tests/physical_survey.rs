@@ -117,10 +117,23 @@ fn a_physical_rooms_survey_asks_a_person_for_the_leds_and_measures_the_room() {
         .current_dir(d)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(Stdio::piped())
         .spawn()
         .expect("start the camera agent");
     let stdout = child.stdout.take().expect("piped stdout");
+    let stderr = child.stderr.take().expect("piped stderr");
+    let log = Arc::new(Mutex::new(String::new()));
+    std::thread::spawn({
+        let log = log.clone();
+        move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                eprintln!("{line}");
+                let mut log = log.lock().expect("log");
+                log.push_str(&line);
+                log.push('\n');
+            }
+        }
+    });
     let _agent = Agent(child);
     let (tx, lines) = mpsc::channel();
     std::thread::spawn(move || {
@@ -159,5 +172,17 @@ fn a_physical_rooms_survey_asks_a_person_for_the_leds_and_measures_the_room() {
     assert_eq!(
         shots, 2,
         "one photograph with the LEDs off, one with them on"
+    );
+    // The log says what to do, in plain text (no colour codes into a pipe or a file).
+    let log = log.lock().expect("log").clone();
+    assert!(
+        log.contains("switch the room's LED lighting OFF")
+            && log.contains("switch the room's LED lighting ON as for neutral")
+            && log.contains("echo on > lights/lights"),
+        "{log}"
+    );
+    assert!(
+        !log.contains('\u{1b}'),
+        "colour codes in a piped log: {log:?}"
     );
 }
