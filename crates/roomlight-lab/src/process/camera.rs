@@ -223,13 +223,16 @@ async fn model_and_camera(process: &CameraProcess) -> Result<(RoomModel, AnyCame
                     camera,
                     lights: Some(lights),
                 } => {
+                    // The camera first: one that cannot be opened yet is waited for (logged,
+                    // with backoff) before anything else is asked of the room.
+                    let eye = open_real(camera).await?;
                     let room = match lights {
                         LightsSpec::Rendered(endpoint) => {
                             SurveyRoom::Rendered(connect_rendered(endpoint).await?)
                         }
                         LightsSpec::Manual(dir) => SurveyRoom::Physical(ManualLights::new(dir)),
                     };
-                    (room, Some(open_real(camera).await?))
+                    (room, Some(eye))
                 }
                 CameraHardware::Real { lights: None, .. } => {
                     bail!("calibration over the wire with a real camera needs `lights`")
