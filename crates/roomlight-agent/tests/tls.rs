@@ -13,7 +13,7 @@ use roomlight_core::closed_loop::{Plant, PlantConfig};
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::watch;
 use tokio_stream::StreamExt;
@@ -256,9 +256,16 @@ async fn a_wrong_bearer_token_is_refused_before_the_hello() {
     ));
 }
 
-/// Log lines, as the fmt subscriber would write their message and fields.
-#[derive(Clone, Default)]
-struct Captured(Arc<Mutex<Vec<String>>>);
+/// Log lines, as the fmt subscriber would write their message and fields; a waiter is woken
+/// by each new line.
+#[derive(Clone)]
+struct Captured(Arc<watch::Sender<Vec<String>>>);
+
+impl Default for Captured {
+    fn default() -> Self {
+        Self(Arc::new(watch::channel(Vec::new()).0))
+    }
+}
 
 struct Line(String);
 
@@ -280,7 +287,7 @@ impl tracing::Subscriber for Captured {
     fn event(&self, event: &tracing::Event<'_>) {
         let mut line = Line(String::new());
         event.record(&mut line);
-        self.0.lock().expect("log").push(line.0);
+        self.0.send_modify(|lines| lines.push(line.0));
     }
     fn enter(&self, _: &tracing::span::Id) {}
     fn exit(&self, _: &tracing::span::Id) {}
@@ -289,24 +296,16 @@ impl tracing::Subscriber for Captured {
 impl Captured {
     /// Waits (at most `within`) for a line containing every one of `words`.
     async fn wait_for(&self, within: Duration, words: &[&str]) {
-        let found = tokio::time::timeout(within, async {
-            loop {
-                if self
-                    .0
-                    .lock()
-                    .expect("log")
-                    .iter()
-                    .any(|l| words.iter().all(|w| l.contains(w)))
-                {
-                    return;
-                }
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-        })
-        .await;
-        let lines = self.0.lock().expect("log").clone();
+        let mut lines = self.0.subscribe();
+        let found = tokio::time::timeout(
+            within,
+            lines.wait_for(|lines| lines.iter().any(|l| words.iter().all(|w| l.contains(w)))),
+        )
+        .await
+        .is_ok_and(|r| r.is_ok());
+        let lines = self.0.borrow().clone();
         assert!(
-            found.is_ok(),
+            found,
             "no line with {words:?} within {within:?}: {lines:#?}"
         );
     }

@@ -53,8 +53,8 @@ fn photograph(dir: &Path, n: u64, level: f64) {
 }
 
 /// The installer and the room until `stop`: answers each lights request after switching the
-/// room, and shoots each photograph asked for. Returns the requests seen, in order.
-fn installer(dir: &Path, stop: &AtomicBool, requests: &Mutex<Vec<String>>) {
+/// room (each request sent on `requests`, in order), and shoots each photograph asked for.
+fn installer(dir: &Path, stop: &AtomicBool, requests: &mpsc::Sender<String>) {
     let (photos, lights) = (dir.join("photos"), dir.join("lights"));
     let (mut lit, mut handled, mut shot) = (false, String::new(), String::new());
     let deadline = Instant::now() + Duration::from_secs(120);
@@ -65,10 +65,7 @@ fn installer(dir: &Path, stop: &AtomicBool, requests: &Mutex<Vec<String>>) {
         if !wanted.is_empty() && wanted != handled {
             lit = wanted.trim() == "on";
             std::fs::write(lights.join("lights"), &wanted).expect("answer");
-            requests
-                .lock()
-                .expect("requests")
-                .push(wanted.trim().to_string());
+            let _ = requests.send(wanted.trim().to_string());
             handled = wanted;
         }
         let asked = std::fs::read_to_string(photos.join(".wanted")).unwrap_or_default();
@@ -107,10 +104,10 @@ fn a_physical_rooms_survey_asks_a_person_for_the_leds_and_measures_the_room() {
     .expect("camera config");
 
     let stop = Arc::new(AtomicBool::new(false));
-    let requests = Arc::new(Mutex::new(Vec::new()));
+    let (asked, requests) = mpsc::channel();
     let room = std::thread::spawn({
-        let (d, stop, requests) = (d.to_path_buf(), stop.clone(), requests.clone());
-        move || installer(&d, &stop, &requests)
+        let (d, stop) = (d.to_path_buf(), stop.clone());
+        move || installer(&d, &stop, &asked)
     });
     let mut child = Command::new(env!("CARGO_BIN_EXE_roomlight"))
         .args(["camera", "--config", "camera.toml"])
@@ -155,13 +152,16 @@ fn a_physical_rooms_survey_asks_a_person_for_the_leds_and_measures_the_room() {
         l.starts_with("camera listening on")
     });
     // Off for the black, on for the target, off again for the projectors to take over.
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while requests.lock().expect("requests").len() < 3 && Instant::now() < deadline {
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let seen: Vec<String> = (0..3)
+        .map(|_| {
+            requests
+                .recv_timeout(Duration::from_secs(10))
+                .expect("a lights request answered")
+        })
+        .collect();
     stop.store(true, Ordering::Relaxed);
     room.join().expect("the installer thread");
-    assert_eq!(*requests.lock().expect("requests"), ["off", "on", "off"]);
+    assert_eq!(seen, ["off", "on", "off"]);
     let shots = std::fs::read_dir(d.join("photos"))
         .expect("photos")
         .filter(|e| {

@@ -126,7 +126,7 @@ mod tests {
             .open(&answer)
             .and_then(|f| f.set_modified(old))
             .expect("age the answer");
-        let waiting = tokio::spawn({
+        let mut waiting = tokio::spawn({
             let lights = lights.clone();
             async move { lights.switch(true, "neutral").await }
         });
@@ -137,12 +137,13 @@ mod tests {
             assert!(tokio::time::Instant::now() < deadline, "no request written");
             tokio::time::sleep(Duration::from_millis(10)).await;
         }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        assert!(!waiting.is_finished(), "went on with a stale answer");
+        let within = Duration::from_millis(100);
+        let still_waiting = tokio::time::timeout(within, &mut waiting).await.is_err();
+        assert!(still_waiting, "went on with a stale answer");
         // The wrong word neither.
         std::fs::write(&answer, "off\n").expect("write");
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        assert!(!waiting.is_finished(), "went on with the wrong answer");
+        let still_waiting = tokio::time::timeout(within, &mut waiting).await.is_err();
+        assert!(still_waiting, "went on with the wrong answer");
         std::fs::write(&answer, "ON\n").expect("write");
         tokio::time::timeout(Duration::from_secs(10), waiting)
             .await
