@@ -93,7 +93,7 @@ fn status(line: &str) -> Option<(u64, f64, usize, usize)> {
 }
 
 /// The optimum of the model the camera agent wrote in `d`, and the excess over it of a
-/// measured objective once the camera noise's bias `½ Σ σ²` is taken out (as processes.rs).
+/// measured objective once the camera noise's bias `½ Σ σ²` is taken out (as processes/main.rs).
 fn noise_free(d: &Path) -> (f64, impl Fn(f64) -> f64) {
     let model: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
@@ -108,7 +108,7 @@ fn noise_free(d: &Path) -> (f64, impl Fn(f64) -> f64) {
     (best.objective, move |g: f64| best.excess(g - bias))
 }
 
-/// The camera's resolution, as processes.rs's (at 320×240 the run did not converge within the
+/// The camera's resolution, as processes/main.rs's (at 320×240 the run did not converge within the
 /// test's deadlines).
 const CAMERA: &str = "640x480";
 
