@@ -529,6 +529,7 @@ function bindActions() {
     if (answer.ok) flash(`preset ${preset}: its light is measured, the rounds restart`);
     else flash(`preset ${preset}: ${errorText(answer)}`, true);
   }));
+  $('calibrate-all').addEventListener('click', action(() => calibrate({})));
   $('snapshot').addEventListener('click', action(async () => {
     const answer = await api('POST', '/api/snapshot');
     if (answer.ok) flash(`snapshot written to ${answer.data && answer.data.path}`);
@@ -818,6 +819,8 @@ function renderCalibration(status) {
     const key = result ? JSON.stringify([result.at_round, result.captures, result.decoded, result.nodes]) : '';
     if (state.calibrationKeys.get(id) !== key) {
       state.calibrationKeys.set(id, key);
+      for (const img of row.querySelectorAll('img')) img.classList.add('missing');
+      if (!result) return;
       const version = encodeURIComponent(key);
       const base = `/api/calibration/${encodeURIComponent(id)}`;
       row.querySelector('.coverage img').src = `${base}/coverage.png?v=${version}`;
