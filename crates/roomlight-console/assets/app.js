@@ -447,6 +447,7 @@ function renderRoom(status) {
   setText($('captures'), status.captures ?? '–');
   setText($('objective'), formatNumber(status.objective));
   setText($('excess'), formatExcess(status.excess));
+  setText($('restarts'), status.restarts ?? '–');
   setText($('settled'), status.paused ? 'paused' : status.settled ? 'settled' : 'converging');
   const camera = status.camera || {};
   const badge = $('camera-state');
