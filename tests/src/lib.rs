@@ -21,6 +21,7 @@ use roomlight_proto::v1;
 use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
@@ -54,6 +55,17 @@ pub struct SandboxBuilder {
     survey: Option<Survey>,
     rule: StepRule,
     exposure: Duration,
+    lights: Option<LightsHandle>,
+}
+
+/// The room's LEDs as the camera agent switches them (for the console's preset).
+#[derive(Clone)]
+struct LightsHandle(Arc<dyn camera::Lights>);
+
+impl std::fmt::Debug for LightsHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_tuple("Lights").field(&self.0.presets()).finish()
+    }
 }
 
 impl Default for SandboxBuilder {
@@ -77,6 +89,7 @@ impl Default for SandboxBuilder {
             survey: None,
             rule: StepRule::Momentum { theta: 1.0 },
             exposure: Duration::ZERO,
+            lights: None,
         }
     }
 }
@@ -146,6 +159,12 @@ impl SandboxBuilder {
         self
     }
 
+    /// The camera agent can switch the room's LEDs through `lights` (the console's preset).
+    pub fn lights(mut self, lights: Arc<dyn camera::Lights>) -> Self {
+        self.lights = Some(LightsHandle(lights));
+        self
+    }
+
     /// Starts the camera agent over the virtual room's camera; no node agent yet.
     pub async fn start_camera(self) -> Sandbox {
         self.start_with_camera(|camera, _, _| camera).await
@@ -187,9 +206,22 @@ impl SandboxBuilder {
             inner: wrap(room.camera(), room.clone(), cancel.clone()),
             exposure: self.exposure,
         };
-        let (status, task) =
-            camera::serve(self.config.clone(), model, camera, listener, cancel.clone());
+        let extras = camera::Extras {
+            lights: self.lights.map(|l| l.0),
+            preset: None,
+        };
+        let served = camera::serve_room(
+            self.config.clone(),
+            model,
+            camera,
+            listener,
+            None,
+            extras,
+            cancel.clone(),
+        );
+        let (status, task) = (served.status, served.handle);
         Sandbox {
+            control: Some(served.control),
             room,
             problem,
             owners,
@@ -289,6 +321,8 @@ pub struct Sandbox {
     rule: StepRule,
     exposure: Duration,
     status: watch::Receiver<RoomStatus>,
+    /// The console's handle on the first camera agent started.
+    control: Option<camera::Control>,
     camera: Option<Agent>,
     nodes: HashMap<String, Agent>,
     /// Projector → its state file, kept across kills so that a restart finds it.
@@ -312,6 +346,16 @@ impl Sandbox {
         let mut ids: Vec<String> = self.owners.keys().cloned().collect();
         ids.sort();
         ids
+    }
+
+    /// The console's handle on the camera agent the builder started.
+    pub fn control(&self) -> camera::Control {
+        self.control.clone().expect("the builder's camera agent")
+    }
+
+    /// The camera agent's status, to follow.
+    pub fn status_watch(&self) -> watch::Receiver<RoomStatus> {
+        self.status.clone()
     }
 
     /// The room's status now.

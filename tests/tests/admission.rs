@@ -207,6 +207,8 @@ async fn a_projector_without_a_resolution_cannot_be_calibrated_over_the_wire() {
         sample: roomlight_calib::charts::SampleConfig::default(),
         target_mask: Vec::new(),
         patches: Vec::new(),
+        width: 0,
+        height: 0,
     };
     let sb = Sandbox::builder()
         .model_rounds(5)

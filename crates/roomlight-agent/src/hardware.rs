@@ -149,6 +149,13 @@ pub trait Display: Send + 'static {
         false
     }
 
+    /// Shows the identify pattern naming `projector` (`on`) until called again with `on`
+    /// false, then what it showed before; false when this display cannot (it draws no pixels).
+    fn identify(&mut self, projector: &str, on: bool) -> bool {
+        let _ = (projector, on);
+        false
+    }
+
     /// Takes the nodes' weights and the response measured over the wire (node values shown
     /// afterwards are drawn with them). Displays that draw no pixels ignore it.
     fn assign(&mut self, assignment: &Assignment) {

@@ -114,6 +114,14 @@ impl Controller {
         Some(summary)
     }
 
+    /// The target changed (another LED preset): the next round is a capture, it restarts the
+    /// momentum, and settling is judged afresh.
+    pub fn retarget(&mut self) {
+        self.pending = 0;
+        self.changed = true;
+        self.settle = Settle::default();
+    }
+
     /// One node's contribution change `δ_n` to the round just sent: the predicted errors lose
     /// it. Refused whole (nothing applied) if a patch is unknown or a value is not finite.
     pub fn contribution(
@@ -291,6 +299,15 @@ impl Projectors {
     /// Its attenuation is known: it takes part in the rounds.
     pub fn calibrated(&mut self, id: &str) {
         self.update(id, |p| p.calibrated = true);
+    }
+
+    /// It is to be measured again: it leaves the rounds (keeping its nodes and its light)
+    /// until it is [`Projectors::calibrated`] again.
+    pub fn recalibrate(&mut self, id: &str) {
+        self.update(id, |p| {
+            p.calibrated = false;
+            p.awaiting = None;
+        });
     }
 
     /// Its nodes (segmented over the wire).

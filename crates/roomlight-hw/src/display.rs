@@ -45,6 +45,8 @@ pub struct WindowDisplay {
     assignment: Option<Assignment>,
     values: Vec<(u32, LinearRgb)>,
     content: Content,
+    /// Showing the identify pattern of this projector id, over whatever else.
+    identify: Option<String>,
     dirty: bool,
 }
 
@@ -63,6 +65,7 @@ impl WindowDisplay {
             assignment: None,
             values: Vec::new(),
             content: Content::Values,
+            identify: None,
             dirty: false,
         })
     }
@@ -95,6 +98,9 @@ impl WindowDisplay {
     /// The frame of what is shown now; black where nothing is assigned.
     fn render(&self) -> Frame {
         let (w, h) = self.size();
+        if let Some(projector) = &self.identify {
+            return crate::identify::frame(projector, self.output_name(), w, h);
+        }
         let codes = match &self.content {
             Content::Pattern(p) => match p.codes(w, h) {
                 Ok(codes) => codes,
@@ -146,6 +152,12 @@ impl Display for WindowDisplay {
 
     fn show_pattern(&mut self, pattern: Pattern) -> bool {
         self.content = Content::Pattern(pattern);
+        self.dirty = true;
+        true
+    }
+
+    fn identify(&mut self, projector: &str, on: bool) -> bool {
+        self.identify = on.then(|| projector.to_string());
         self.dirty = true;
         true
     }

@@ -28,6 +28,8 @@ fn survey() -> Value {
         corners: vec![chart("desk", 10.0), chart("wall", 80.0)],
         sample: SampleConfig::default(),
         target_pixels: vec![3, 4, 5, 163, 164, 165],
+        target_polygons: Vec::new(),
+        preset: None,
     })
     .expect("a survey as JSON")
 }

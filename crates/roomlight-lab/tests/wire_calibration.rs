@@ -52,6 +52,8 @@ async fn survey_model(room: &Room, camera: &RenderedCamera) -> (RoomModel, Vec<u
         sample,
         target_mask: vec![false; w as usize * h as usize],
         patches: patches.clone(),
+        width: w,
+        height: h,
     };
     let model = RoomModel {
         problem,

@@ -111,14 +111,23 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
 /// Logs to stderr, filtered by `RUST_LOG` (default: warnings), for every command: the agents'
 /// warnings show in a bench or the demo as they do in a camera or node agent. Colours only on a
 /// terminal: a file, a pipe or journald gets plain text.
+///
+/// Warnings and errors are also kept for the installer's console (its "last warnings"),
+/// whatever `RUST_LOG` says.
 pub(crate) fn init_logs() {
     use std::io::IsTerminal as _;
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
+    use tracing_subscriber::prelude::*;
+    let log = tracing_subscriber::fmt::layer()
         .with_ansi(std::io::stderr().is_terminal())
         .with_writer(std::io::stderr)
+        .with_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+        );
+    let kept = roomlight_console::warnings::Layer
+        .with_filter(tracing_subscriber::filter::LevelFilter::WARN);
+    let _ = tracing_subscriber::registry()
+        .with(log)
+        .with(kept)
         .try_init();
 }
 

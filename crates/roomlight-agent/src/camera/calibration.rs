@@ -63,10 +63,26 @@ pub(super) async fn calibrate(
     let Some((_, nodes)) = shared.registry.lock().outbox(projector) else {
         return Vec::new();
     };
+    let notes = Notes::begin(shared, projector);
+    let calibrated = measure_and_install(shared, eye, projector, nodes, errors, &notes).await;
+    notes.end(shared, &calibrated);
+    calibrated
+}
+
+/// [`calibrate`]'s work, reporting to `notes`.
+async fn measure_and_install(
+    shared: &Shared,
+    eye: &mut Captures<impl Camera>,
+    projector: &str,
+    nodes: Vec<u32>,
+    errors: Option<&[LinearRgb]>,
+    notes: &Notes,
+) -> Vec<String> {
     let measured = match &shared.survey {
         Some(survey) if nodes.is_empty() => {
             let mut batch = batch(shared, projector).await;
-            let mut measured = over_the_wire(shared, eye, survey, batch.clone()).await;
+            notes.batch(shared, &batch);
+            let mut measured = over_the_wire(shared, eye, survey, batch.clone(), notes).await;
             // One projector that fails (left, shows nothing, refused) must not hold the others'
             // bring-up back: once more without it, or alone when the cause is not one of them.
             if let (Err(e), true) = (&measured, batch.len() > 1) {
@@ -75,20 +91,23 @@ pub(super) async fn calibrate(
                     Some(culprit) if culprit != projector => batch.retain(|id| id != culprit),
                     _ => batch.truncate(1),
                 }
-                measured = over_the_wire(shared, eye, survey, batch).await;
+                notes.batch(shared, &batch);
+                measured = over_the_wire(shared, eye, survey, batch, notes).await;
             }
             measured
         }
-        Some(survey) => hot_images(shared, eye, survey, projector, nodes).await,
+        Some(survey) => hot_images(shared, eye, survey, projector, nodes, notes).await,
         None => hot_patches(shared, eye, projector, nodes).await,
     };
     let outcome = match measured {
         Ok(outcome) => outcome,
         Err(e) => {
             tracing::error!(%projector, error = %e, "calibration over the wire failed");
+            notes.warn(projector, format!("failed: {e}"));
             return Vec::new();
         }
     };
+    notes.captures(outcome.captures);
     tracing::info!(projectors = ?outcome.projectors.iter().map(|p| &p.0).collect::<Vec<_>>(), captures = outcome.captures, "calibrated over the wire");
     let Some(calibrated) = install(shared, outcome, errors) else {
         return Vec::new();
@@ -157,6 +176,143 @@ fn log_event(event: Event) {
     }
 }
 
+/// A calibration's progress and findings, published for the console: which projectors are
+/// measured, the step, captures done of those planned; per projector the share its structured
+/// light decoded and what looked wrong.
+#[derive(Debug, Default)]
+struct Notes {
+    found: std::sync::Mutex<Found>,
+}
+
+#[derive(Debug, Default)]
+struct Found {
+    batch: Vec<String>,
+    decoded: Vec<(String, f64)>,
+    warnings: Vec<(String, String)>,
+    captures: usize,
+}
+
+impl Notes {
+    fn found(&self) -> std::sync::MutexGuard<'_, Found> {
+        self.found
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// `projector`'s calibration begins.
+    fn begin(shared: &Shared, projector: &str) -> Self {
+        let notes = Self::default();
+        notes.batch(shared, &[projector.to_string()]);
+        notes
+    }
+
+    /// These projectors are measured together.
+    fn batch(&self, shared: &Shared, batch: &[String]) {
+        self.found().batch = batch.to_vec();
+        shared.status.send_modify(|s| {
+            s.calibrating = Some(super::CalibrationProgress {
+                projectors: batch.to_vec(),
+                stage: "starting".into(),
+                done: 0,
+                expected: 0,
+            });
+        });
+        shared.publish_projectors();
+    }
+
+    fn warn(&self, projector: &str, warning: String) {
+        self.found().warnings.push((projector.to_string(), warning));
+    }
+
+    fn captures(&self, captures: usize) {
+        self.found().captures = captures;
+    }
+
+    /// The procedure's progress: logged, and published.
+    fn reporter<'a>(&'a self, shared: &'a Shared) -> impl FnMut(Event) + Send + 'a {
+        move |event: Event| {
+            match &event {
+                Event::Stage { stage, captures } => shared.status.send_modify(|s| {
+                    if let Some(c) = s.calibrating.as_mut() {
+                        c.stage = format!("{stage:?}");
+                        c.expected = c.done + captures;
+                    }
+                }),
+                Event::Captured { .. } => shared.status.send_modify(|s| {
+                    if let Some(c) = s.calibrating.as_mut() {
+                        c.done += 1;
+                        c.expected = c.expected.max(c.done);
+                    }
+                }),
+                Event::Decoded { projector, share } => {
+                    self.found().decoded.push((projector.clone(), *share));
+                }
+                Event::SecondPass { projector, .. } => {
+                    self.warn(
+                        projector,
+                        "a second pass over pixels the first left unknown".into(),
+                    );
+                }
+                Event::WholeFrame { projector, chart } => self.warn(
+                    projector,
+                    match chart {
+                        Some(c) => format!("one node over its whole frame (lights chart {c} most)"),
+                        None => "one node over its whole frame: it lights no chart".into(),
+                    },
+                ),
+                _ => {}
+            }
+            log_event(event);
+        }
+    }
+
+    /// The calibration ended; `calibrated` are the projectors it measured (none: it failed).
+    fn end(&self, shared: &Shared, calibrated: &[String]) {
+        let found = std::mem::take(&mut *self.found());
+        let nodes: std::collections::HashMap<String, usize> = {
+            let live = shared.live();
+            found
+                .batch
+                .iter()
+                .map(|id| (id.clone(), live.owners.get(id).map_or(0, Vec::len)))
+                .collect()
+        };
+        shared.status.send_modify(|s| {
+            s.calibrating = None;
+            for id in &found.batch {
+                let mut warnings: Vec<String> = found
+                    .warnings
+                    .iter()
+                    .filter(|(p, _)| p == id)
+                    .map(|(_, w)| w.clone())
+                    .collect();
+                if !calibrated.contains(id) && warnings.is_empty() {
+                    warnings.push("not calibrated (see the log)".into());
+                }
+                let result = super::CalibrationResult {
+                    projector: id.clone(),
+                    decoded: found
+                        .decoded
+                        .iter()
+                        .rev()
+                        .find(|(p, _)| p == id)
+                        .map(|d| d.1),
+                    nodes: nodes.get(id).copied().unwrap_or(0),
+                    captures: found.captures,
+                    at_round: s.round,
+                    warnings,
+                };
+                match s.calibrations.iter_mut().find(|r| r.projector == *id) {
+                    Some(slot) => *slot = result,
+                    None => s.calibrations.push(result),
+                }
+            }
+            s.calibrations.sort_by(|a, b| a.projector.cmp(&b.projector));
+        });
+        shared.publish_projectors();
+    }
+}
+
 /// Brings up `batch` (a dark room) or calibrates it joining a lit room, through the procedure's
 /// steps: black offset, whites, structured light, responses, nodes beside the attached
 /// projectors' claims, then their attenuation (Hadamard against the dark capture; hot in a lit
@@ -166,6 +322,7 @@ async fn over_the_wire(
     eye: &mut Captures<impl Camera>,
     survey: &Survey,
     batch: Vec<String>,
+    notes: &Notes,
 ) -> Result<Outcome, Failed> {
     let setup = setup(survey);
     let lit = !shared.registry.lock().projectors().dark();
@@ -173,7 +330,7 @@ async fn over_the_wire(
     let first = shared.live().problem.nodes() as u32;
     let settings = Settings::default();
     let mut rig = WireRig::new(shared, eye, batch);
-    let mut procedure = Procedure::new(&mut rig, settings, log_event);
+    let mut procedure = Procedure::new(&mut rig, settings, notes.reporter(shared));
     let live = procedure.rig().projectors();
     if live.is_empty() {
         return Err(Failed::Nothing("left before its calibration".into()));
@@ -252,10 +409,11 @@ async fn hot_images(
     survey: &Survey,
     projector: &str,
     nodes: Vec<u32>,
+    notes: &Notes,
 ) -> Result<Outcome, Failed> {
     let excluded = shared.live().excluded.clone();
     let mut rig = WireRig::new(shared, eye, vec![projector.to_string()]);
-    let mut procedure = Procedure::new(&mut rig, Settings::default(), log_event);
+    let mut procedure = Procedure::new(&mut rig, Settings::default(), notes.reporter(shared));
     let hot = procedure.hot(&setup(survey), projector, &nodes).await?;
     let (columns, measurable) = hot_columns(survey, &excluded, std::slice::from_ref(&hot))?;
     Ok(Outcome {

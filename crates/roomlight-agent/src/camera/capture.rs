@@ -115,7 +115,10 @@ impl<C: Camera> Captures<C> {
             .await?;
         let samples =
             roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample)
-                .map_err(|e| format!("the charts could not be sampled: {e}"))?;
+                .map_err(|e| format!("the charts could not be sampled: {e}"));
+        // The console's view of the room: the image moves, nothing is copied.
+        shared.publish_photo(image);
+        let samples = samples?;
         let mut means = Vec::with_capacity(survey.patches.len());
         let mut ok = Vec::with_capacity(survey.patches.len());
         for &i in &survey.patches {
@@ -153,6 +156,19 @@ impl<C: Camera> Captures<C> {
             })
             .await;
         self.record(shared, outcome)
+    }
+
+    /// A whole photograph for the console (between rounds; every frame counted). Its failure
+    /// is the console's answer and does not count against the camera's health: a camera that
+    /// gives only patches (the synthetic room's) still runs the rounds.
+    pub(super) async fn photograph(
+        &mut self,
+        shared: &Shared,
+    ) -> Result<LinearImage, super::operator::Refused> {
+        let timeout = self.camera.capture_timeout();
+        self.latest(shared, timeout, async |c: &mut C| c.capture_image().await)
+            .await
+            .map_err(super::operator::Refused::Camera)
     }
 
     /// The camera's limits, for calibration.

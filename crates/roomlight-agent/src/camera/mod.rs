@@ -15,13 +15,16 @@
 //! - `faults`: the camera's typed state and the backoff after a failed capture;
 //! - `calibration`: the calibration procedure driven over the wire (bring-up, joins, hot);
 //! - `rig`: the procedure's rig over the peers (Show and Assign messages, the camera);
-//! - `model`: the live model (attenuation, `s`, starts, patches left out) and its file.
+//! - `model`: the live model (attenuation, `s`, starts, patches left out) and its file;
+//! - `operator`: what the installer's console sees and asks (pause, calibrate, preset,
+//!   identify, photograph), carried out by the round loop between rounds.
 
 mod calibration;
 mod capture;
 mod faults;
 mod listener;
 mod model;
+mod operator;
 mod registry;
 mod rig;
 mod rounds;
@@ -30,15 +33,20 @@ mod service;
 use crate::hardware::Camera;
 pub use faults::{CameraState, RETRY_FIRST, RETRY_MAX};
 use model::Live;
+pub use operator::{
+    CalibrationProgress, CalibrationResult, Control, Frame, Lights, Photo, ProjectorState,
+    ProjectorStatus, Refused,
+};
 use prost::Message;
 use registry::{Outbox, Registry};
 use roomlight_calib::charts::{COLUMNS, ChartCorners, ROWS, SampleConfig};
+use roomlight_calib::image_io::LinearImage;
 use roomlight_core::{LinearRgb, Problem};
 use roomlight_proto::refusal::Refusal;
 use roomlight_proto::v1;
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
@@ -119,6 +127,9 @@ pub struct Survey {
     pub target_mask: Vec<bool>,
     /// Room patch index (chart · patches per chart + patch) of each of the model's patches.
     pub patches: Vec<usize>,
+    /// The camera's resolution (the target mask's size).
+    pub width: u32,
+    pub height: u32,
 }
 
 impl Survey {
@@ -159,6 +170,18 @@ pub struct RoomStatus {
     pub camera: CameraState,
     /// Attached projectors whose node agent says its display is lost (they stay attached).
     pub displays_lost: Vec<DisplayLost>,
+    /// The rounds are paused by the console (the projectors keep their light).
+    pub paused: bool,
+    /// Times the target changed (another LED preset measured): each restarts the rounds.
+    pub restarts: u64,
+    /// The LED preset reproduced, when known.
+    pub preset: Option<String>,
+    /// The attached projectors, by id.
+    pub projectors: Vec<ProjectorStatus>,
+    /// The calibration running now.
+    pub calibrating: Option<CalibrationProgress>,
+    /// Each projector's last calibration (or failed attempt), by id.
+    pub calibrations: Vec<CalibrationResult>,
 }
 
 /// A projector whose display is lost, as its node agent reported it.
@@ -207,6 +230,16 @@ struct Shared {
     max_message: usize,
     /// The room's status, as the round loop and the readers update it.
     status: watch::Sender<RoomStatus>,
+    /// How the room's LEDs are switched, to measure another preset's light.
+    lights: Option<Arc<dyn Lights>>,
+    /// Each node's value as the camera agent follows it (its start or remembered state, plus
+    /// its contributions), for the console's frame thumbnails.
+    values: Mutex<HashMap<u32, LinearRgb>>,
+    /// The projectors left out of the last round.
+    late: Mutex<Vec<String>>,
+    /// The latest whole photograph, published only while someone watches.
+    photos: watch::Sender<Option<Photo>>,
+    photo_seq: AtomicU64,
 }
 
 impl Shared {
@@ -216,6 +249,46 @@ impl Shared {
 
     fn live_mut(&self) -> RwLockWriteGuard<'_, Live> {
         self.live.write().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn values(&self) -> MutexGuard<'_, HashMap<u32, LinearRgb>> {
+        self.values.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Publishes a whole photograph for the console, if one watches (the image is moved, not
+    /// copied: the round loop pays one allocation).
+    fn publish_photo(&self, image: LinearImage) -> u64 {
+        let seq = self.photo_seq.fetch_add(1, Ordering::Relaxed) + 1;
+        if self.photos.receiver_count() > 0 {
+            self.photos.send_replace(Some(Photo {
+                seq,
+                image: Arc::new(image),
+            }));
+        }
+        seq
+    }
+
+    /// Publishes the attached projectors' states (on every change of the registry, a
+    /// calibration's start and end, and each round's late ones).
+    fn publish_projectors(&self) {
+        let late = self
+            .late
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone();
+        let calibrating = self
+            .status
+            .borrow()
+            .calibrating
+            .as_ref()
+            .map(|c| c.projectors.clone())
+            .unwrap_or_default();
+        let projectors = self.registry.lock().statuses(&calibrating, &late);
+        self.status.send_if_modified(|s| {
+            let changed = s.projectors != projectors;
+            s.projectors = projectors;
+            changed
+        });
     }
 
     /// Queues `bodies` to one peer without waiting, counting their bytes; false when the node
@@ -246,6 +319,7 @@ impl Shared {
             }
             return false;
         }
+        self.note_starts(&bodies);
         for body in bodies {
             let message = v1::RoomMessage { body: Some(body) };
             self.bytes_out
@@ -256,6 +330,19 @@ impl Shared {
             }
         }
         true
+    }
+
+    /// A fresh node starts where it is told (a node that runs keeps its value): the console's
+    /// view of its frame.
+    fn note_starts(&self, bodies: &[v1::room_message::Body]) {
+        let mut values = self.values();
+        for body in bodies {
+            if let v1::room_message::Body::Attenuation(a) = body
+                && let Ok(start) = roomlight_proto::convert::from_rgb("start", a.start.as_ref())
+            {
+                values.entry(a.node).or_insert(start.clamp_unit());
+            }
+        }
     }
 
     /// Publishes the camera's state (at once: a failing camera runs no round to report it).
@@ -314,11 +401,64 @@ pub fn serve_tls(
     watch::Receiver<RoomStatus>,
     tokio::task::JoinHandle<Result<(), crate::AgentError>>,
 ) {
+    let served = serve_room(
+        config,
+        model,
+        camera,
+        listener,
+        tls,
+        Extras::default(),
+        cancel,
+    );
+    (served.status, served.handle)
+}
+
+/// What a camera agent may be given beyond its config: how to switch the room's LEDs (for
+/// the console's preset switch) and which preset the model's target is.
+#[derive(Default)]
+pub struct Extras {
+    pub lights: Option<Arc<dyn Lights>>,
+    pub preset: Option<String>,
+}
+
+impl std::fmt::Debug for Extras {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Extras")
+            .field("lights", &self.lights.as_ref().map(|l| l.presets()))
+            .field("preset", &self.preset)
+            .finish()
+    }
+}
+
+/// A camera agent running: its status, the console's handle on it, and its task.
+#[derive(Debug)]
+pub struct Served {
+    pub status: watch::Receiver<RoomStatus>,
+    pub control: Control,
+    pub handle: tokio::task::JoinHandle<Result<(), crate::AgentError>>,
+}
+
+/// [`serve_tls`] with [`Extras`], returning the console's [`Control`] too.
+pub fn serve_room(
+    config: CameraConfig,
+    model: RoomModel,
+    camera: impl Camera,
+    listener: tokio::net::TcpListener,
+    tls: Option<crate::tls::ServerTls>,
+    extras: Extras,
+    cancel: CancellationToken,
+) -> Served {
     let (contributions, contrib_rx) = mpsc::channel(4096);
     let live = Live::new(&model);
     let max_message = max_node_message(&model);
     let connections = connection_limit(&model);
-    let (status, status_rx) = watch::channel(RoomStatus::default());
+    let (status, status_rx) = watch::channel(RoomStatus {
+        preset: extras.preset,
+        ..RoomStatus::default()
+    });
+    let (photos, photos_rx) = watch::channel(None);
+    // A console's requests wait here for the round loop; a few are plenty (each answers).
+    let (requests, requests_rx) = mpsc::channel(16);
     let shared = Arc::new(Shared {
         config,
         survey: model.survey,
@@ -335,10 +475,24 @@ pub fn serve_tls(
         misbehaving: Default::default(),
         max_message,
         status,
+        lights: extras.lights,
+        values: Mutex::new(HashMap::new()),
+        late: Mutex::new(Vec::new()),
+        photos,
+        photo_seq: AtomicU64::new(0),
     });
-    let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx);
+    let control = Control {
+        shared: shared.clone(),
+        requests,
+        photos: photos_rx,
+    };
+    let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx, requests_rx);
     let handle = tokio::spawn(run(shared, rounds, (listener, connections, tls), cancel));
-    (status_rx, handle)
+    Served {
+        status: status_rx,
+        control,
+        handle,
+    }
 }
 
 /// The server and the rounds together; on a stop request the current round finishes (bounded:
@@ -377,8 +531,20 @@ async fn run<C: Camera>(
         tokio::time::sleep(grace).await;
     };
     tokio::pin!(server);
+    let watcher = shared.clone();
+    let projectors = async move {
+        // At most five times a second: acknowledgements change the registry many times a
+        // round, and listing the projectors is O(projectors).
+        loop {
+            let changed = watcher.registry.changed();
+            watcher.publish_projectors();
+            changed.await;
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    };
     tokio::select! {
         result = &mut server => return result.map_err(crate::AgentError::from),
+        () = projectors => {}
         () = rounds.run(cancel.clone()) => {}
         () = stop_waiting => tracing::warn!(?grace, "the round did not finish in time: stopped"),
     }

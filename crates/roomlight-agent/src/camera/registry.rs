@@ -7,6 +7,7 @@
 //! are woken on every change. It knows nothing of the model, the camera or message contents.
 
 use super::DisplayLost;
+use super::operator::{ProjectorState, ProjectorStatus};
 use crate::hardware::DisplayReport;
 use roomlight_core::round::Projectors;
 use roomlight_proto::v1;
@@ -100,6 +101,52 @@ impl Peers {
             .collect();
         lost.sort_by(|a, b| a.projector.cmp(&b.projector));
         lost
+    }
+
+    /// The attached projectors' states for the console, by id: `calibrating` are being
+    /// measured, `late` were left out of the last round.
+    pub(super) fn statuses(&self, calibrating: &[String], late: &[String]) -> Vec<ProjectorStatus> {
+        let mut out: Vec<ProjectorStatus> = self
+            .wire
+            .iter()
+            .map(|(id, peer)| {
+                let round = self.round.get(id);
+                let calibrated = round.is_some_and(|p| p.calibrated());
+                let shown = round.and_then(|p| p.shown()).or(peer.pattern_shown);
+                let state = if matches!(peer.display, Some(DisplayReport::Lost { .. })) {
+                    ProjectorState::DisplayLost
+                } else if calibrating.contains(id) {
+                    ProjectorState::Calibrating
+                } else if calibrated && late.contains(id) {
+                    ProjectorState::Late
+                } else if calibrated {
+                    ProjectorState::Live
+                } else if shown.is_none() {
+                    ProjectorState::Connecting
+                } else {
+                    ProjectorState::Waiting
+                };
+                ProjectorStatus {
+                    id: id.clone(),
+                    state,
+                    nodes: round.map_or(0, |p| p.nodes().len()),
+                    shown,
+                    width: peer.width,
+                    height: peer.height,
+                }
+            })
+            .collect();
+        out.sort_by(|a, b| a.id.cmp(&b.id));
+        out
+    }
+
+    /// Projector `id` is to be measured again (it keeps its nodes and light meanwhile).
+    pub(super) fn recalibrate(&mut self, id: &str) -> bool {
+        if self.round.get(id).is_none() {
+            return false;
+        }
+        self.round.recalibrate(id);
+        true
     }
 
     /// Its queue and nodes.

@@ -9,7 +9,8 @@
 //! wire. It knows nothing of the handshake or how a peer's stream is read.
 
 use super::capture::Captures;
-use super::{Contribution, RoomStatus, Shared};
+use super::operator::{Refused, Request};
+use super::{Contribution, Shared};
 use crate::hardware::Camera;
 use roomlight_core::LinearRgb;
 use roomlight_core::aggregator::{ErrorKind, RoundSummary};
@@ -44,6 +45,12 @@ pub(super) struct Rounds<C> {
     backoff: Backoff,
     /// The round controller's clock: time since the loop started.
     epoch: tokio::time::Instant,
+    /// The console's requests, carried out between rounds.
+    requests: mpsc::Receiver<Request>,
+    /// Paused by the console: no round runs (requests are still served).
+    paused: bool,
+    /// Times the target changed.
+    restarts: u64,
 }
 
 impl<C: Camera> Rounds<C> {
@@ -51,6 +58,7 @@ impl<C: Camera> Rounds<C> {
         shared: Arc<Shared>,
         camera: C,
         contributions: mpsc::Receiver<Contribution>,
+        requests: mpsc::Receiver<Request>,
     ) -> Self {
         let sigma = shared.live().problem.noise().to_vec();
         let model_rounds = shared.config.model_rounds;
@@ -62,17 +70,35 @@ impl<C: Camera> Rounds<C> {
             calibrated_hot: 0,
             backoff: Backoff::default(),
             epoch: tokio::time::Instant::now(),
+            requests,
+            paused: false,
+            restarts: 0,
         }
     }
 
     /// Runs rounds until `cancel`: a stop request ends them between two rounds, never inside one.
     pub(super) async fn run(mut self, cancel: CancellationToken) {
         while !cancel.is_cancelled() {
+            // The console's requests, between two rounds.
+            while let Ok(request) = self.requests.try_recv() {
+                self.serve(request).await;
+            }
+            if self.paused {
+                tokio::select! {
+                    Some(request) = self.requests.recv() => self.serve(request).await,
+                    () = cancel.cancelled() => break,
+                }
+                continue;
+            }
             // Someone must be there, and have shown its last frame (or wait to be measured).
             let present = tokio::select! {
                 present = self.shared.registry.wait_for(Duration::from_secs(3600), |r| {
                     r.projectors().any_present()
                 }) => present,
+                Some(request) = self.requests.recv() => {
+                    self.serve(request).await;
+                    continue;
+                }
                 () = cancel.cancelled() => break,
             };
             if !present {
@@ -132,6 +158,10 @@ impl<C: Camera> Rounds<C> {
         tokio::select! {
             () = tokio::time::sleep_until(next) => Next::Again,
             () = shared.registry.changed() => Next::Again,
+            Some(request) = self.requests.recv() => {
+                self.serve(request).await;
+                Next::Again
+            }
             () = cancel.cancelled() => Next::Stop,
         }
     }
@@ -184,18 +214,146 @@ impl<C: Camera> Rounds<C> {
             let peers = shared.registry.lock();
             (peers.len(), peers.displays_lost())
         };
-        shared.status.send_replace(RoomStatus {
-            round,
-            captures: self.eye.count,
-            measured_objective,
-            live_projectors,
-            bytes_out: shared.bytes_out.swap(0, Ordering::Relaxed),
-            bytes_in: shared.bytes_in.swap(0, Ordering::Relaxed),
-            settled: self.controller.settled(),
-            calibrated_hot: self.calibrated_hot,
-            camera: self.eye.state().clone(),
-            displays_lost,
+        let settled = self.controller.settled();
+        shared.status.send_modify(|s| {
+            s.round = round;
+            s.captures = self.eye.count;
+            s.measured_objective = measured_objective;
+            s.live_projectors = live_projectors;
+            s.bytes_out = shared.bytes_out.swap(0, Ordering::Relaxed);
+            s.bytes_in = shared.bytes_in.swap(0, Ordering::Relaxed);
+            s.settled = settled;
+            s.calibrated_hot = self.calibrated_hot;
+            s.camera = self.eye.state().clone();
+            s.displays_lost = displays_lost;
         });
+    }
+
+    /// Carries out one of the console's requests (between rounds).
+    async fn serve(&mut self, request: Request) {
+        match request {
+            Request::Pause(paused) => {
+                if paused != self.paused {
+                    tracing::info!(
+                        paused,
+                        "rounds {} by the console",
+                        if paused { "paused" } else { "resumed" }
+                    );
+                }
+                self.paused = paused;
+            }
+            Request::Calibrate(which, reply) => {
+                let _ = reply.send(self.recalibrate(which));
+            }
+            Request::Preset(preset, reply) => {
+                let _ = reply.send(self.retarget(preset).await);
+            }
+            Request::Photograph(reply) => {
+                let photo = self.eye.photograph(&self.shared).await;
+                let _ = reply.send(photo.map(|image| {
+                    let (w, h) = (image.width, image.height);
+                    (self.shared.publish_photo(image), w, h)
+                }));
+            }
+        }
+    }
+
+    /// Queues `which` (every attached projector when `None`) to be measured again: they leave
+    /// the rounds, keeping their light, until their calibration ends.
+    fn recalibrate(&mut self, which: Option<String>) -> Result<Vec<String>, Refused> {
+        let queued = {
+            let mut peers = self.shared.registry.lock();
+            let ids: Vec<String> = match which {
+                Some(id) if peers.peer(&id).is_some() => vec![id],
+                Some(id) => return Err(Refused::UnknownProjector(id)),
+                None => {
+                    let mut ids: Vec<String> = peers
+                        .projectors()
+                        .iter()
+                        .map(|(id, _)| id.clone())
+                        .collect();
+                    ids.sort();
+                    ids
+                }
+            };
+            ids.into_iter()
+                .filter(|id| peers.recalibrate(id))
+                .collect::<Vec<_>>()
+        };
+        for id in &queued {
+            self.backoff.forget(id);
+        }
+        tracing::info!(projectors = ?queued, "calibration requested by the console");
+        self.shared.registry.notify();
+        Ok(queued)
+    }
+
+    /// Reproduces the LED preset `preset` from now on: its light is measured as the difference
+    /// of two captures, with and without the LEDs, while the projectors keep theirs, and the
+    /// target becomes the room's black plus it; the rounds restart.
+    async fn retarget(&mut self, preset: String) -> Result<(), Refused> {
+        let shared = self.shared.clone();
+        let Some(lights) = shared.lights.clone() else {
+            return Err(Refused::NoLights);
+        };
+        let presets = lights.presets();
+        if !presets.contains(&preset) {
+            return Err(Refused::UnknownPreset(preset, presets.join(", ")));
+        }
+        let capture = async |rounds: &mut Self| {
+            shared
+                .registry
+                .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
+                .await;
+            rounds
+                .eye
+                .measured(&shared)
+                .await
+                .ok_or_else(|| Refused::Camera("the capture failed (see the warnings)".into()))
+        };
+        let (without, ok_without) = capture(self).await?;
+        lights
+            .switch(Some(preset.clone()))
+            .await
+            .map_err(Refused::Lights)?;
+        let with = capture(self).await;
+        // Off again whatever happened: the projectors light the room, not the LEDs.
+        let off = lights.switch(None).await.map_err(Refused::Lights);
+        let (with, ok_with) = with?;
+        off?;
+        {
+            let mut live = shared.live_mut();
+            let black = live.problem.black().to_vec();
+            let old = live.problem.target().to_vec();
+            let target: Vec<LinearRgb> = (0..black.len())
+                .map(|i| {
+                    let measured = ok_without.get(i) == Some(&true)
+                        && ok_with.get(i) == Some(&true)
+                        && live.excluded.get(i) != Some(&true);
+                    if !measured {
+                        // Left out, or not measurable under one of the two: as it was.
+                        return old[i];
+                    }
+                    // The LEDs add light; a negative difference is noise.
+                    black[i] + (with[i] - without[i]).map(|v| v.max(0.0))
+                })
+                .collect();
+            live.problem = live
+                .problem
+                .with_target(target)
+                .map_err(|e| Refused::Model(format!("the new target was refused: {e}")))?;
+        }
+        self.controller.retarget();
+        self.restarts += 1;
+        tracing::info!(%preset, "new target measured: the rounds restart");
+        let restarts = self.restarts;
+        shared.status.send_modify(|s| {
+            s.preset = Some(preset);
+            s.restarts = restarts;
+            s.settled = false;
+        });
+        shared.save_model();
+        Ok(())
     }
 
     /// Tells the controller which projectors take part now (a change restarts the next round).
@@ -277,9 +435,13 @@ impl<C> Rounds<C> {
         let shared = self.shared.clone();
         let live = shared.live();
         let columns = live.problem.columns();
+        let mut values = shared.values();
         for (node, change) in c.nodes {
             match collection.receive(c.round, node) {
                 Received::Counted => {
+                    if let Some(x) = values.get_mut(&node) {
+                        *x = (*x + change).clamp_unit();
+                    }
                     let Some(column) = columns.get(node as usize) else {
                         continue;
                     };

@@ -227,6 +227,19 @@ fn greeting(
     calibrated: bool,
 ) -> Vec<Result<v1::RoomMessage, Status>> {
     let config = &shared.config;
+    // The values it remembers, when they are kept: the console's view of its frame.
+    if let Some(state) = hello
+        .state
+        .as_ref()
+        .filter(|st| st.calibration_epoch == config.calibration_epoch)
+    {
+        let mut values = shared.values();
+        for n in state.nodes.iter().filter(|n| nodes.contains(&n.node)) {
+            if let Ok(x) = roomlight_proto::convert::from_rgb("state", n.x.as_ref()) {
+                values.insert(n.node, x.clamp_unit());
+            }
+        }
+    }
     let live = shared.live();
     let assign = match live.assignments.get(&hello.projector_id) {
         Some(a) => super::calibration::assign_message(a),
@@ -257,7 +270,9 @@ fn greeting(
         room_message(v1::room_message::Body::Assign(assign)),
     ];
     if calibrated {
-        messages.extend(live.attenuation_bodies(nodes).into_iter().map(room_message));
+        let bodies = live.attenuation_bodies(nodes);
+        shared.note_starts(&bodies);
+        messages.extend(bodies.into_iter().map(room_message));
     }
     messages
 }

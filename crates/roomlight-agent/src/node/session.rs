@@ -99,9 +99,15 @@ pub(super) async fn run(
         assigned: Vec::new(),
         nodes: HashMap::new(),
         started: false,
+        identify_until: None,
     };
     loop {
+        let identify_until = session.identify_until;
         let next = tokio::select! {
+            () = sleep_until_some(identify_until) => {
+                session.identify(None).await;
+                continue;
+            }
             () = cancel.cancelled() => {
                 let goodbye = v1::Goodbye { reason: "shutting down".into() };
                 // The stream may already be gone; the node stops either way.
@@ -123,6 +129,10 @@ pub(super) async fn run(
             Some(Body::Attenuation(a)) => session.attenuation(&a).await?,
             Some(Body::Errors(e)) => session.errors(e).await?,
             Some(Body::Show(show)) => session.show(show).await?,
+            Some(Body::Identify(i)) => {
+                let seconds = u64::from(i.seconds.clamp(1, 60));
+                session.identify(Some(Duration::from_secs(seconds))).await;
+            }
             Some(Body::Goodbye(g)) => {
                 tracing::info!(reason = %g.reason, "the camera agent said goodbye");
                 return Ok(SessionEnd::Closed);
@@ -274,6 +284,8 @@ struct Session<'a, D: Display> {
     nodes: HashMap<u32, NodeState>,
     /// Whether the start (frame 0) has been acknowledged.
     started: bool,
+    /// Showing the identify pattern until then.
+    identify_until: Option<tokio::time::Instant>,
 }
 
 impl<D: Display> Session<'_, D> {
@@ -395,6 +407,21 @@ impl<D: Display> Session<'_, D> {
     /// A calibration pattern: node values shown as they are, without touching the node states
     /// (values for nodes it does not own, or not finite, are refused), or a whole-frame
     /// pattern. One the display cannot show is not acknowledged.
+    /// Shows the identify pattern for `seconds` (`None`: its time is up, the frame returns).
+    async fn identify(&mut self, seconds: Option<Duration>) {
+        let projector = self.config.projector_id.clone();
+        let on = seconds.is_some();
+        if !self.display.identify(&projector, on) {
+            tracing::info!("identify asked: this display draws no pixels");
+            return;
+        }
+        self.identify_until = seconds.map(|s| tokio::time::Instant::now() + s);
+        if on {
+            tracing::info!(?seconds, "showing the identify pattern");
+        }
+        self.display.flush().await;
+    }
+
     async fn show(&mut self, show: v1::Show) -> Result<(), AgentError> {
         let resolution = self.display.resolution();
         let values = match show
@@ -454,4 +481,12 @@ async fn acknowledge(
         v1::node_message::Body::Shown(v1::Shown { seq, pattern }),
     )
     .await
+}
+
+/// Resolves at `until`, never when `None`.
+async fn sleep_until_some(until: Option<tokio::time::Instant>) {
+    match until {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
+    }
 }

@@ -70,6 +70,8 @@ fn write_survey(room: &Room, out: &Path) -> Result<()> {
                 .filter(|(_, p)| p.target)
                 .map(|(i, _)| i as u32)
                 .collect(),
+            target_polygons: Vec::new(),
+            preset: None,
         },
     )
 }

@@ -66,6 +66,26 @@ pub struct CameraProcess {
     pub advertise: Option<MdnsConfig>,
     /// TLS (plaintext when `None`: loopback, or `insecure` in its config).
     pub tls: Option<roomlight_agent::tls::ServerTls>,
+    /// The installer's web console, if served.
+    pub console: Option<ConsoleProcess>,
+}
+
+/// Where and for whom the installer's console is served.
+#[derive(Clone)]
+pub struct ConsoleProcess {
+    /// Its address (`127.0.0.1:8080`; port 0: any free port, printed).
+    pub listen: String,
+    /// The token that logs in.
+    pub token: String,
+}
+
+impl std::fmt::Debug for ConsoleProcess {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ConsoleProcess")
+            .field("listen", &self.listen)
+            .field("token", &"<secret>")
+            .finish()
+    }
 }
 
 /// The camera agent's camera: the synthetic room's patches, a rendered room's images sampled
@@ -203,10 +223,13 @@ async fn from_model(
     Ok((model, camera))
 }
 
-async fn model_and_camera(process: &CameraProcess) -> Result<(RoomModel, AnyCamera)> {
+async fn model_and_camera(
+    process: &CameraProcess,
+) -> Result<(RoomModel, AnyCamera, camera::Extras)> {
     match &process.source {
         CameraSource::Model { model, charts } => {
-            from_model(model, charts.as_deref(), &process.hardware).await
+            let (model, camera) = from_model(model, charts.as_deref(), &process.hardware).await?;
+            Ok((model, camera, camera::Extras::default()))
         }
         CameraSource::Survey { survey, preset } => {
             // The model this camera agent wrote before it was restarted, if any.
@@ -243,6 +266,29 @@ async fn model_and_camera(process: &CameraProcess) -> Result<(RoomModel, AnyCame
     }
 }
 
+/// Serves the console beside the camera agent until `cancel`, printing its address.
+fn start_console(
+    listener: tokio::net::TcpListener,
+    config: roomlight_console::ConsoleConfig,
+    control: camera::Control,
+    status: tokio::sync::watch::Receiver<camera::RoomStatus>,
+    cancel: &CancellationToken,
+) -> Result<()> {
+    let addr = listener.local_addr()?;
+    if !addr.ip().is_loopback() {
+        tracing::warn!(%addr, "the console is served in plain HTTP beyond this machine: its token crosses the network in the clear (use a network you trust, or an SSH tunnel to a loopback console)");
+    }
+    println!("console on http://{addr}/");
+    let _ = std::io::stdout().flush();
+    let cancel = cancel.clone();
+    tokio::spawn(async move {
+        if let Err(e) = roomlight_console::serve(listener, config, control, status, cancel).await {
+            tracing::error!(error = %e, "the console stopped");
+        }
+    });
+    Ok(())
+}
+
 /// Loads the model, connects the camera, listens (calling `listening` with the address once
 /// node agents can attach), advertises, and serves until `cancel`, printing one line per round.
 pub async fn serve_camera(
@@ -250,10 +296,19 @@ pub async fn serve_camera(
     listening: impl FnOnce(SocketAddr),
     cancel: CancellationToken,
 ) -> Result<()> {
-    let (model, camera) = tokio::select! {
+    let (model, camera, extras) = tokio::select! {
         loaded = model_and_camera(&process) => loaded?,
         // Stopped while it waits for its camera.
         () = cancel.cancelled() => return Ok(()),
+    };
+    let console = match &process.console {
+        Some(c) => Some((
+            tokio::net::TcpListener::bind(&c.listen)
+                .await
+                .with_context(|| format!("binding the console's address {}", c.listen))?,
+            c.token.clone(),
+        )),
+        None => None,
     };
     let listener = tokio::net::TcpListener::bind(&process.listen)
         .await
@@ -269,14 +324,34 @@ pub async fn serve_camera(
         ),
         None => None,
     };
-    let (mut status, handle) = camera::serve_tls(
+    let survey_file = match &process.source {
+        CameraSource::Survey { survey, .. } => Some(survey.clone()),
+        CameraSource::Model { .. } => None,
+    };
+    let model_out = process.agent.model_out.clone();
+    let served = camera::serve_room(
         process.agent,
         model,
         camera,
         listener,
         process.tls,
+        extras,
         cancel.clone(),
     );
+    let (mut status, handle) = (served.status.clone(), served.handle);
+    if let Some((listener, token)) = console {
+        let config = roomlight_console::ConsoleConfig {
+            token,
+            survey: survey_file,
+            snapshots: model_out
+                .as_deref()
+                .and_then(Path::parent)
+                .filter(|d| !d.as_os_str().is_empty())
+                .map_or_else(|| PathBuf::from("."), Path::to_path_buf),
+            model: model_out,
+        };
+        start_console(listener, config, served.control, served.status, &cancel)?;
+    }
     super::systemd::ready(&format!("camera agent of room {room:?} serving on {addr}"));
     super::systemd::with_watchdog(async {
         loop {

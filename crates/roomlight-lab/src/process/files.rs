@@ -46,6 +46,14 @@ pub struct SurveyFile {
     pub sample: SampleConfig,
     /// Row-major camera pixels of the target, increasing.
     pub target_pixels: Vec<u32>,
+    /// The target as the console drew it (polygons in camera pixels); `target_pixels` is what
+    /// counts.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub target_polygons: Vec<Vec<[f64; 2]>>,
+    /// The LED preset to reproduce, as the console picked it (the camera config's `preset`
+    /// comes first).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preset: Option<String>,
 }
 
 /// The most charts a survey may name (a room has a few dozen).

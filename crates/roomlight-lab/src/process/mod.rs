@@ -17,7 +17,7 @@ mod survey;
 mod systemd;
 
 pub use calibrate::{CalibrateOptions, calibrate_to_files};
-pub use camera::{CameraHardware, CameraProcess, CameraSource, serve_camera};
+pub use camera::{CameraHardware, CameraProcess, CameraSource, ConsoleProcess, serve_camera};
 pub use check::{CameraAt, Checklist, check_camera, check_node};
 pub use files::{
     ChartsFile, MAX_CHARTS, ModelFile, SurveyFile, load_model, load_scene, load_survey,

@@ -44,6 +44,8 @@ impl Checked {
             sample: self.survey.sample,
             target_mask: self.target_mask.clone(),
             patches,
+            width: self.survey.camera_width,
+            height: self.survey.camera_height,
         }
     }
 
@@ -85,7 +87,7 @@ pub(super) async fn survey_model(
     resume: Option<(&Path, ModelFile)>,
     room: SurveyRoom,
     eye: Option<HwCamera>,
-) -> Result<(RoomModel, AnyCamera)> {
+) -> Result<(RoomModel, AnyCamera, camera::Extras)> {
     let checked = match &room {
         SurveyRoom::Rendered(client) => check(survey_path, client).await?,
         SurveyRoom::Physical(_) => {
@@ -99,9 +101,51 @@ pub(super) async fn survey_model(
             }
         }
     };
-    match resume {
-        Some((path, model)) => resumed(&checked, path, model, &room, eye.as_ref()),
-        None => measured(&checked, preset, &room, eye.as_ref()).await,
+    // The config's preset, else the one the console saved in the survey.
+    let preset = preset.or(checked.survey.preset.as_deref());
+    let (model, camera, preset) = match resume {
+        Some((path, model)) => {
+            let (model, camera) = resumed(&checked, path, model, &room, eye.as_ref())?;
+            (model, camera, preset.map(str::to_string))
+        }
+        None => {
+            let (model, camera, preset) = measured(&checked, preset, &room, eye.as_ref()).await?;
+            (model, camera, Some(preset))
+        }
+    };
+    let lights = SurveyLights {
+        room,
+        presets: checked.presets.clone(),
+        sample: checked.survey.sample,
+    };
+    let extras = camera::Extras {
+        lights: Some(Arc::new(lights)),
+        preset,
+    };
+    Ok((model, camera, extras))
+}
+
+/// The room's LEDs as the camera agent switches them for the console's preset.
+struct SurveyLights {
+    room: SurveyRoom,
+    presets: Vec<String>,
+    sample: roomlight_calib::charts::SampleConfig,
+}
+
+impl camera::Lights for SurveyLights {
+    fn presets(&self) -> Vec<String> {
+        self.presets.clone()
+    }
+
+    fn switch(
+        &self,
+        preset: Option<String>,
+    ) -> std::pin::Pin<Box<dyn Future<Output = Result<(), String>> + Send + '_>> {
+        Box::pin(async move {
+            switch_room(&self.room, self.sample, preset.as_deref())
+                .await
+                .map_err(|e| format!("{e:#}"))
+        })
     }
 }
 
@@ -181,7 +225,7 @@ async fn measured(
     preset: Option<&str>,
     room: &SurveyRoom,
     eye: Option<&HwCamera>,
-) -> Result<(RoomModel, AnyCamera)> {
+) -> Result<(RoomModel, AnyCamera, String)> {
     let preset = match preset {
         Some(p) if checked.presets.iter().any(|q| q == p) => p.to_string(),
         Some(p) => bail!("preset {p:?}: the room has {}", checked.presets.join(", ")),
@@ -235,21 +279,25 @@ async fn measured(
         hot: Default::default(),
         survey: Some(checked.for_patches(patches)),
     };
-    Ok((model, camera))
+    Ok((model, camera, preset))
 }
 
 /// Switches the room's LEDs to `preset` (`None`: off).
 async fn switch(room: &SurveyRoom, checked: &Checked, preset: Option<&str>) -> Result<()> {
+    switch_room(room, checked.survey.sample, preset).await
+}
+
+/// [`switch`] with the sampling only.
+async fn switch_room(
+    room: &SurveyRoom,
+    sample: roomlight_calib::charts::SampleConfig,
+    preset: Option<&str>,
+) -> Result<()> {
     match room {
         SurveyRoom::Rendered(client) => {
-            RenderedCamera::new(
-                client.clone(),
-                Vec::new(),
-                Vec::new(),
-                checked.survey.sample,
-            )
-            .set_lights(preset.unwrap_or(""))
-            .await?;
+            RenderedCamera::new(client.clone(), Vec::new(), Vec::new(), sample)
+                .set_lights(preset.unwrap_or(""))
+                .await?;
             Ok(())
         }
         SurveyRoom::Physical(lights) => lights.switch(preset.is_some(), preset.unwrap_or("")).await,

@@ -4,7 +4,9 @@ use super::{Hardware, check, check_nonempty, read_toml};
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::CameraConfig;
 use roomlight_agent::discovery::MdnsConfig;
-use roomlight_lab::process::{CameraHardware, CameraProcess, CameraSource, LightsSpec};
+use roomlight_lab::process::{
+    CameraHardware, CameraProcess, CameraSource, ConsoleProcess, LightsSpec,
+};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -70,6 +72,26 @@ struct CameraFile {
     tls: Option<roomlight_agent::tls::TlsFiles>,
     #[serde(default)]
     insecure: bool,
+    /// The installer's web console: `console = "127.0.0.1:8080"`, or `console = { listen =
+    /// "...", token = ... }` with a token of its own (the room token by default).
+    #[serde(default)]
+    console: Option<ConsoleSpec>,
+}
+
+/// Where the console listens, and optionally its own token.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum ConsoleSpec {
+    Listen(String),
+    Table(ConsoleTable),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ConsoleTable {
+    listen: String,
+    #[serde(default)]
+    token: Option<super::Token>,
 }
 
 fn heartbeat_default() -> u64 {
@@ -87,12 +109,48 @@ fn mdns_default() -> bool {
 
 /// The camera agent's config file, checked and turned into the process to run.
 pub fn load_camera(path: &Path) -> Result<CameraProcess> {
-    let file: CameraFile = read_toml(path)?;
+    let mut file: CameraFile = read_toml(path)?;
     let token = file.token.resolve(path)?;
     file.check(path)?;
     let hardware = file.hardware(path)?;
     let tls = roomlight_agent::tls::server(path, file.tls.as_ref(), &file.listen, file.insecure)?;
-    Ok(file.into_process(hardware, token, tls))
+    let console = match file.console.take() {
+        None => None,
+        Some(ConsoleSpec::Listen(listen)) => Some(ConsoleProcess {
+            listen,
+            token: token.clone(),
+        }),
+        Some(ConsoleSpec::Table(ConsoleTable { listen, token: own })) => Some(ConsoleProcess {
+            listen,
+            token: match own {
+                Some(t) => t
+                    .resolve(path)
+                    .with_context(|| format!("{}: console.token", path.display()))?,
+                None => token.clone(),
+            },
+        }),
+    };
+    if let Some(c) = &console {
+        check_nonempty(path, "console", &c.listen)?;
+        let Ok(addr) = c.listen.parse::<std::net::SocketAddr>() else {
+            bail!(
+                "{}: console {:?}: expected an address and port, such as \"127.0.0.1:8080\"",
+                path.display(),
+                c.listen
+            );
+        };
+        if !addr.ip().is_loopback() && c.token.chars().count() < 12 {
+            bail!(
+                "{}: console {}: beyond this machine its token needs at least 12 characters (it has {}): it opens the room to any browser on the network",
+                path.display(),
+                c.listen,
+                c.token.chars().count()
+            );
+        }
+    }
+    let mut process = file.into_process(hardware, token, tls);
+    process.console = console;
+    Ok(process)
 }
 
 /// `camera` as a spec string or a `CameraConfig` table, validated.
@@ -232,6 +290,7 @@ impl CameraFile {
             source,
             listen: self.listen,
             tls,
+            console: None,
             advertise: self.mdns.then_some(MdnsConfig {
                 port: self.mdns_port,
                 loopback_only: self.mdns_loopback_only,
