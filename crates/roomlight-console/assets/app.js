@@ -499,10 +499,11 @@ function renderWarnings(warnings) {
 
 // ---- the action bar -----------------------------------------------------------------------
 
+/// `''` stands for no preset (the survey's may be null: the camera agent's config names it).
 function fillPresets(select, presets, current) {
   const names = presets || [];
   if ([...select.options].map((o) => o.value).join('\n') !== names.join('\n')) {
-    select.replaceChildren(...names.map((name) => element('option', { value: name, textContent: name })));
+    select.replaceChildren(...names.map((name) => element('option', { value: name, textContent: name || '(the config\'s)' })));
   }
   if (current != null && document.activeElement !== select && select.value !== current) select.value = current;
 }
@@ -594,16 +595,28 @@ function renderSurvey() {
   polygonList.replaceChildren(...polygons.map((polygon, k) => element('li', {},
     element('span', { textContent: `polygon ${k + 1}: ${polygon.length} points` }),
     deleteButton(`delete polygon ${k + 1}`, () => polygons.splice(k, 1)))));
-  if (!polygons.length) polygonList.append(element('li', { className: 'empty', textContent: 'No target polygon.' }));
+  if (!polygons.length) {
+    // A survey written by `roomlight calibrate --survey-only` has the target as pixels only:
+    // kept as they are until a polygon is drawn.
+    const pixels = draft && draft.target_pixels;
+    const text = pixels ? `No polygon: the target is ${pixels} pixels from the file, kept unless you draw one.` : 'No target polygon.';
+    polygonList.append(element('li', { className: 'empty', textContent: text }));
+  }
   for (const key of SAMPLE_KEYS) {
     const input = $(`sample-${key}`);
     const value = draft && draft.sample ? draft.sample[key] : '';
     if (document.activeElement !== input) input.value = value ?? '';
   }
-  fillPresets($('survey-preset'), state.status && state.status.presets, draft ? draft.preset : null);
+  fillSurveyPresets();
   setStageAspect();
   updateSurveyControls();
   scheduleRedraw();
+}
+
+function fillSurveyPresets() {
+  const presets = (state.status && state.status.presets) || [];
+  const current = state.draft ? state.draft.preset ?? '' : null;
+  fillPresets($('survey-preset'), ['', ...presets], current);
 }
 
 function deleteButton(label, remove) {
@@ -654,8 +667,8 @@ function cameraPoint(event) {
   const [cw, ch] = cameraSize();
   const clamp = (v, high) => Math.min(Math.max(Math.round(v * 10) / 10, 0), high);
   return [
-    clamp((event.offsetX / canvas.clientWidth) * cw, cw - 1),
-    clamp((event.offsetY / canvas.clientHeight) * ch, ch - 1),
+    clamp((event.offsetX / canvas.clientWidth) * cw, cw),
+    clamp((event.offsetY / canvas.clientHeight) * ch, ch),
   ];
 }
 
@@ -684,8 +697,6 @@ function closePolygon() {
   if (state.mode !== 'target' || state.points.length < 3) return;
   state.draft.target = state.draft.target || [];
   state.draft.target.push(state.points.slice());
-  // The pixels a file carries for its polygons are the server's to compute from them.
-  delete state.draft.target_pixels;
   state.points = [];
   edited();
 }
@@ -744,7 +755,7 @@ function bindSurvey() {
   }
   $('survey-preset').addEventListener('change', (event) => {
     if (!state.draft) return;
-    state.draft.preset = event.currentTarget.value;
+    state.draft.preset = event.currentTarget.value || null;
     edited();
   });
   $('save-survey').addEventListener('click', action(saveSurvey));
@@ -844,7 +855,7 @@ function onStatus(status) {
   renderActions(status);
   renderRoom(status);
   renderCalibration(status);
-  fillPresets($('survey-preset'), status.presets, state.draft ? state.draft.preset : null);
+  fillSurveyPresets();
   setStageAspect();
   scheduleRedraw();
 }
