@@ -1,36 +1,98 @@
 #!/usr/bin/env bash
-# A simulated room on loopback with one process per part: `roomlight sim`, the camera agent and
-# one node agent per projector. Ctrl-C stops them all. Usage: deploy/local-room.sh [PROJECTORS]
+# A simulated room on this PC, one process per part, with the installer's console: `roomlight
+# sim` serves a rendered room, the camera agent calibrates it over the wire (only the survey is
+# written beforehand) and serves the console, and one node agent per luminaire joins it.
+# Prints the console's URL and token; Ctrl-C or SIGTERM stops every process.
+#
+# Usage: deploy/local-room.sh [SCENE]        SCENE: small (default) or default (the embedded lab)
+# Environment:
+#   ROOMLIGHT_BIN           the roomlight binary (default ./target/release/roomlight; built by
+#                           `cargo build --release -p roomlight`, never by this script)
+#   ROOMLIGHT_CONSOLE_PORT  the console's port on 127.0.0.1 (default 8080; 0: any free port)
+#   ROOMLIGHT_TOKEN         the room's and console's token (default: a random one)
 set -euo pipefail
-projectors=${1:-3}
 here=$(cd "$(dirname "$0")/.." && pwd)
-work=$(mktemp -d)
-cargo build --release -p roomlight --manifest-path "$here/Cargo.toml"
-bin="$here/target/release/roomlight"
+bin=${ROOMLIGHT_BIN:-$here/target/release/roomlight}
+if [ ! -x "$bin" ]; then
+    echo "error: no roomlight binary at $bin: build it first (cargo build --release -p roomlight) or set ROOMLIGHT_BIN" >&2
+    exit 1
+fi
+# The work happens in a folder of its own: the binary's path must not depend on where we are.
+bin=$(cd "$(dirname "$bin")" && pwd)/$(basename "$bin")
+scene=${1:-small}
+port=${ROOMLIGHT_CONSOLE_PORT:-8080}
+token=${ROOMLIGHT_TOKEN:-$(head -c 24 /dev/urandom | od -An -tx1 | tr -d ' \n')}
+camera_size=()
+if [ "$scene" = small ]; then camera_size=(--camera 640x480); fi
+work=$(mktemp -d -t roomlight-room.XXXXXX)
 pids=()
 stop() {
     trap - INT TERM EXIT
-    for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
+    for pid in "${pids[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
     wait 2>/dev/null || true
-    echo "stopped; logs and state files in $work"
+    echo "stopped; logs, survey and model in $work"
 }
-trap stop INT TERM EXIT
+trap stop EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+
+# Waits (at most $3 seconds) until file $1 has a line starting with $2, and prints that line;
+# fails if the process $4 ended first.
+wait_line() {
+    local file=$1 prefix=$2 within=$3 pid=$4 i
+    for ((i = 0; i < within * 10; i++)); do
+        if grep -q "^$prefix" "$file" 2>/dev/null; then
+            grep -m1 "^$prefix" "$file"
+            return 0
+        fi
+        if ! kill -0 "$pid" 2>/dev/null; then
+            echo "error: it stopped before printing \"$prefix\"; see $file:" >&2
+            tail -n 20 "$file" >&2
+            return 1
+        fi
+        sleep 0.1
+    done
+    echo "error: no \"$prefix\" in $file within ${within}s" >&2
+    return 1
+}
+
 cd "$work"
-"$bin" sim --synthetic $((projectors * 10)) --projectors "$projectors" --listen 127.0.0.1:50050 --model-out room-model.json > sim.log 2>&1 &
+"$bin" calibrate --scene "$scene" "${camera_size[@]}" --survey-only --out . > calibrate.log
+"$bin" sim --scene "$scene" "${camera_size[@]}" --listen 127.0.0.1:0 > sim.log 2>&1 &
 pids+=($!)
-# The node agents find the camera agent over mDNS, on loopback and a port of this room's own.
-sed -e 's/^listen = .*/listen = "127.0.0.1:50051"/' -e 's/^mdns_port = .*/mdns_port = 53530/' \
-    -e 's/^mdns_loopback_only = .*/mdns_loopback_only = true/' "$here/deploy/camera.toml" > camera.toml
-until grep -q "listening on" sim.log; do sleep 0.1; done
-"$bin" camera --config camera.toml &
+sim=$(wait_line sim.log "sim listening on" 120 "${pids[-1]}" | awk '{print $NF}')
+cat > camera.toml <<EOF
+room = "$scene"
+token = "$token"
+listen = "127.0.0.1:0"
+hardware = { sim = "http://$sim" }
+survey = "survey.json"
+model_out = "model.json"
+model_rounds = 20
+mdns = false
+console = "127.0.0.1:$port"
+EOF
+"$bin" camera --config camera.toml > camera.log 2>&1 &
 pids+=($!)
-sleep 0.5
-for ((k = 0; k < projectors; k++)); do
-    sed -e "s/^projector = .*/projector = \"p$k\"/" -e "s/^state_file = .*/state_file = \"p$k.state.json\"/" \
-        -e 's/^camera = .*/camera = { mdns = "lab" }/' -e 's/^mdns_port = .*/mdns_port = 53530/' \
-        -e 's/^mdns_loopback_only = .*/mdns_loopback_only = true/' "$here/deploy/node.toml" > "p$k.toml"
-    "$bin" node --config "p$k.toml" > "p$k.log" 2>&1 &
+camera=$(wait_line camera.log "camera listening on" 120 "${pids[-1]}" | awk '{print $NF}')
+console=$(wait_line camera.log "console on" 30 "${pids[-1]}" | awk '{print $NF}')
+# One node agent per luminaire, as `roomlight calibrate` listed them.
+while read -r _ name kind; do
+    cat > "$name.toml" <<EOF
+room = "$scene"
+token = "$token"
+camera = "http://$camera"
+hardware = { sim = "http://$sim" }
+rendered = true
+kind = "$kind"
+projector = "$name"
+state_file = "$name.state.json"
+EOF
+    "$bin" node --config "$name.toml" > "$name.log" 2>&1 &
     pids+=($!)
-done
-echo "room running in $work (Ctrl-C stops it)"
+done < <(grep '^luminaire ' calibrate.log)
+echo "room $scene running in $work ($((${#pids[@]} - 2)) projectors)"
+echo "console: $console"
+echo "token: $token"
+echo "Ctrl-C stops it."
 wait

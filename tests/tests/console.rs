@@ -82,8 +82,14 @@ async fn json_of(app: &axum::Router, request: Request<Body>) -> (StatusCode, Val
     (status, value)
 }
 
-/// Waits until the console's status satisfies `pred`.
-async fn status_until(app: &axum::Router, pred: impl Fn(&Value) -> bool) -> Value {
+/// Waits until the console's status satisfies `pred`, looking again whenever the room's
+/// status changes (and at least every half second: the console's own state, such as the
+/// optimum, follows it).
+async fn status_until(
+    app: &axum::Router,
+    mut room: tokio::sync::watch::Receiver<roomlight_agent::camera::RoomStatus>,
+    pred: impl Fn(&Value) -> bool,
+) -> Value {
     let deadline = tokio::time::Instant::now() + WITHIN;
     loop {
         let (code, s) = json_of(app, bearer("GET", "/api/status", None)).await;
@@ -95,7 +101,7 @@ async fn status_until(app: &axum::Router, pred: impl Fn(&Value) -> bool) -> Valu
             tokio::time::Instant::now() < deadline,
             "status never reached the condition: {s}"
         );
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        let _ = tokio::time::timeout(Duration::from_millis(500), room.changed()).await;
     }
 }
 
@@ -121,7 +127,7 @@ async fn the_status_tells_the_room_as_it_is() {
         .body(Body::empty())
         .expect("request");
     assert_eq!(json_of(&app, wrong).await.0, StatusCode::UNAUTHORIZED);
-    let s = status_until(&app, |s| {
+    let s = status_until(&app, sb.status_watch(), |s| {
         s["captures"].as_u64() >= Some(3)
             && s["projectors"]
                 .as_array()
@@ -390,7 +396,7 @@ async fn a_new_preset_is_measured_and_becomes_the_target() {
     )
     .await;
     assert_eq!(code, StatusCode::ACCEPTED, "{body}");
-    let s = status_until(&app, |s| s["restarts"] == 1).await;
+    let s = status_until(&app, sb.status_watch(), |s| s["restarts"] == 1).await;
     assert_eq!(s["preset"], "warm");
     assert!(
         leds.on
@@ -552,7 +558,7 @@ async fn a_projector_is_calibrated_again_on_request() {
         (code, body["queued"].clone()),
         (StatusCode::ACCEPTED, json!(["p1"]))
     );
-    let s = status_until(&app, |s| {
+    let s = status_until(&app, sb.status_watch(), |s| {
         s["calibration"]["results"]
             .as_array()
             .is_some_and(|r| r.iter().any(|r| r["projector"] == "p1"))

@@ -724,4 +724,5 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
     drop(procs);
 }
 
+mod local_room;
 mod rendered;
