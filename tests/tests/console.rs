@@ -235,7 +235,10 @@ async fn a_browser_logs_in_with_a_cookie_and_changes_need_csrf() {
             .0,
         StatusCode::FORBIDDEN
     );
-    assert!(!sb.status().paused, "a refused change changed nothing");
+    assert!(
+        !sb.control().overview().borrow().paused,
+        "a refused change changed nothing"
+    );
     let (code, body) = json_of(&app, with_cookie("POST", "/api/pause", Some(&csrf))).await;
     assert_eq!(
         (code, body["paused"].as_bool()),
@@ -257,6 +260,15 @@ async fn a_browser_logs_in_with_a_cookie_and_changes_need_csrf() {
     sb.shutdown().await;
 }
 
+/// Until the camera agent says its rounds are paused.
+async fn paused(sb: &Sandbox) {
+    let mut overview = sb.control().overview();
+    tokio::time::timeout(WITHIN, overview.wait_for(|o| o.paused))
+        .await
+        .expect("paused in time")
+        .expect("the camera agent runs");
+}
+
 /// Pausing stops the captures after the current round (the projectors keep their light);
 /// resuming starts them again.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -270,7 +282,8 @@ async fn pause_stops_the_rounds_and_resume_restarts_them() {
         json_of(&app, bearer("POST", "/api/pause", None)).await.0,
         StatusCode::OK
     );
-    let paused = sb.wait_for(WITHIN, |s| s.paused).await;
+    paused(&sb).await;
+    let paused = sb.status();
     let shown = sb.room.shown();
     // At most the round under way ends; then nothing is captured for as long as we look.
     let after = tokio::time::timeout(
@@ -296,8 +309,8 @@ async fn pause_stops_the_rounds_and_resume_restarts_them() {
         json_of(&app, bearer("POST", "/api/resume", None)).await.0,
         StatusCode::OK
     );
-    let resumed = sb.wait_captures(WITHIN, 2).await;
-    assert!(!resumed.paused);
+    sb.wait_captures(WITHIN, 2).await;
+    assert!(!sb.control().overview().borrow().paused);
     cancel.cancel();
     sb.shutdown().await;
 }
@@ -611,7 +624,7 @@ async fn frame_thumbnails_follow_the_nodes_values() {
         json_of(&app, bearer("POST", "/api/pause", None)).await.0,
         StatusCode::OK
     );
-    sb.wait_for(WITHIN, |s| s.paused).await;
+    paused(&sb).await;
     let settled = tokio::time::timeout(
         Duration::from_secs(2),
         sb.wait_captures(Duration::from_secs(60), 2),

@@ -225,11 +225,12 @@ async fn session(Shared(console): Shared<State>, headers: HeaderMap) -> Json<Val
 /// The status as the API and the event stream give it.
 pub fn status_json(console: &Console) -> Value {
     let s = console.status.borrow().clone();
+    let o = console.overview.borrow().clone();
     let objective =
         (s.captures > 0 && s.measured_objective.is_finite()).then_some(s.measured_objective);
     let optimum = console.history.optimum();
     let excess = objective.and_then(|o| console.history.excess(o));
-    let projectors: Vec<Value> = s
+    let projectors: Vec<Value> = o
         .projectors
         .iter()
         .map(|p| {
@@ -244,10 +245,10 @@ pub fn status_json(console: &Console) -> Value {
             })
         })
         .collect();
-    let running = s.calibrating.as_ref().map(|c| {
+    let running = o.calibrating.as_ref().map(|c| {
         json!({"projectors": c.projectors, "stage": c.stage, "done": c.done, "expected": c.expected})
     });
-    let results: Vec<Value> = s
+    let results: Vec<Value> = o
         .calibrations
         .iter()
         .map(|r| {
@@ -279,9 +280,9 @@ pub fn status_json(console: &Console) -> Value {
         "room": console.control.room(),
         "round": s.round, "captures": s.captures,
         "objective": objective, "optimum": optimum, "excess": excess,
-        "settled": s.settled, "paused": s.paused, "restarts": s.restarts,
+        "settled": s.settled, "paused": o.paused, "restarts": o.restarts,
         "camera": camera,
-        "preset": s.preset, "presets": console.control.presets(),
+        "preset": o.preset, "presets": console.control.presets(),
         "projectors": projectors,
         "calibration": {"running": running, "results": results},
         "warnings": crate::warnings::recent(),

@@ -1,5 +1,5 @@
 //! Server-Sent Events: one task serialises the status once per update (on every change, at
-//! most [`MAX_RATE`] times a second, and at least every [`HEARTBEAT`]) and offers it to every
+//! most [`MAX_RATE`] times a second, and at least every [`HEARTBEAT`]: 2.5 a second) and offers it to every
 //! open stream without waiting; a stream whose queue is full (its browser does not read) is
 //! dropped, and at most [`MAX_STREAMS`] are open at once.
 
@@ -14,7 +14,7 @@ pub const MAX_STREAMS: usize = 32;
 /// Updates queued for one stream before it counts as lagging.
 pub const QUEUE: usize = 8;
 /// An update at least this often (the page's liveness).
-pub const HEARTBEAT: Duration = Duration::from_millis(500);
+pub const HEARTBEAT: Duration = Duration::from_millis(400);
 /// At most this many updates a second.
 pub const MAX_RATE: u32 = 5;
 
@@ -65,14 +65,19 @@ impl Hub {
 /// Publishes the status to the streams until `cancel`.
 pub async fn publish(console: Arc<Console>, cancel: CancellationToken) {
     let mut status = console.status.clone();
+    let mut overview = console.overview.clone();
     let pause = Duration::from_secs(1) / MAX_RATE;
+    let mut heartbeat = tokio::time::interval(HEARTBEAT);
+    heartbeat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         tokio::select! {
             changed = status.changed() => if changed.is_err() { return },
-            () = tokio::time::sleep(HEARTBEAT) => {}
+            changed = overview.changed() => if changed.is_err() { return },
+            _ = heartbeat.tick() => {}
             () = cancel.cancelled() => return,
         }
         status.borrow_and_update();
+        overview.borrow_and_update();
         if console.events.len() > 0 {
             let update: Arc<str> = crate::api::status_json(&console).to_string().into();
             let dropped = console.events.offer(&update);

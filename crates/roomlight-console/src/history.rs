@@ -76,15 +76,13 @@ pub async fn follow(console: Arc<Console>, cancel: CancellationToken) {
         }
         let (round, captures, objective, key) = {
             let s = status.borrow_and_update();
-            let key = (
-                s.calibrated_hot,
-                s.restarts,
-                s.calibrations.len(),
-                s.live_projectors,
-            );
+            let o = console.overview.borrow();
+            // The model changes with a calibration or a new target.
+            let calibrated: Vec<u64> = o.calibrations.iter().map(|c| c.at_round).collect();
+            let key = (s.calibrated_hot, o.restarts, calibrated, s.live_projectors);
             (s.round, s.captures, s.measured_objective, key)
         };
-        if model_key != Some(key) {
+        if model_key.as_ref() != Some(&key) {
             model_key = Some(key);
             let problem = console.control.problem();
             let optimum = if (1..=MAX_OPTIMUM_NODES).contains(&problem.nodes()) {

@@ -209,7 +209,7 @@ impl Notes {
     /// These projectors are measured together.
     fn batch(&self, shared: &Shared, batch: &[String]) {
         self.found().batch = batch.to_vec();
-        shared.status.send_modify(|s| {
+        shared.overview.send_modify(|s| {
             s.calibrating = Some(super::CalibrationProgress {
                 projectors: batch.to_vec(),
                 stage: "starting".into(),
@@ -232,13 +232,13 @@ impl Notes {
     fn reporter<'a>(&'a self, shared: &'a Shared) -> impl FnMut(Event) + Send + 'a {
         move |event: Event| {
             match &event {
-                Event::Stage { stage, captures } => shared.status.send_modify(|s| {
+                Event::Stage { stage, captures } => shared.overview.send_modify(|s| {
                     if let Some(c) = s.calibrating.as_mut() {
                         c.stage = format!("{stage:?}");
                         c.expected = c.done + captures;
                     }
                 }),
-                Event::Captured { .. } => shared.status.send_modify(|s| {
+                Event::Captured { .. } => shared.overview.send_modify(|s| {
                     if let Some(c) = s.calibrating.as_mut() {
                         c.done += 1;
                         c.expected = c.expected.max(c.done);
@@ -277,7 +277,8 @@ impl Notes {
                 .map(|id| (id.clone(), live.owners.get(id).map_or(0, Vec::len)))
                 .collect()
         };
-        shared.status.send_modify(|s| {
+        let round = shared.status.borrow().round;
+        shared.overview.send_modify(|s| {
             s.calibrating = None;
             for id in &found.batch {
                 let mut warnings: Vec<String> = found
@@ -299,7 +300,7 @@ impl Notes {
                         .map(|d| d.1),
                     nodes: nodes.get(id).copied().unwrap_or(0),
                     captures: found.captures,
-                    at_round: s.round,
+                    at_round: round,
                     warnings,
                 };
                 match s.calibrations.iter_mut().find(|r| r.projector == *id) {

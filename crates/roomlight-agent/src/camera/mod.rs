@@ -34,8 +34,8 @@ use crate::hardware::Camera;
 pub use faults::{CameraState, RETRY_FIRST, RETRY_MAX};
 use model::Live;
 pub use operator::{
-    CalibrationProgress, CalibrationResult, Control, Frame, Lights, Photo, ProjectorState,
-    ProjectorStatus, Refused,
+    CalibrationProgress, CalibrationResult, Control, Frame, Lights, Overview, Photo,
+    ProjectorState, ProjectorStatus, Refused,
 };
 use prost::Message;
 use registry::{Outbox, Registry};
@@ -170,18 +170,6 @@ pub struct RoomStatus {
     pub camera: CameraState,
     /// Attached projectors whose node agent says its display is lost (they stay attached).
     pub displays_lost: Vec<DisplayLost>,
-    /// The rounds are paused by the console (the projectors keep their light).
-    pub paused: bool,
-    /// Times the target changed (another LED preset measured): each restarts the rounds.
-    pub restarts: u64,
-    /// The LED preset reproduced, when known.
-    pub preset: Option<String>,
-    /// The attached projectors, by id.
-    pub projectors: Vec<ProjectorStatus>,
-    /// The calibration running now.
-    pub calibrating: Option<CalibrationProgress>,
-    /// Each projector's last calibration (or failed attempt), by id.
-    pub calibrations: Vec<CalibrationResult>,
 }
 
 /// A projector whose display is lost, as its node agent reported it.
@@ -228,8 +216,12 @@ struct Shared {
     misbehaving: crate::throttle::Shared,
     /// The largest message a node agent may send, derived from the room's size.
     max_message: usize,
-    /// The room's status, as the round loop and the readers update it.
+    /// The room's status, as the round loop and the readers update it: once per round (and
+    /// on the camera's and displays' changes).
     status: watch::Sender<RoomStatus>,
+    /// What only the console follows (projector states, calibration, pause, preset): apart,
+    /// so that a change of it is no round to those who follow the rounds.
+    overview: watch::Sender<Overview>,
     /// How the room's LEDs are switched, to measure another preset's light.
     lights: Option<Arc<dyn Lights>>,
     /// Each node's value as the camera agent follows it (its start or remembered state, plus
@@ -277,14 +269,14 @@ impl Shared {
             .unwrap_or_else(PoisonError::into_inner)
             .clone();
         let calibrating = self
-            .status
+            .overview
             .borrow()
             .calibrating
             .as_ref()
             .map(|c| c.projectors.clone())
             .unwrap_or_default();
         let projectors = self.registry.lock().statuses(&calibrating, &late);
-        self.status.send_if_modified(|s| {
+        self.overview.send_if_modified(|s| {
             let changed = s.projectors != projectors;
             s.projectors = projectors;
             changed
@@ -452,9 +444,10 @@ pub fn serve_room(
     let live = Live::new(&model);
     let max_message = max_node_message(&model);
     let connections = connection_limit(&model);
-    let (status, status_rx) = watch::channel(RoomStatus {
+    let (status, status_rx) = watch::channel(RoomStatus::default());
+    let (overview, overview_rx) = watch::channel(Overview {
         preset: extras.preset,
-        ..RoomStatus::default()
+        ..Overview::default()
     });
     let (photos, photos_rx) = watch::channel(None);
     // A console's requests wait here for the round loop; a few are plenty (each answers).
@@ -475,6 +468,7 @@ pub fn serve_room(
         misbehaving: Default::default(),
         max_message,
         status,
+        overview,
         lights: extras.lights,
         values: Mutex::new(HashMap::new()),
         late: Mutex::new(Vec::new()),
@@ -485,6 +479,7 @@ pub fn serve_room(
         shared: shared.clone(),
         requests,
         photos: photos_rx,
+        overview: overview_rx,
     };
     let rounds = rounds::Rounds::new(shared.clone(), camera, contrib_rx, requests_rx);
     let handle = tokio::spawn(run(shared, rounds, (listener, connections, tls), cancel));

@@ -15,6 +15,24 @@ use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{mpsc, oneshot, watch};
 
+/// What the console follows beyond the rounds: published on its own watch whenever it
+/// changes (the projectors at most five times a second).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Overview {
+    /// The rounds are paused by the console (the projectors keep their light).
+    pub paused: bool,
+    /// Times the target changed (another LED preset measured): each restarts the rounds.
+    pub restarts: u64,
+    /// The LED preset reproduced, when known.
+    pub preset: Option<String>,
+    /// The attached projectors, by id.
+    pub projectors: Vec<ProjectorStatus>,
+    /// The calibration running now.
+    pub calibrating: Option<CalibrationProgress>,
+    /// Each projector's last calibration (or failed attempt), by id.
+    pub calibrations: Vec<CalibrationResult>,
+}
+
 /// A projector as the console lists it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ProjectorStatus {
@@ -154,6 +172,7 @@ pub struct Control {
     pub(super) shared: Arc<Shared>,
     pub(super) requests: mpsc::Sender<Request>,
     pub(super) photos: watch::Receiver<Option<Photo>>,
+    pub(super) overview: watch::Receiver<Overview>,
 }
 
 impl std::fmt::Debug for Control {
@@ -185,7 +204,7 @@ impl Control {
     /// Stops the rounds after the current one (`true`; the projectors keep their light) or
     /// lets them go on.
     pub fn pause(&self, paused: bool) -> Result<(), Refused> {
-        self.shared.status.send_if_modified(|s| {
+        self.shared.overview.send_if_modified(|s| {
             let changed = s.paused != paused;
             s.paused = paused;
             changed
@@ -230,6 +249,11 @@ impl Control {
         } else {
             Err(Refused::UnknownProjector(projector.to_string()))
         }
+    }
+
+    /// Projector states, calibration, pause and preset, as they change.
+    pub fn overview(&self) -> watch::Receiver<Overview> {
+        self.overview.clone()
     }
 
     /// The latest photograph, as it is published.

@@ -347,11 +347,11 @@ impl<C: Camera> Rounds<C> {
         self.restarts += 1;
         tracing::info!(%preset, "new target measured: the rounds restart");
         let restarts = self.restarts;
-        shared.status.send_modify(|s| {
+        shared.overview.send_modify(|s| {
             s.preset = Some(preset);
             s.restarts = restarts;
-            s.settled = false;
         });
+        shared.status.send_modify(|s| s.settled = false);
         shared.save_model();
         Ok(())
     }
