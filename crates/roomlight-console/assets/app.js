@@ -401,7 +401,7 @@ function stateClass(text) {
 }
 
 function projectorRow(id) {
-  const thumbnail = element('img', { alt: `what ${id} shows`, className: 'missing', loading: 'lazy' });
+  const thumbnail = element('img', { alt: `what ${id} shows`, className: 'missing' });
   thumbnail.addEventListener('load', () => thumbnail.classList.remove('missing'));
   thumbnail.addEventListener('error', () => thumbnail.classList.add('missing'));
   const identify = element('button', { type: 'button', className: 'identify', textContent: 'Identify' });
@@ -822,7 +822,9 @@ function renderCalibration(status) {
     const cell = row.querySelector('.state');
     setText(cell, shown);
     cell.className = stateClass(shown);
-    setText(row.querySelector('.decoded'), result ? `${(result.decoded * 100).toFixed(1)}%` : '–');
+    // `decoded` is null when a hot calibration measured the attenuation only.
+    const decoded = result && result.decoded != null ? `${(result.decoded * 100).toFixed(1)}%` : result ? 'attenuation only' : '–';
+    setText(row.querySelector('.decoded'), decoded);
     setText(row.querySelector('.nodes'), result ? result.nodes : '–');
     setText(row.querySelector('.captures'), result ? result.captures : '–');
     setText(row.querySelector('.at-round'), result ? result.at_round : '–');
