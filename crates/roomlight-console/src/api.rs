@@ -618,3 +618,12 @@ async fn snapshot(Shared(console): Shared<State>) -> Answer {
     tracing::info!(path = %dir.display(), "console: snapshot saved");
     Ok(Json(json!({"path": dir.display().to_string()})).into_response())
 }
+
+#[cfg(test)]
+mod tests {
+    /// The page (HTML, script and style, embedded) stays within 300 kB.
+    #[test]
+    fn the_page_weighs_at_most_300_kb() {
+        assert!(super::PAGE_BYTES <= 300_000, "{} bytes", super::PAGE_BYTES);
+    }
+}

@@ -260,6 +260,17 @@ enum BenchCommand {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// What the installer's console costs the rounds: median round time of a synthetic room
+    /// through the agents alone, with five consoles open (event streams, the page's polling),
+    /// and alone again.
+    Console {
+        /// Nodes of the synthetic room (ten per node agent).
+        #[arg(long, default_value_t = 100)]
+        nodes: usize,
+        /// Rounds timed in each phase.
+        #[arg(long, default_value_t = 60)]
+        rounds: usize,
+    },
     /// The simulator on the embedded lab: precomputation, capture times, memory.
     Sim {
         /// The small test room instead of the lab.
@@ -398,6 +409,9 @@ fn bench(args: BenchArgs) -> Result<()> {
             bench::net::run(quick, json.as_deref()).map(|_| ())
         }
         Some(BenchCommand::Calib { quick }) => bench::calib::run(quick),
+        Some(BenchCommand::Console { nodes, rounds }) => {
+            bench::console::run(nodes, rounds).map(|_| ())
+        }
         Some(BenchCommand::Sim { quick, out }) => bench::sim::run(quick, out.as_deref()),
         Some(BenchCommand::Hw(args)) => bench::hw::run(&args),
     }

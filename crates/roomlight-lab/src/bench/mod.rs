@@ -5,6 +5,7 @@
 //! are printed and written, never asserted; memory is the resident set (`memory`).
 
 pub mod calib;
+pub mod console;
 pub mod core;
 pub mod evidence;
 pub mod hw;

@@ -176,6 +176,8 @@ fn print_row(p: &NetPoint) {
 pub struct SyntheticAgents {
     pub room: VirtualRoom,
     pub status: tokio::sync::watch::Receiver<camera::RoomStatus>,
+    /// The console's handle on the camera agent.
+    pub control: camera::Control,
     pub agents: usize,
     owners: HashMap<String, Vec<u32>>,
     endpoint: String,
@@ -218,7 +220,7 @@ impl SyntheticAgents {
             stale_frames: 0,
             model_out: None,
         };
-        let (status, camera_task) = camera::serve(
+        let served = camera::serve_room(
             config,
             RoomModel {
                 problem: problem.clone(),
@@ -229,11 +231,15 @@ impl SyntheticAgents {
             },
             room.camera(),
             listener,
+            None,
+            camera::Extras::default(),
             cancel.clone(),
         );
+        let (status, camera_task) = (served.status, served.handle);
         Ok(Self {
             room,
             status,
+            control: served.control,
             agents,
             owners,
             endpoint,

@@ -272,3 +272,45 @@ pub fn optimum_summary(path: &Path) -> Result<String> {
         best.objective_black
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What the console saves is a survey the camera agent reads: its target pixels are the
+    /// polygon's, and the preset the console picked comes back.
+    #[test]
+    fn the_consoles_survey_is_read_by_the_camera_agent() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("survey.json");
+        let first = SurveyFile {
+            camera_width: 64,
+            camera_height: 48,
+            corners: Vec::new(),
+            sample: SampleConfig::default(),
+            target_pixels: vec![1, 2],
+            target_polygons: Vec::new(),
+            preset: None,
+        };
+        std::fs::write(&path, serde_json::to_string(&first).expect("JSON")).expect("write");
+        let (_, mut survey) = roomlight_console::survey::read(&path).expect("the console reads it");
+        assert_eq!(survey.target_pixels, 2);
+        survey.charts.push(ChartCorners {
+            name: "desk".into(),
+            corners: [[2.0, 2.0], [20.0, 2.0], [20.0, 14.0], [2.0, 14.0]],
+        });
+        survey.target = vec![vec![[30.0, 10.0], [40.0, 10.0], [40.0, 20.0], [30.0, 20.0]]];
+        survey.preset = Some("warm".into());
+        roomlight_console::survey::validate(&survey, &survey.clone(), &[]).expect("valid");
+        roomlight_console::survey::write(&path, &survey).expect("saved");
+        let read = load_survey(&path).expect("the camera agent reads it");
+        assert_eq!(read.preset.as_deref(), Some("warm"));
+        assert_eq!(read.corners.len(), 1);
+        let mask = read.target_mask();
+        let inside: Vec<usize> = (0..mask.len()).filter(|&i| mask[i]).collect();
+        let expected: Vec<usize> = (10..20)
+            .flat_map(|y| (30..40).map(move |x| y * 64 + x))
+            .collect();
+        assert_eq!(inside, expected);
+    }
+}
