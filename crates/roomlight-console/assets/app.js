@@ -215,10 +215,43 @@ function watchImage(img) {
   });
 }
 
-/// Charts as outlines (their top-left corner marked), target polygons filled, and while
-/// editing the points clicked so far.
+/// A survey whose target came as pixels only (`roomlight calibrate --survey-only`) is drawn
+/// from its mask, /api/survey/target.png (white: target), tinted; loaded once a version.
+const targetMask = { version: '', tinted: null };
+
+function maskOf(survey) {
+  if (!survey || !state.survey || (survey.target || []).length || !survey.target_pixels) return null;
+  const version = state.survey.version;
+  if (targetMask.version !== version) {
+    targetMask.version = version;
+    targetMask.tinted = null;
+    const img = new Image();
+    img.addEventListener('load', () => {
+      const tinted = element('canvas', { width: img.naturalWidth, height: img.naturalHeight });
+      const g = tinted.getContext('2d');
+      g.drawImage(img, 0, 0);
+      // The mask's brightness becomes the target colour's opacity: nothing over the rest.
+      const pixels = g.getImageData(0, 0, tinted.width, tinted.height);
+      const p = pixels.data;
+      for (let i = 0; i < p.length; i += 4) {
+        const alpha = p[i] * 0.6;
+        p.set([255, 107, 107, alpha], i);
+      }
+      g.putImageData(pixels, 0, 0);
+      targetMask.tinted = tinted;
+      scheduleRedraw();
+    });
+    img.src = `/api/survey/target.png?v=${encodeURIComponent(version)}`;
+  }
+  return targetMask.tinted;
+}
+
+/// Charts as outlines (their top-left corner marked), the target filled (its polygons, or its
+/// mask), and while editing the points clicked so far.
 function drawOverlay(canvas, survey, points) {
   const { g, width, height } = fitCanvas(canvas);
+  const mask = maskOf(survey);
+  if (mask) g.drawImage(mask, 0, 0, width, height);
   const [cw, ch] = cameraSize();
   const sx = width / cw;
   const sy = height / ch;
@@ -317,7 +350,8 @@ function drawPlot(canvas, key) {
   }
   g.textAlign = 'center';
   g.textBaseline = 'top';
-  const step = niceStep(x1 - x0, Math.max(2, Math.floor(plotW / 90)));
+  // Rounds are whole numbers: no tick between two.
+  const step = Math.max(key === 'round' ? 1 : 0, niceStep(x1 - x0, Math.max(2, Math.floor(plotW / 90))));
   for (let x = Math.ceil(x0 / step) * step; x <= x1; x += step) {
     const px = Math.round(X(x)) + 0.5;
     g.beginPath();
@@ -605,7 +639,9 @@ function renderSurvey() {
   for (const key of SAMPLE_KEYS) {
     const input = $(`sample-${key}`);
     const value = draft && draft.sample ? draft.sample[key] : '';
-    if (document.activeElement !== input) input.value = value ?? '';
+    // Levels are single precision in the file: 0.98 comes back as 0.980000019073…
+    const shown = typeof value === 'number' ? String(Number(value.toPrecision(6))) : value ?? '';
+    if (document.activeElement !== input) input.value = shown;
   }
   fillSurveyPresets();
   setStageAspect();
@@ -708,7 +744,8 @@ async function saveSurvey() {
     state.survey = { version: answer.data.version, survey: structuredClone(draft) };
     state.dirty = false;
     renderSurvey();
-    surveyMessage('saved', 'good');
+    // The camera agent reads its survey when it starts (docs/console.md).
+    surveyMessage('saved — used when the camera agent starts again (systemctl restart roomlight-camera)', 'good');
   } else if (answer.status === 409 && answer.data && answer.data.survey) {
     useSurvey({ version: answer.data.version, survey: answer.data.survey });
     surveyMessage('changed meanwhile — reloaded', 'bad');
