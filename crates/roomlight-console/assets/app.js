@@ -805,10 +805,21 @@ function bindSurvey() {
 // ---- the calibration page -----------------------------------------------------------------
 
 function calibrationRow(id) {
+  // Asked for as soon as a result appears, a map may not be ready yet (the model is being
+  // rebuilt): asked again twice, 2 s apart, while the result is the same.
   const image = (kind) => {
     const img = element('img', { alt: `${kind} of ${id}`, className: 'missing' });
     img.addEventListener('load', () => img.classList.remove('missing'));
-    img.addEventListener('error', () => img.classList.add('missing'));
+    img.addEventListener('error', () => {
+      img.classList.add('missing');
+      const tries = Number(img.dataset.tries || 0);
+      if (!img.dataset.url || tries >= 2) return;
+      const url = img.dataset.url;
+      img.dataset.tries = String(tries + 1);
+      setTimeout(() => {
+        if (img.dataset.url === url) img.src = `${url}&try=${tries + 1}`;
+      }, 2000);
+    });
     return img;
   };
   const button = element('button', { type: 'button', className: 'calibrate', textContent: 'Calibrate' });
@@ -870,12 +881,19 @@ function renderCalibration(status) {
     const key = result ? JSON.stringify([result.at_round, result.captures, result.decoded, result.nodes]) : '';
     if (state.calibrationKeys.get(id) !== key) {
       state.calibrationKeys.set(id, key);
-      for (const img of row.querySelectorAll('img')) img.classList.add('missing');
+      for (const img of row.querySelectorAll('img')) {
+        img.classList.add('missing');
+        img.dataset.url = '';
+      }
       if (!result) return;
       const version = encodeURIComponent(key);
       const base = `/api/calibration/${encodeURIComponent(id)}`;
-      row.querySelector('.coverage img').src = `${base}/coverage.png?v=${version}`;
-      row.querySelector('.attenuation img').src = `${base}/attenuation.png?v=${version}`;
+      for (const kind of ['coverage', 'attenuation']) {
+        const img = row.querySelector(`.${kind} img`);
+        img.dataset.url = `${base}/${kind}.png?v=${version}`;
+        img.dataset.tries = '0';
+        img.src = img.dataset.url;
+      }
     }
   });
 }

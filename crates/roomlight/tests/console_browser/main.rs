@@ -232,7 +232,7 @@ async fn room_page(b: &Browser, room: &Room) {
 }
 
 /// One projector's Calibrate button: the progress shows, the projector is measured again (a
-/// result of a later round) and is live again, its coverage image shown.
+/// result of a later round) and is live again, its coverage and attenuation maps shown.
 async fn calibration_page(b: &Browser, room: &Room, api: &Api, shots: &Path) {
     b.click("a[href='#calibration']").await;
     let projector = room.projectors[0].as_str();
@@ -265,9 +265,9 @@ async fn calibration_page(b: &Browser, room: &Room, api: &Api, shots: &Path) {
     b.screenshot(shots, "calibration-progress").await;
     let row = format!(
         "const r = document.querySelector(\"tr[data-calibrate='{projector}']\"); \
-         const img = r.querySelector('.coverage img'); \
+         const shown = i => i.complete && i.naturalWidth > 0 && !i.classList.contains('missing'); \
          return [r.querySelector('.state').textContent, r.querySelector('.at-round').textContent, \
-         img.complete && img.naturalWidth > 0 && !img.classList.contains('missing')]"
+         [...r.querySelectorAll('.coverage img, .attenuation img')].every(shown)]"
     );
     until(
         "calibrated again and live",
