@@ -1,7 +1,7 @@
 //! `roomlight bench console`: what the installer's console costs the rounds. A synthetic room
 //! runs through the real agents over loopback gRPC (as `bench net`), first alone, then with
-//! five consoles open — each an event stream read as a browser reads it, and the page's
-//! polling of the status, the history and a projector's frame twice a second — then alone
+//! five consoles open — each behaving as the page does: the status, history and survey once,
+//! the event stream read as it comes, every projector's frame thumbnail every 3 s — then alone
 //! again; the median round time of each phase, and their ratio, are printed. The consoles
 //! talk HTTP/1.1 over plain sockets (hand-written here: a dozen lines, no client crate for a
 //! benchmark).
@@ -90,8 +90,16 @@ async fn measure(nodes: usize, rounds: usize) -> Result<ConsoleRun> {
         cancel.clone(),
     ));
     let counts = Arc::new((AtomicU64::new(0), AtomicU64::new(0)));
+    let projectors: Vec<String> = (0..room.agents).map(|a| format!("p{a}")).collect();
     let browsers: Vec<_> = (0..CONSOLES)
-        .map(|_| tokio::spawn(browser(addr, counts.clone(), cancel.clone())))
+        .map(|_| {
+            tokio::spawn(browser(
+                addr,
+                projectors.clone(),
+                counts.clone(),
+                cancel.clone(),
+            ))
+        })
         .collect();
     // Every console has its stream open before the phase starts.
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -149,8 +157,14 @@ async fn phase(room: &mut SyntheticAgents, rounds: usize) -> Result<f64> {
     Ok(times[times.len() / 2])
 }
 
-/// One console: its event stream read as it comes, and the page's polling twice a second.
-async fn browser(addr: SocketAddr, counts: Arc<(AtomicU64, AtomicU64)>, cancel: CancellationToken) {
+/// One console as the page behaves: the status, the history and the survey once, the event
+/// stream read as it comes, and every projector's frame thumbnail every 3 s.
+async fn browser(
+    addr: SocketAddr,
+    projectors: Vec<String>,
+    counts: Arc<(AtomicU64, AtomicU64)>,
+    cancel: CancellationToken,
+) {
     let stream_counts = counts.clone();
     let events = async move {
         let Ok(mut s) = tokio::net::TcpStream::connect(addr).await else {
@@ -175,15 +189,15 @@ async fn browser(addr: SocketAddr, counts: Arc<(AtomicU64, AtomicU64)>, cancel: 
         }
     };
     let polling = async move {
-        let mut tick = tokio::time::interval(Duration::from_millis(500));
+        for path in ["/api/status", "/api/history", "/api/survey"] {
+            get(addr, path).await;
+            counts.0.fetch_add(1, Ordering::Relaxed);
+        }
+        let mut tick = tokio::time::interval(Duration::from_secs(3));
         loop {
             tick.tick().await;
-            for path in [
-                "/api/status",
-                "/api/history",
-                "/api/projectors/p0/frame.png",
-            ] {
-                if get(addr, path).await {
+            for p in &projectors {
+                if get(addr, &format!("/api/projectors/{p}/frame.png")).await {
                     counts.0.fetch_add(1, Ordering::Relaxed);
                 }
             }
