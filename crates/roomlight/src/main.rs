@@ -22,8 +22,10 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Runs the best end-to-end pipeline there is so far: a synthetic room lit by distributed
-    /// node updates from the conventional start, reported against the exact optimum.
+    /// The whole method on the embedded lab: calibration from simulated captures, then the real
+    /// agents over loopback gRPC lighting every LED preset, a projector leaving and another
+    /// joining, the projection-mapping target's contrast; an HTML report against the exact
+    /// optimum (`--synthetic`: the update rules compared on a synthetic room).
     Demo(DemoArgs),
     /// The simulated hardware as a process: a synthetic room served as `VirtualHardware`, or
     /// (`--scene`) the rendered room served as `RenderedRoom`.
@@ -31,7 +33,7 @@ enum Command {
     /// Calibrates a simulated room and writes the files the processes of a rendered room need
     /// (the camera agent's model and charts, each node agent's frame).
     Calibrate(procs::CalibrateArgs),
-    /// The camera agent of a room.
+    /// The camera agent of a room, and its installer's web console (`console` in its config).
     Camera {
         /// Its TOML config (see deploy/camera.toml).
         #[arg(long)]
