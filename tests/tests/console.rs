@@ -196,9 +196,11 @@ async fn a_browser_logs_in_with_a_cookie_and_changes_need_csrf() {
             .body(Body::from(format!("token={token}")))
             .expect("request")
     };
-    let (code, headers, _) = call(&app, login("wrong")).await;
+    let (code, headers, page) = call(&app, login("wrong")).await;
     assert_eq!(code, StatusCode::UNAUTHORIZED);
     assert!(headers.get(header::SET_COOKIE).is_none());
+    // The form again (a browser does not follow a redirect that comes with a 401).
+    assert!(String::from_utf8_lossy(&page).contains("name=\"token\""));
     let (code, headers, _) = call(&app, login(TOKEN)).await;
     assert_eq!(code, StatusCode::SEE_OTHER);
     let set = headers[header::SET_COOKIE].to_str().expect("cookie");

@@ -194,7 +194,11 @@ struct LoginForm {
 async fn login(Shared(console): Shared<State>, Form(form): Form<LoginForm>) -> Response {
     if !auth::token_matches(&form.token, &console.config.token) {
         tracing::info!("console: a login with a wrong token");
-        return (StatusCode::UNAUTHORIZED, Redirect::to("/login?failed=1")).into_response();
+        // The form again, with its status: the page tells the installer (a browser does not
+        // follow a redirect that comes with a 401).
+        let mut page = html(LOGIN);
+        *page.status_mut() = StatusCode::UNAUTHORIZED;
+        return page;
     }
     let id = console.sessions.open();
     let mut response = Redirect::to("/").into_response();
@@ -294,6 +298,7 @@ pub fn status_json(console: &Console) -> Value {
         "image": image,
         "survey": survey,
         "consoles": console.events.len(),
+        "t": console.started.elapsed().as_secs_f64(),
     })
 }
 
@@ -597,6 +602,8 @@ async fn snapshot(Shared(console): Shared<State>) -> Answer {
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_millis());
     let dir = console.config.snapshots.join(format!("snapshot-{stamp}"));
+    // Said whole: a relative path means nothing in a browser.
+    let dir = std::path::absolute(&dir).unwrap_or(dir);
     let report = serde_json::to_vec_pretty(&report_json(&console)).unwrap_or_default();
     let image = console.images.latest().map(|e| e.png);
     let model = console.config.model.clone();
