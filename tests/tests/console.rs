@@ -719,6 +719,24 @@ async fn bounds_and_the_event_stream() {
         .body(Body::from(format!("{{\"preset\": \"{huge}\"}}")))
         .expect("request");
     assert_eq!(call(&app, request).await.0, StatusCode::PAYLOAD_TOO_LARGE);
+    // A flood of requests (2 000: status, history, thumbnails) does not hold the rounds up:
+    // captures go on while it is served, and every request is answered.
+    sb.wait_captures(WITHIN, 2).await;
+    let flood: Vec<_> = (0..2000)
+        .map(|i| {
+            let app = app.clone();
+            let path = [
+                "/api/status",
+                "/api/history",
+                "/api/projectors/p1/frame.png",
+            ][i % 3];
+            tokio::spawn(async move { call(&app, bearer("GET", path, None)).await.0 })
+        })
+        .collect();
+    sb.wait_captures(WITHIN, 3).await;
+    for request in flood {
+        assert_eq!(request.await.expect("answered"), StatusCode::OK);
+    }
     let (code, body) = json_of(&app, bearer("POST", "/api/capture", None)).await;
     assert_eq!(code, StatusCode::SERVICE_UNAVAILABLE, "{body}");
     assert_eq!(
