@@ -152,7 +152,7 @@ fn run_child(bench: &str, evidence: &Evidence, args: &[&str]) -> (Section, bool)
 /// cases that could not run.
 fn room_markdown(outcome: &Outcome) -> String {
     let mut table = room::table(&outcome.records);
-    table.load_preset(ASCII_MARKDOWN);
+    super::width::markdown(&mut table);
     let mut md = format!("{}.\n\n{table}\n", room::CAPTION);
     for (case, why) in &outcome.failed {
         md.push_str(&format!("\n- {case}: could not run: {why}"));

@@ -742,6 +742,7 @@ pub const CAPTION: &str = "medians over the repeats (range in brackets); capture
 /// The records as a table (a terminal's preset; the caller may load another).
 pub fn table(records: &[Record]) -> Table {
     let mut table = Table::new();
+    super::width::fit(&mut table);
     table.load_preset(UTF8_FULL_CONDENSED).set_header([
         "case",
         "rule",

@@ -206,6 +206,7 @@ impl SoakReport {
     pub fn table(&self) -> String {
         let mut t = comfy_table::Table::new();
         t.load_preset(comfy_table::presets::ASCII_MARKDOWN);
+        crate::bench::width::fit(&mut t);
         t.set_header([
             "agent",
             "runs",

@@ -1,0 +1,118 @@
+//! Every table a bench prints fits a terminal of 120 columns (issue 22): a cell too long for
+//! its column wraps inside it instead of the table running off the screen. A bench's table
+//! function calls [`fit`] on the table it builds; a table written into a markdown file calls
+//! [`markdown`] instead (one line per row, as markdown needs; its renderer reflows it).
+
+use comfy_table::{ContentArrangement, Table, presets::ASCII_MARKDOWN};
+
+/// The widest line of a printed table, in characters.
+pub const MAX_COLUMNS: u16 = 120;
+
+/// Makes `table` wrap its cells so that none of its lines is longer than [`MAX_COLUMNS`]
+/// characters, whether or not the output is a terminal.
+pub fn fit(table: &mut Table) -> &mut Table {
+    table
+        .set_content_arrangement(ContentArrangement::Dynamic)
+        .set_width(MAX_COLUMNS)
+}
+
+/// Makes `table` a markdown table: the ASCII markdown preset, one line per row, as wide as its
+/// cells (markdown cannot wrap a row over lines).
+pub fn markdown(table: &mut Table) -> &mut Table {
+    table
+        .load_preset(ASCII_MARKDOWN)
+        .set_content_arrangement(ContentArrangement::Disabled)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use comfy_table::presets::UTF8_FULL_CONDENSED;
+
+    /// The longest line of `table` as printed, in characters (not bytes: `─`, `µ`, `Δ`, `…`).
+    fn widest(table: &Table) -> usize {
+        table
+            .to_string()
+            .lines()
+            .map(|l| l.chars().count())
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// A table as wide as the room bench's with every column it may gain: fourteen columns of
+    /// long headers and cells with ranges.
+    fn wide() -> Table {
+        let header: Vec<String> = [
+            "case",
+            "rule",
+            "to 1%",
+            "to 0.1%",
+            "final excess (range)",
+            "mean ΔE00 (range)",
+            "max ΔE00",
+            "compute µs/round",
+            "message ms/round",
+            "capture ms",
+            "bytes/round",
+            "diverged",
+            "wall-clock s to 1%",
+            "reproducible",
+        ]
+        .map(String::from)
+        .to_vec();
+        let row: Vec<String> = [
+            "lab/warm-white-stale-errors",
+            "momentum+model rounds",
+            "12 (10…> 30)",
+            "> 30",
+            "1.2e-4 (8.1e-5…3.3e-3)",
+            "1.23 (1.10…1.57)",
+            "4.56",
+            "1234.5",
+            "12.34",
+            "1200",
+            "123456",
+            "false",
+            "12.3 (11.0…14.2)",
+            "yes (seed 1, 3 repeats)",
+        ]
+        .map(String::from)
+        .to_vec();
+        let mut t = Table::new();
+        t.load_preset(UTF8_FULL_CONDENSED).set_header(header);
+        t.add_row(row.clone()).add_row(row);
+        t
+    }
+
+    #[test]
+    fn a_wide_table_is_wider_than_the_limit_until_fitted() {
+        let mut t = wide();
+        assert!(widest(&t) > usize::from(MAX_COLUMNS), "{t}");
+        fit(&mut t);
+        assert!(widest(&t) <= usize::from(MAX_COLUMNS), "{t}");
+        // Every row is still there, wrapped over lines.
+        assert!(t.to_string().lines().count() > 6, "{t}");
+    }
+
+    #[test]
+    fn a_narrow_table_is_left_as_it_is() {
+        let mut t = Table::new();
+        t.load_preset(UTF8_FULL_CONDENSED)
+            .set_header(["nodes", "median ms"])
+            .add_row(["10", "0.123"]);
+        let before = t.to_string();
+        fit(&mut t);
+        assert_eq!(t.to_string(), before);
+    }
+
+    #[test]
+    fn a_markdown_table_keeps_one_line_per_row() {
+        let mut t = wide();
+        fit(&mut t);
+        markdown(&mut t);
+        let printed = t.to_string();
+        // Header, separator and the two rows.
+        assert_eq!(printed.lines().count(), 4, "{printed}");
+        assert!(printed.lines().all(|l| l.starts_with('|')), "{printed}");
+    }
+}
