@@ -116,12 +116,22 @@ impl Browser {
             profile,
         };
         let address = format!("127.0.0.1:{port}");
-        until("chromedriver ready", Duration::from_secs(20), async || {
-            let answer = super::http::request(&address, "GET", "/status", None, None)
-                .map_err(|e| e.to_string())?;
-            let ready = answer.json("chromedriver status")["value"]["ready"] == true;
-            ready.then_some(()).ok_or(answer.body)
-        })
+        // Nothing tells when chromedriver is ready but its answer: asked every 50 ms.
+        let mut tick = tokio::time::interval(Duration::from_millis(50));
+        let wake = async || {
+            tick.tick().await;
+        };
+        until_woken(
+            "chromedriver ready",
+            Duration::from_secs(20),
+            wake,
+            async || {
+                let answer = super::http::request(&address, "GET", "/status", None, None)
+                    .map_err(|e| e.to_string())?;
+                let ready = answer.json("chromedriver status")["value"]["ready"] == true;
+                ready.then_some(()).ok_or(answer.body)
+            },
+        )
         .await;
         let mut args: Vec<String> = CHROMIUM_ARGS.iter().map(|a| a.to_string()).collect();
         args.push(format!(
@@ -144,6 +154,29 @@ impl Browser {
             client,
             _driver: driver,
         }
+    }
+
+    /// Checks `check` until it gives `Ok`, at most `within`, waking at each change of the page
+    /// (its DOM) instead of on a clock; the last `Err` (what was seen instead) is in the panic.
+    pub async fn until<T>(
+        &self,
+        what: &str,
+        within: Duration,
+        check: impl AsyncFnMut() -> Result<T, String>,
+    ) -> T {
+        until_woken(what, within, async || self.next_change().await, check).await
+    }
+
+    /// Returns at the page's next DOM change (a `MutationObserver`), or after 250 ms without
+    /// one: a plot drawn on a canvas, a file written or an answer of the API change no node.
+    /// A page being replaced (navigation) ends the wait too.
+    async fn next_change(&self) {
+        const SCRIPT: &str = "const done = arguments[arguments.length - 1];\
+            const seen = new MutationObserver(() => { seen.disconnect(); done(true); });\
+            seen.observe(document, { subtree: true, childList: true, attributes: true, characterData: true });\
+            setTimeout(() => { seen.disconnect(); done(false); }, 250);";
+        // An error (the page navigated away mid-script) is a change as good as any.
+        let _ = self.client.execute_async(SCRIPT, Vec::new()).await;
     }
 
     /// Runs `script` (a function body: `return ...`) in the page.
@@ -192,11 +225,13 @@ impl Browser {
     }
 }
 
-/// Polls `check` every 50 ms until it gives `Ok`, at most `within`; the last `Err` (what was
-/// seen instead) is in the panic.
-pub async fn until<T>(
+/// Checks `check` until it gives `Ok`, at most `within`; the last `Err` (what was seen
+/// instead) is in the panic. Between checks it waits for `wake` (the page's next change, or a
+/// tick of the clock where nothing in the page tells).
+async fn until_woken<T>(
     what: &str,
     within: Duration,
+    mut wake: impl AsyncFnMut(),
     mut check: impl AsyncFnMut() -> Result<T, String>,
 ) -> T {
     let deadline = Instant::now() + within;
@@ -206,7 +241,7 @@ pub async fn until<T>(
             Err(seen) if Instant::now() >= deadline => {
                 panic!("{what}: not within {within:?}; last seen: {seen}")
             }
-            Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
+            Err(_) => wake().await,
         }
     }
 }

@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use fantoccini::Locator;
 use serde_json::Value;
 
-use browser::{Browser, until};
+use browser::Browser;
 use room::{Room, TOKEN};
 
 /// Where the screenshots go: `$CARGO_TARGET_DIR/console-screenshots`, or the workspace's
@@ -123,7 +123,7 @@ async fn log_in(b: &Browser, room: &Room, shots: &Path) {
         .goto(&format!("http://{}/", room.console))
         .await
         .expect("open the console");
-    until("the login form", Duration::from_secs(10), async || {
+    b.until("the login form", Duration::from_secs(10), async || {
         let path = path_of(b).await;
         (path == "/login").then_some(()).ok_or(path)
     })
@@ -131,7 +131,7 @@ async fn log_in(b: &Browser, room: &Room, shots: &Path) {
     b.screenshot(shots, "login").await;
     b.type_into("#token", "not the token").await;
     b.click("#login").await;
-    until("a wrong token told", Duration::from_secs(10), async || {
+    b.until("a wrong token told", Duration::from_secs(10), async || {
         let seen = b
             .js("const e = document.getElementById('login-error'); \
                  return [!!e && !e.hidden, location.pathname + location.search, \
@@ -145,7 +145,7 @@ async fn log_in(b: &Browser, room: &Room, shots: &Path) {
     .await;
     b.type_into("#token", TOKEN).await;
     b.click("#login").await;
-    until("the console", Duration::from_secs(10), async || {
+    b.until("the console", Duration::from_secs(10), async || {
         let path = path_of(b).await;
         let page = b.js("return !!document.getElementById('round')").await;
         (path == "/" && page == true).then_some(()).ok_or(path)
@@ -158,7 +158,7 @@ async fn log_in(b: &Browser, room: &Room, shots: &Path) {
 async fn room_page(b: &Browser, room: &Room) {
     let states = "return Object.fromEntries([...document.querySelectorAll('#projectors tr[data-projector]')]\
         .map(r => [r.dataset.projector, r.querySelector('.state').textContent]))";
-    until(
+    b.until(
         "every projector live",
         Duration::from_secs(90),
         async || {
@@ -173,12 +173,13 @@ async fn room_page(b: &Browser, room: &Room) {
         document.getElementById('objective-plot').toDataURL(), \
         document.getElementById('objective-time').toDataURL()]";
     let round = |v: &Value| v[0].as_str().and_then(|r| r.parse::<u64>().ok());
-    let before = until("a round number", Duration::from_secs(10), async || {
-        let now = b.js(plots).await;
-        round(&now).map(|_| now).ok_or("no round yet".to_string())
-    })
-    .await;
-    until(
+    let before = b
+        .until("a round number", Duration::from_secs(10), async || {
+            let now = b.js(plots).await;
+            round(&now).map(|_| now).ok_or("no round yet".to_string())
+        })
+        .await;
+    b.until(
         "the round and both plots moving on",
         Duration::from_secs(20),
         async || {
@@ -202,7 +203,7 @@ async fn room_page(b: &Browser, room: &Room) {
     let images = "const loaded = i => i.complete && i.naturalWidth > 0 && !i.classList.contains('missing'); \
         return [loaded(document.getElementById('camera-image')), \
         [...document.querySelectorAll('#projectors tr[data-projector] .frame img')].map(loaded)]";
-    until(
+    b.until(
         "the camera image and every frame shown",
         Duration::from_secs(15),
         async || {
@@ -219,7 +220,7 @@ async fn room_page(b: &Browser, room: &Room) {
     let first = &room.projectors[0];
     b.click(&format!("tr[data-projector='{first}'] button.identify"))
         .await;
-    until("identify accepted", Duration::from_secs(10), async || {
+    b.until("identify accepted", Duration::from_secs(10), async || {
         let flash = b
             .js("return document.getElementById('flash').textContent")
             .await;
@@ -248,7 +249,7 @@ async fn calibration_page(b: &Browser, room: &Room, api: &Api, shots: &Path) {
         "tr[data-calibrate='{projector}'] button.calibrate"
     ))
     .await;
-    until(
+    b.until(
         "the calibration's progress",
         Duration::from_secs(20),
         async || {
@@ -269,7 +270,7 @@ async fn calibration_page(b: &Browser, room: &Room, api: &Api, shots: &Path) {
          return [r.querySelector('.state').textContent, r.querySelector('.at-round').textContent, \
          [...r.querySelectorAll('.coverage img, .attenuation img')].every(shown)]"
     );
-    until(
+    b.until(
         "calibrated again and live",
         Duration::from_secs(60),
         async || {
@@ -292,7 +293,7 @@ async fn calibration_page(b: &Browser, room: &Room, api: &Api, shots: &Path) {
 async fn action_bar(b: &Browser, room: &Room, api: &Api) {
     for paused in [true, false] {
         b.click("#pause").await;
-        until("paused or resumed", Duration::from_secs(10), async || {
+        b.until("paused or resumed", Duration::from_secs(10), async || {
             let status = api.get("/api/status").await;
             let badge = b
                 .js("return !document.getElementById('paused-badge').hidden")
@@ -319,7 +320,7 @@ async fn action_bar(b: &Browser, room: &Room, api: &Api) {
         .await
         .expect("select the preset");
     b.click("#apply-preset").await;
-    until(
+    b.until(
         "the rounds restarted",
         Duration::from_secs(30),
         async || {
@@ -331,16 +332,17 @@ async fn action_bar(b: &Browser, room: &Room, api: &Api) {
     )
     .await;
     b.click("#snapshot").await;
-    let folder = until("a snapshot written", Duration::from_secs(20), async || {
-        let flash = b
-            .js("return document.getElementById('flash').textContent")
-            .await;
-        let said = flash.as_str().unwrap_or_default();
-        said.strip_prefix("snapshot written to ")
-            .map(PathBuf::from)
-            .ok_or(said.to_string())
-    })
-    .await;
+    let folder = b
+        .until("a snapshot written", Duration::from_secs(20), async || {
+            let flash = b
+                .js("return document.getElementById('flash').textContent")
+                .await;
+            let said = flash.as_str().unwrap_or_default();
+            said.strip_prefix("snapshot written to ")
+                .map(PathBuf::from)
+                .ok_or(said.to_string())
+        })
+        .await;
     // A relative path is the camera agent's, which runs in the room's folder.
     let folder = room.dir().join(folder);
     assert!(folder.is_dir(), "{} is no folder", folder.display());
@@ -351,7 +353,7 @@ async fn room_screenshot(b: &Browser, shots: &Path) {
     b.click("a[href='#room']").await;
     let round = "return document.getElementById('round').textContent";
     let shown = b.js(round).await;
-    until(
+    b.until(
         "a status after going back to the room",
         Duration::from_secs(10),
         async || {
@@ -366,7 +368,7 @@ async fn room_screenshot(b: &Browser, shots: &Path) {
 /// Log out ends the session: the console asks for the token again.
 async fn log_out(b: &Browser, room: &Room) {
     b.click("#logout").await;
-    until(
+    b.until(
         "the login form after logging out",
         Duration::from_secs(10),
         async || {

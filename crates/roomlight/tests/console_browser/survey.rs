@@ -9,7 +9,7 @@ use fantoccini::actions::{InputSource, MOUSE_BUTTON_LEFT, MouseActions, PointerA
 use serde_json::Value;
 
 use crate::Api;
-use crate::browser::{Browser, until};
+use crate::browser::Browser;
 use crate::room::Room;
 
 /// A capture is taken and shown; a target polygon clicked on the overlay is saved, and the API
@@ -20,7 +20,7 @@ pub async fn survey_page(b: &Browser, room: &Room, api: &Api, shots: &Path) {
     let file_before = std::fs::read(room.dir().join("survey.json")).expect("survey file");
     let polygons_before = before["survey"]["target"].as_array().map_or(0, Vec::len);
     b.click("#capture").await;
-    until("the capture shown", Duration::from_secs(20), async || {
+    b.until("the capture shown", Duration::from_secs(20), async || {
         let seen = b
             .js("const i = document.getElementById('survey-image'); \
                  return [document.getElementById('survey-message').textContent, \
@@ -67,7 +67,7 @@ pub async fn survey_page(b: &Browser, room: &Room, api: &Api, shots: &Path) {
     assert_eq!(listed, polygons_before as u64 + 1, "polygons listed");
     b.screenshot(shots, "survey").await;
     b.click("#save-survey").await;
-    until("the survey saved", Duration::from_secs(15), async || {
+    b.until("the survey saved", Duration::from_secs(15), async || {
         let said = b
             .js("return document.getElementById('survey-message').textContent")
             .await;
@@ -126,7 +126,7 @@ pub async fn survey_refusals(b: &Browser, room: &Room, api: &Api) {
     text.push(b'\n');
     std::fs::write(&file, text).expect("edit the survey by hand");
     b.click("#save-survey").await;
-    until("changed meanwhile", Duration::from_secs(10), async || {
+    b.until("changed meanwhile", Duration::from_secs(10), async || {
         let said = message().await;
         said.starts_with("changed meanwhile")
             .then_some(())
@@ -168,7 +168,7 @@ pub async fn survey_refusals(b: &Browser, room: &Room, api: &Api) {
     b.type_into("#chart-name", &name).await;
     b.click("#confirm-chart").await;
     b.click("#save-survey").await;
-    until(
+    b.until(
         "a second chart of the same name refused",
         Duration::from_secs(10),
         async || {
