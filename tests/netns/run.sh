@@ -100,7 +100,7 @@ model_rounds = 5
 mdns = true
 tls = { cert = "$work/camera/netns.pem", key = "$work/camera/netns.key", ca = "$work/camera/ca.pem", require_client_cert = true }
 CONF
-in_ns cam env RUST_LOG=info "$bin" camera --config "$work/camera.toml" > "$work/cam.log" 2> "$work/cam.err" &
+in_ns cam env RUST_LOG=info "$bin" camera --config "$work/camera.toml" --status-lines > "$work/cam.log" 2> "$work/cam.err" &
 pids+=($!)
 wait_line "$work/cam.log" "camera listening on" 30 "the camera agent to listen"
 

@@ -34,6 +34,8 @@ enum Command {
     /// (the camera agent's model and charts, each node agent's frame).
     Calibrate(procs::CalibrateArgs),
     /// The camera agent of a room, and its installer's web console (`console` in its config).
+    /// Its rounds are summarised on stdout, at most a line a second, with a line at once when
+    /// the projectors live or calibrated change.
     Camera {
         /// Its TOML config (see deploy/camera.toml).
         #[arg(long)]
@@ -41,6 +43,10 @@ enum Command {
         /// Load and check the config, print what would run, and exit.
         #[arg(long)]
         check: bool,
+        /// One stdout line per round instead of the summary, for tools that follow the rounds:
+        /// `round R captures C objective G live L calibrated H`.
+        #[arg(long)]
+        status_lines: bool,
     },
     /// A node agent (one per projector).
     Node {
@@ -207,9 +213,11 @@ struct BenchArgs {
 
 #[derive(Debug, Subcommand)]
 enum BenchCommand {
-    /// The optimisation core on synthetic rooms of 10, 100 and 1000 nodes.
+    /// The optimisation core on synthetic rooms of 10, 100 and 1000 nodes, and two harder rooms
+    /// of 100 (reflective, noisy), every rule from the conventional start.
     Core {
-        /// Smaller rooms and budgets (seconds, for tests).
+        /// Only the rooms of 10 and 100 nodes, 150 captures per rule instead of 400 (seconds,
+        /// for tests).
         #[arg(long)]
         quick: bool,
         /// Write the table as JSON to this file.
@@ -221,11 +229,13 @@ enum BenchCommand {
     },
     /// Speed against error on the simulated lab: every preset and rule through the agents.
     Room {
-        /// The small test room, one preset, eight captures per rule (seconds).
+        /// The small test room (its camera at 640x480), one preset, 8 captures per rule (10 with
+        /// stale errors), a few rules on the hard cases, 100 synthetic nodes instead of 1000
+        /// (seconds).
         #[arg(long)]
         quick: bool,
-        /// The hard cases of DESIGN §9 (variants of the room, stale errors, a projector
-        /// leaving and another joining, a synthetic room) instead of the presets.
+        /// The hard cases (variants of the room, stale errors, a projector leaving and another
+        /// joining, a synthetic room of 1000 nodes) instead of the presets.
         #[arg(long)]
         hard: bool,
         /// Write the records as JSON to this file.
@@ -251,26 +261,22 @@ enum BenchCommand {
         #[arg(long)]
         quick: bool,
     },
-    /// The distributed runtime over loopback gRPC: round overhead, bytes and resident memory
-    /// per node for 10, 100, 1000, 5000 and 10 000 nodes (ten nodes per node agent), and the
-    /// growth exponent. A size too slow to measure is reported as such.
+    // Its help says the sizes it runs, from the constants it runs them from.
+    #[command(about = net_about(), long_about = None)]
     Net {
-        /// 10 and 100 nodes only.
-        #[arg(long)]
+        #[arg(long, help = net_quick_help())]
         quick: bool,
         /// Write the table (every size, the growth exponents) as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
     },
-    /// What the installer's console costs the rounds: median round time of a synthetic room
-    /// through the agents alone, with five consoles open (event streams, the page's polling),
-    /// and alone again.
+    // Its help says its consoles and phases, from the constants it runs with.
+    #[command(about = console_about(), long_about = None)]
     Console {
         /// Nodes of the synthetic room (ten per node agent).
         #[arg(long, default_value_t = 100)]
         nodes: usize,
-        /// Rounds timed in each phase.
-        #[arg(long, default_value_t = 60)]
+        #[arg(long, default_value_t = 60, help = console_rounds_help())]
         rounds: usize,
     },
     /// The simulator on the embedded lab: precomputation, capture times, memory.
@@ -286,6 +292,38 @@ enum BenchCommand {
     Hw(bench::hw::HwArgs),
 }
 
+/// `bench net`'s help, from the sizes it runs.
+fn net_about() -> String {
+    format!(
+        "The distributed runtime over loopback gRPC: round overhead, bytes and resident memory \
+         per node for {} nodes ({} nodes per node agent), and the growth exponents. A size too \
+         slow to measure is reported as such.",
+        bench::net::said(&bench::net::SIZES),
+        bench::net::NODES_PER_AGENT
+    )
+}
+
+fn net_quick_help() -> String {
+    format!("{} nodes only", bench::net::said(&bench::net::QUICK_SIZES))
+}
+
+/// `bench console`'s help, from its number of consoles.
+fn console_about() -> String {
+    format!(
+        "What the installer's console costs the rounds: median round time of a synthetic room \
+         through the agents alone, with {} consoles open (event streams, the page's polling), \
+         and alone again.",
+        bench::console::CONSOLES
+    )
+}
+
+fn console_rounds_help() -> String {
+    format!(
+        "The fewest rounds timed in each phase (a phase also lasts at least {} s)",
+        bench::console::PHASE.as_secs()
+    )
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     procs::init_logs();
@@ -298,7 +336,11 @@ fn main() -> Result<()> {
         }),
         Command::Sim(args) => procs::sim(&args),
         Command::Calibrate(args) => procs::calibrate(&args),
-        Command::Camera { config, check } => procs::camera(&config, check),
+        Command::Camera {
+            config,
+            check,
+            status_lines,
+        } => procs::camera(&config, check, status_lines),
         Command::Node { config, check } => procs::node(&config, check),
         Command::Check { config } => procs::check(&config),
         Command::Optimum { model } => procs::optimum(&model),

@@ -23,7 +23,8 @@ pub struct SimArgs {
     /// Seed of the room and of the camera noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Camera noise, in multiples of the patch noise (0: noiseless).
+    /// The synthetic room's camera noise, in multiples of the patch noise (0: noiseless; a
+    /// rendered room has its scene's).
     #[arg(long, default_value_t = 0.0)]
     noise: f64,
     /// Address to serve on (port 0: any free port, printed).
@@ -35,7 +36,7 @@ pub struct SimArgs {
     model_out: Option<PathBuf>,
     /// Serve a rendered room instead (the `RenderedRoom` service: projector images in, camera
     /// images out, LED presets): `default` (the embedded lab), `small`, or a scene TOML file.
-    #[arg(long, conflicts_with_all = ["synthetic", "projectors", "model_out"])]
+    #[arg(long, conflicts_with_all = ["synthetic", "projectors", "model_out", "noise"])]
     scene: Option<String>,
     /// With --scene: the camera's resolution instead of the scene's, as WIDTHxHEIGHT.
     #[arg(long, requires = "scene")]
@@ -233,9 +234,13 @@ pub fn optimum(path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// With `check`: the config loaded, checked and printed, nothing run.
-pub fn camera(path: &Path, check: bool) -> Result<()> {
-    let process = config::load_camera(path)?;
+/// With `check`: the config loaded, checked and printed, nothing run. `status_lines`: one
+/// stdout line per round rather than the summary.
+pub fn camera(path: &Path, check: bool, status_lines: bool) -> Result<()> {
+    let mut process = config::load_camera(path)?;
+    if status_lines {
+        process.status_lines = process::StatusLines::EveryRound;
+    }
     if check {
         println!("{process:#?}");
         return Ok(());

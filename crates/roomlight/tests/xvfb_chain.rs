@@ -221,7 +221,7 @@ fn the_room_converges_through_windows_grabs_and_photographs() {
         ),
     )
     .expect("camera config");
-    let cam_out = procs.spawn(&["camera", "--config", "camera.toml"], d);
+    let cam_out = procs.spawn(&["camera", "--config", "camera.toml", "--status-lines"], d);
     let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
         l.starts_with("camera listening on")
     }));

@@ -22,7 +22,7 @@ const TOKEN: &str = "bench-console-token";
 /// Consoles open in the middle phase.
 pub const CONSOLES: usize = 5;
 /// Each phase lasts at least this long (the consoles poll twice a second).
-const PHASE: Duration = Duration::from_secs(8);
+pub const PHASE: Duration = Duration::from_secs(8);
 
 /// The three phases' median round times, in ms.
 #[derive(Debug, Clone, serde::Serialize)]

@@ -239,7 +239,6 @@ fn bench_case(case: &Case, budget: usize, seed: u64) -> Result<Vec<Row>> {
 
 fn print_table(rows: &[Row]) {
     let mut table = Table::new();
-    super::width::fit(&mut table);
     table.load_preset(UTF8_FULL_CONDENSED).set_header(vec![
         "case",
         "rule",
@@ -265,5 +264,6 @@ fn print_table(rows: &[Row]) {
             r.model_rounds.to_string(),
         ]);
     }
+    super::width::fit(&mut table);
     println!("{table}");
 }

@@ -18,7 +18,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 use tokio_util::sync::CancellationToken;
 
-const NODES_PER_AGENT: usize = 10;
+pub const NODES_PER_AGENT: usize = 10;
 
 /// One size of the scaling run.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -77,19 +77,40 @@ pub fn growth_exponent(points: &[(f64, f64)]) -> Option<f64> {
     (sxx > 0.0).then(|| sxy / sxx)
 }
 
-/// Runs every size (10 and 100 with `quick`; up to 10 000 otherwise), prints the table and
-/// the growth exponents, and writes the run to `json` if given.
+/// The room sizes measured, in nodes.
+pub const SIZES: [usize; 5] = [10, 100, 1000, 5000, 10_000];
+/// The room sizes measured with `--quick`.
+pub const QUICK_SIZES: [usize; 2] = [10, 100];
+
+/// `10, 100, 1000, 5000 and 10 000`: sizes as the help and the docs say them.
+pub fn said(sizes: &[usize]) -> String {
+    let one = |n: usize| {
+        if n >= 10_000 {
+            format!("{} {:03}", n / 1000, n % 1000)
+        } else {
+            n.to_string()
+        }
+    };
+    match sizes {
+        [] => String::new(),
+        [only] => one(*only),
+        [rest @ .., last] => format!(
+            "{} and {}",
+            rest.iter().map(|&n| one(n)).collect::<Vec<_>>().join(", "),
+            one(*last)
+        ),
+    }
+}
+
+/// Runs every size ([`QUICK_SIZES`] with `quick`, else [`SIZES`]), prints the table and the
+/// growth exponents, and writes the run to `json` if given.
 pub fn run(quick: bool, json: Option<&Path>) -> Result<NetRun> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .context("starting the runtime")?;
-    let sizes: &[usize] = if quick {
-        &[10, 100]
-    } else {
-        &[10, 100, 1000, 5000, 10_000]
-    };
+    let sizes: &[usize] = if quick { &QUICK_SIZES } else { &SIZES };
     println!(
         "{:>6} {:>7} {:>10} {:>10} {:>11} {:>14} {:>13} {:>7} {:>13}",
         "nodes",
@@ -390,7 +411,17 @@ async fn measure_rounds(room: &mut SyntheticAgents, point: &mut NetPoint) -> Res
 
 #[cfg(test)]
 mod tests {
-    use super::growth_exponent;
+    use super::{growth_exponent, said};
+
+    #[test]
+    fn sizes_are_said_as_a_person_writes_them() {
+        assert_eq!(said(&[10, 100]), "10 and 100");
+        assert_eq!(
+            said(&[10, 100, 1000, 5000, 10_000]),
+            "10, 100, 1000, 5000 and 10 000"
+        );
+        assert_eq!(said(&[12_345]), "12 345");
+    }
 
     #[test]
     fn the_growth_exponent_is_the_log_log_slope() {

@@ -1,5 +1,6 @@
 //! `roomlight camera`: the camera agent's model and camera from the files of a calibrated room
-//! or a survey, served until cancelled, one status line per round. The camera is the
+//! or a survey, served until cancelled, its rounds summarised on stdout (or one status line per
+//! round, `status`). The camera is the
 //! simulator's (over gRPC) or a real one (roomlight-camera's `HwCamera`: a folder, a command,
 //! a V4L2 device) sampled at the charts.
 
@@ -68,6 +69,8 @@ pub struct CameraProcess {
     pub tls: Option<roomlight_agent::tls::ServerTls>,
     /// The installer's web console, if served.
     pub console: Option<ConsoleProcess>,
+    /// What it prints about the rounds on stdout.
+    pub status_lines: super::StatusLines,
 }
 
 /// Where and for whom the installer's console is served.
@@ -290,7 +293,8 @@ fn start_console(
 }
 
 /// Loads the model, connects the camera, listens (calling `listening` with the address once
-/// node agents can attach), advertises, and serves until `cancel`, printing one line per round.
+/// node agents can attach), advertises, and serves until `cancel`, printing the rounds as
+/// `process.status_lines` says.
 pub async fn serve_camera(
     process: CameraProcess,
     listening: impl FnOnce(SocketAddr),
@@ -338,7 +342,7 @@ pub async fn serve_camera(
         extras,
         cancel.clone(),
     );
-    let (mut status, handle) = (served.status.clone(), served.handle);
+    let (status, handle) = (served.status.clone(), served.handle);
     if let Some((listener, token)) = console {
         let config = roomlight_console::ConsoleConfig {
             token,
@@ -353,25 +357,67 @@ pub async fn serve_camera(
         start_console(listener, config, served.control, served.status, &cancel)?;
     }
     super::systemd::ready(&format!("camera agent of room {room:?} serving on {addr}"));
-    super::systemd::with_watchdog(async {
-        loop {
+    super::systemd::with_watchdog(print_rounds(
+        status,
+        super::StatusPrinter::new(process.status_lines),
+        &cancel,
+    ))
+    .await;
+    handle.await.context("the camera agent task")??;
+    Ok(())
+}
+
+/// Prints the rounds as `printer` makes them, from every change of `status` until `cancel` or
+/// the agent's end; a summary due is printed on time even when no round follows it.
+async fn print_rounds(
+    mut status: tokio::sync::watch::Receiver<camera::RoomStatus>,
+    mut printer: super::StatusPrinter,
+    cancel: &CancellationToken,
+) {
+    let print = |lines: &[String]| {
+        if lines.is_empty() {
+            return;
+        }
+        let mut out = std::io::stdout().lock();
+        for line in lines {
+            let _ = writeln!(out, "{line}");
+        }
+        let _ = out.flush();
+    };
+    loop {
+        let due = printer.due();
         tokio::select! {
             () = cancel.cancelled() => break,
+            () = async {
+                match due {
+                    Some(due) => tokio::time::sleep_until(due.into()).await,
+                    None => std::future::pending().await,
+                }
+            } => {
+                if let Some(line) = printer.flush(std::time::Instant::now()) {
+                    print(&[line]);
+                }
+            }
             changed = status.changed() => {
                 if changed.is_err() {
                     break;
                 }
-                let s = status.borrow().clone();
-                println!(
-                    "round {} captures {} objective {:.6e} live {} calibrated {}",
-                    s.round, s.captures, s.measured_objective, s.live_projectors, s.calibrated_hot
-                );
-                let _ = std::io::stdout().flush();
+                let round = {
+                    let s = status.borrow();
+                    super::Round {
+                        round: s.round,
+                        captures: s.captures,
+                        objective: s.measured_objective,
+                        live: s.live_projectors,
+                        calibrated: s.calibrated_hot,
+                        settled: s.settled,
+                    }
+                };
+                print(&printer.round(round, std::time::Instant::now()));
             }
         }
-        }
-    })
-    .await;
-    handle.await.context("the camera agent task")??;
-    Ok(())
+    }
+    if let Some(line) = printer.flush(std::time::Instant::now()) {
+        print(&[line]);
+    }
 }

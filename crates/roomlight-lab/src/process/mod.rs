@@ -13,6 +13,7 @@ mod lights;
 mod node;
 mod photos;
 mod sim;
+mod status;
 mod survey;
 mod systemd;
 
@@ -27,3 +28,4 @@ pub use lights::{LightsSpec, ManualLights};
 pub use node::{NodeDisplay, run_node};
 pub use photos::GrabMode;
 pub use sim::{PreparedSim, SimRoom, SyntheticSim, prepare_sim};
+pub use status::{Round, StatusLines, StatusPrinter};

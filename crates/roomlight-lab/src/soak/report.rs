@@ -58,7 +58,7 @@ pub struct AgentReport {
     pub runs: Vec<Incarnation>,
     /// Bytes of its log (stderr, every run).
     pub log_bytes: u64,
-    /// Bytes of its stdout (the camera agent's status lines: one per capture, by design).
+    /// Bytes of its stdout (the camera agent's status lines: one per round, `--status-lines`).
     pub stdout_bytes: u64,
     /// Its warnings and errors, by message.
     pub warnings: BTreeMap<String, usize>,
@@ -206,7 +206,6 @@ impl SoakReport {
     pub fn table(&self) -> String {
         let mut t = comfy_table::Table::new();
         t.load_preset(comfy_table::presets::ASCII_MARKDOWN);
-        crate::bench::width::fit(&mut t);
         t.set_header([
             "agent",
             "runs",
@@ -244,6 +243,7 @@ impl SoakReport {
                 a.warnings.values().sum::<usize>().to_string(),
             ]);
         }
+        crate::bench::width::fit(&mut t);
         let mut out = format!(
             "soak {}, commit {}, {}\nrounds {} of {} (per camera agent run {:?}) in {:.0} s\n",
             self.utc,

@@ -1,8 +1,8 @@
 //! The soak's room: a synthetic room served by `roomlight sim`, its camera agent and one node
 //! agent per present projector, each its own process with its config file in the soak's
 //! folder, as `deploy/local-room.sh` runs them (explicit addresses on 127.0.0.1, no mDNS). It
-//! follows the camera agent's status lines, counts the rounds of every camera incarnation, and
-//! waits on conditions with deadlines.
+//! follows the camera agent's status lines (`--status-lines`: one per round), counts the rounds
+//! of every camera incarnation, and waits on conditions with deadlines.
 
 use super::procs::{Agent, Status};
 use crate::process::{ModelFile, load_model};
@@ -80,7 +80,12 @@ impl Room {
         sim.start(0)?;
         let sim_addr = address(&sim.wait_line("sim listening on", Duration::from_secs(60))?);
         let model = load_model(&dir.join("model.json"))?;
-        let camera = Agent::new(exe, dir, "camera", &["camera", "--config", "camera.toml"]);
+        let camera = Agent::new(
+            exe,
+            dir,
+            "camera",
+            &["camera", "--config", "camera.toml", "--status-lines"],
+        );
         let mut room = Self {
             dir: dir.to_path_buf(),
             exe: exe.to_path_buf(),

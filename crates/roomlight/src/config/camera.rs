@@ -291,6 +291,7 @@ impl CameraFile {
             listen: self.listen,
             tls,
             console: None,
+            status_lines: Default::default(),
             advertise: self.mdns.then_some(MdnsConfig {
                 port: self.mdns_port,
                 loopback_only: self.mdns_loopback_only,

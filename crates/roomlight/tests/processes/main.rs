@@ -220,7 +220,11 @@ fn small_room_and_camera(
         ),
     )
     .expect("camera config");
-    let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
+    let cam_out = procs.spawn(
+        "camera",
+        &["camera", "--config", "camera.toml", "--status-lines"],
+        d,
+    );
     let camera = address(&wait_line(&cam_out, Duration::from_secs(30), |l| {
         l.starts_with("camera listening on")
     }));
@@ -329,7 +333,7 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
     let watchdog = Path::new("100000");
     let cam_out = procs.spawn_with(
         "camera",
-        &["camera", "--config", "camera.toml"],
+        &["camera", "--config", "camera.toml", "--status-lines"],
         d,
         &[
             ("NOTIFY_SOCKET", &cam_notify.1),
@@ -687,7 +691,11 @@ fn the_room_is_calibrated_over_the_wire_and_survives_killed_processes() {
             .replace("127.0.0.1:0", &camera),
     )
     .expect("camera config");
-    let cam_out = procs.spawn("camera", &["camera", "--config", "camera.toml"], d);
+    let cam_out = procs.spawn(
+        "camera",
+        &["camera", "--config", "camera.toml", "--status-lines"],
+        d,
+    );
     let resumed = wait_line(&cam_out, Duration::from_secs(30), |l| {
         l.starts_with("resumed")
     });
