@@ -60,9 +60,11 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         "simulated hardware: each node's light rendered once in {:.1} s",
         t.elapsed().as_secs_f64()
     );
+    let reach = crate::whole_room::ReachMap::new(&room, &cal.regions)?;
     let lab = Lab {
         room: &room,
         cal: &cal,
+        reach: &reach,
         transport: &transport,
         bar: &bar,
         options: args,
@@ -71,7 +73,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     // One capture per preset measures its target.
     let captures = cal.captures + presets.len();
     let (hot_join, pm) = match presets.first() {
-        Some(first) => (lab.hot_join(first)?, Some(lab.pm(first)?)),
+        Some(first) => (lab.hot_join(first)?, Some(lab.pm(&presets)?)),
         None => (None, None),
     };
     let report = Report {
@@ -141,10 +143,28 @@ fn print_preset(name: &str, r: &pipeline::RunResult) {
     );
 }
 
+fn print_whole_room(name: &str, w: &crate::whole_room::WholeRoom) {
+    println!(
+        "{name}, whole room: ΔE00 mean {:.2}, 95th percentile {:.2} over reached pixels ({:.1}%); not reached: no node {:.1}%, occluded {:.1}%, outside every luminaire {:.1}%; seam band {}",
+        w.de00_mean,
+        w.de00_p95,
+        100.0 * w.reached_share,
+        100.0 * w.no_node_share,
+        100.0 * w.occluded_share,
+        100.0 * w.outside_share,
+        w.seam.map_or("none (no overlap)".into(), |s| format!(
+            "{:.2} against {:.2} elsewhere",
+            s.band_de00_mean, s.elsewhere_de00_mean
+        ))
+    );
+}
+
 /// The calibrated simulated lab the demo's runs share.
 struct Lab<'a> {
     room: &'a Arc<roomlight_sim::Room>,
     cal: &'a pipeline::Calibrated,
+    /// Which camera pixels the luminaires can light, for the whole-room figures.
+    reach: &'a crate::whole_room::ReachMap,
     transport: &'a pipeline::Transport,
     bar: &'a indicatif::ProgressBar,
     options: &'a DemoOptions,
@@ -169,9 +189,10 @@ impl Lab<'_> {
                 RunOptions::default_rule(self.options.seed + preset as u64),
             )?;
             print_preset(&spec.name, &result);
-            let images = preset_images(
-                self.room, self.cal, &model, &result, preset, &spec.name, dir,
+            let pictures = report::pictures::preset_pictures(
+                self.room, self.cal, &model, &result, self.reach, preset, &spec.name, dir,
             )?;
+            print_whole_room(&spec.name, &pictures.whole_room);
             if preset == 0 {
                 rules = self.compare_rules(&model, &truth)?;
             }
@@ -184,7 +205,7 @@ impl Lab<'_> {
                     .collect(),
                 model,
                 result,
-                images,
+                pictures,
             });
         }
         Ok((presets, rules))
@@ -309,14 +330,23 @@ impl Lab<'_> {
         }))
     }
 
-    /// Projection mapping and contrast with the first preset's result.
-    fn pm(&self, first: &PresetOutcome) -> Result<crate::pm::PmResult> {
+    /// Projection mapping with the first preset's result; the board's contrast under every
+    /// preset's.
+    fn pm(&self, presets: &[PresetOutcome]) -> Result<crate::pm::PmResult> {
         let t = Instant::now();
+        let lightings: Vec<crate::pm::Lighting<'_>> = presets
+            .iter()
+            .enumerate()
+            .map(|(preset, p)| crate::pm::Lighting {
+                preset,
+                name: &p.name,
+                x: &p.result.x,
+            })
+            .collect();
         let pm = crate::pm::run(
             self.room,
             self.cal,
-            &first.result.x,
-            0,
+            &lightings,
             self.options.seed,
             &self.options.out,
             |line| println!("{line}"),
@@ -352,79 +382,6 @@ fn shadows(room: &roomlight_sim::Room) -> Result<Option<crate::shadow::ShadowCom
 
 /// Patches per colour chart.
 const PATCHES_PER_CHART: usize = 24;
-
-/// Renders the room under the LEDs, at the conventional start and with the result (noiseless,
-/// the same exposure for the three), as tone-mapped sRGB PNGs with linear 16-bit ones beside.
-fn preset_images(
-    room: &roomlight_sim::Room,
-    cal: &pipeline::Calibrated,
-    model: &pipeline::Model,
-    result: &pipeline::RunResult,
-    preset: usize,
-    name: &str,
-    dir: &std::path::Path,
-) -> Result<[String; 3]> {
-    use roomlight_sim::Frame;
-    use roomlight_sim::room::PngEncoding;
-    let dark = vec![Frame::Black; room.projectors().len()];
-    let frames = pipeline::FrameBuilder::new(room, &cal.regions, cal.responses.clone());
-    let captures = [
-        room.render(&dark, Some(preset))?,
-        room.render(&frames.frames(&model.conventional), None)?,
-        room.render(&frames.frames(&result.x), None)?,
-    ];
-    // Exposure: the target's 99th percentile channel value maps to full scale.
-    let mut levels: Vec<f32> = captures[0]
-        .pixels
-        .iter()
-        .map(|p| p.iter().copied().fold(0.0, f32::max))
-        .collect();
-    levels.sort_by(f32::total_cmp);
-    let white = levels
-        .get(levels.len() * 99 / 100)
-        .copied()
-        .filter(|w| *w > 0.0)
-        .unwrap_or(1.0);
-    let slug: String = name
-        .chars()
-        .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
-        .collect();
-    let mut names = Vec::new();
-    for (capture, what) in captures.iter().zip(["target", "conventional", "result"]) {
-        let file = format!("{slug}-{what}.png");
-        capture.save_png(&dir.join(&file), PngEncoding::Srgb8, white)?;
-        capture.save_png(
-            &dir.join(format!("{slug}-{what}.linear16.png")),
-            PngEncoding::Linear16,
-            white,
-        )?;
-        names.push(file);
-    }
-    // The three side by side, small: the report's headline picture.
-    let thumbs = names
-        .iter()
-        .map(|file| {
-            let path = dir.join(file);
-            image::open(&path)
-                .with_context(|| format!("reading back {}", path.display()))
-                .map(|img| img.thumbnail(320, 240).to_rgb8())
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let (w, h) = thumbs
-        .iter()
-        .fold((0, 0), |(w, h), t| (w + t.width(), h.max(t.height())));
-    let mut strip = image::RgbImage::new(w, h);
-    let mut x = 0;
-    for t in &thumbs {
-        image::imageops::replace(&mut strip, t, i64::from(x), 0);
-        x += t.width();
-    }
-    let path = dir.join(format!("{slug}-strip.png"));
-    strip
-        .save(&path)
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok([names[0].clone(), names[1].clone(), names[2].clone()])
-}
 
 /// The synthetic-room comparison: the in-memory loop against the paper's rule, then the agents.
 fn synthetic(args: &DemoOptions) -> Result<()> {

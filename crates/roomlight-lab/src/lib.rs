@@ -17,3 +17,4 @@ pub mod rendered;
 pub mod report;
 pub mod shadow;
 pub mod soak;
+pub mod whole_room;

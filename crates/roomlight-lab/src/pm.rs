@@ -12,7 +12,6 @@ use roomlight_calib::procedure::{Procedure, Settings};
 use roomlight_calib::rig::block_on;
 use roomlight_core::LinearRgb;
 use roomlight_core::metrics::{GrayImage, Rect, ansi_contrast, luminance, rms_contrast};
-use roomlight_sim::room::PngEncoding;
 use roomlight_sim::scene::{ObjectSpec, ProjectorRole, Scene, ShapeKind};
 use roomlight_sim::{CameraNoise, Capture, Frame, NodeRegion, ProjectorImage, Room};
 use std::path::Path;
@@ -26,8 +25,13 @@ pub const TEXTURES: [&str; 4] = ["crack", "camouflage", "radial", "tiles"];
 /// What projection mapping measured.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct PmResult {
-    /// ANSI contrast of the checker on the board, per condition (dark, led, projector).
+    /// ANSI contrast of the checker on the board, per condition (dark, led, projector), under
+    /// the first lighting.
     pub ansi_contrast: [f64; 3],
+    /// The same for every lighting (preset name; the dark room's value is shared).
+    pub ansi_by_preset: Vec<(String, [f64; 3])>,
+    /// Linear 16-bit PNGs written and their scales (linear value per code).
+    pub linear: Vec<(String, f64)>,
     /// RMS contrast of each texture on the bust, per condition.
     pub rms_contrast: Vec<(String, [f64; 3])>,
     /// Images written, with captions.
@@ -258,18 +262,29 @@ fn lum(c: &Capture) -> Vec<f64> {
         .collect()
 }
 
-/// Runs projection mapping and the contrast measurements; `x` is the luminaires' result for
-/// `preset`, `room` the calibrated room. Writes its images into `dir`.
+/// One LED preset and the luminaires' result for it.
+#[derive(Debug, Clone, Copy)]
+pub struct Lighting<'a> {
+    pub preset: usize,
+    pub name: &'a str,
+    pub x: &'a [LinearRgb],
+}
+
+/// Runs projection mapping and the contrast measurements under `lightings` (the first for the
+/// textures on the bust and the pictures; every one for the board's ANSI contrast), `room` the
+/// calibrated room. Writes its images into `dir`.
 pub fn run(
     room: &Room,
     cal: &Calibrated,
-    x: &[LinearRgb],
-    preset: usize,
+    lightings: &[Lighting<'_>],
     seed: u64,
     dir: &Path,
     mut say: impl FnMut(String),
 ) -> Result<PmResult> {
     let base = room.scene();
+    let first = *lightings
+        .first()
+        .context("projection mapping: no lighting to measure")?;
     let texture_k = base
         .projectors
         .iter()
@@ -282,23 +297,20 @@ pub fn run(
     let board_regions = cal.regions_with_mask(room, &board_mask)?;
     let mut result = PmResult {
         ansi_contrast: [0.0; 3],
+        ansi_by_preset: Vec::new(),
+        linear: Vec::new(),
         rms_contrast: Vec::new(),
         images: Vec::new(),
         decoded_share: 0.0,
     };
-    let lights = Lights {
-        cal,
-        x,
-        preset,
-        texture_k,
-    };
+    let lights = Lights { cal, texture_k };
     for board in [true, false] {
         let eval = Room::build(evaluation_scene(base, board, false)?)
             .context("building the evaluation view")?;
         let regions = if board { &board_regions } else { &cal.regions };
-        let mut view = View::new(&eval, &lights, regions, seed)?;
+        let mut view = View::new(&eval, &lights, regions, first, seed)?;
         if board {
-            board_contrast(&mut view, dir, &mut result, &mut say)?;
+            board_contrast(&mut view, lightings, dir, &mut result, &mut say)?;
         } else {
             bust_contrast(&mut view, dir, &mut result, &mut say)?;
         }
@@ -306,12 +318,10 @@ pub fn run(
     Ok(result)
 }
 
-/// What every evaluation view lights the room with: the luminaires' result for the preset,
-/// and which projector carries the texture.
+/// What every evaluation view lights the room with: the calibration, and which projector
+/// carries the texture.
 struct Lights<'a> {
     cal: &'a Calibrated,
-    x: &'a [LinearRgb],
-    preset: usize,
     texture_k: usize,
 }
 
@@ -320,6 +330,8 @@ struct Lights<'a> {
 struct View<'a> {
     eval: &'a Room,
     lights: &'a Lights<'a>,
+    /// The lighting the view is under now.
+    lighting: Lighting<'a>,
     luminaires: FrameBuilder,
     noise: CameraNoise,
     corr: Correspondence,
@@ -335,6 +347,7 @@ impl<'a> View<'a> {
         eval: &'a Room,
         lights: &'a Lights<'a>,
         regions: &[NodeRegion],
+        lighting: Lighting<'a>,
         seed: u64,
     ) -> Result<Self> {
         let mut noise = CameraNoise::with_seed(eval, seed);
@@ -352,6 +365,7 @@ impl<'a> View<'a> {
         Ok(Self {
             eval,
             lights,
+            lighting,
             luminaires,
             noise,
             corr,
@@ -364,7 +378,7 @@ impl<'a> View<'a> {
     /// The frames of a lighting (dark, LED, projector) with `img` on the texture projector.
     fn with_texture(&self, condition: usize, img: ProjectorImage) -> Vec<Frame> {
         let mut frames = match condition {
-            2 => self.luminaires.frames(self.lights.x),
+            2 => self.luminaires.frames(self.lighting.x),
             _ => vec![Frame::Black; self.eval.projectors().len()],
         };
         frames[self.lights.texture_k] = Frame::Linear(img);
@@ -372,14 +386,16 @@ impl<'a> View<'a> {
     }
 
     fn shoot(&mut self, frames: &[Frame], condition: usize) -> Result<Capture> {
-        let leds = (condition == 1).then_some(self.lights.preset);
+        let leds = (condition == 1).then_some(self.lighting.preset);
         Ok(self.noise.expose(&self.eval.render(frames, leds)?))
     }
 }
 
-/// ANSI contrast of a 4×4 checker projected on the board under each lighting.
-fn board_contrast(
-    view: &mut View<'_>,
+/// ANSI contrast of a 4×4 checker projected on the board in the dark, then under each
+/// lighting's LEDs and projectors (pictures of the first only).
+fn board_contrast<'a>(
+    view: &mut View<'a>,
+    lightings: &[Lighting<'a>],
     dir: &Path,
     result: &mut PmResult,
     say: &mut impl FnMut(String),
@@ -399,26 +415,47 @@ fn board_contrast(
     };
     let mask = &view.mask;
     let checker = warp(&view.corr, |i| if mask[i] { cell(i) } else { None });
-    for (condition, label) in CONDITIONS.iter().enumerate() {
-        let frames = view.with_texture(condition, checker.clone());
-        let cap = view.shoot(&frames, condition)?;
-        let l: Vec<f32> = lum(&cap).iter().map(|&v| v as f32).collect();
-        let a = ansi_contrast(
-            GrayImage {
-                width: cap.width as usize,
-                height: cap.height as usize,
-                pixels: &l,
-            },
-            rect,
-            true,
-        )?;
-        result.ansi_contrast[condition] = a.ratio;
-        let file = format!("pm-checker-{label}.png");
-        save(&cap, dir, &file)?;
+    let mut dark = 0.0;
+    for (k, lighting) in lightings.iter().enumerate() {
+        view.lighting = *lighting;
+        let mut ansi = [dark; 3];
+        for (condition, label) in CONDITIONS.iter().enumerate() {
+            // The dark room is the same for every lighting: measured once.
+            if condition == 0 && k > 0 {
+                continue;
+            }
+            let frames = view.with_texture(condition, checker.clone());
+            let cap = view.shoot(&frames, condition)?;
+            let l: Vec<f32> = lum(&cap).iter().map(|&v| v as f32).collect();
+            let a = ansi_contrast(
+                GrayImage {
+                    width: cap.width as usize,
+                    height: cap.height as usize,
+                    pixels: &l,
+                },
+                rect,
+                true,
+            )?;
+            ansi[condition] = a.ratio;
+            if condition == 0 {
+                dark = a.ratio;
+            }
+            if k == 0 {
+                let file = format!("pm-checker-{label}.png");
+                result.linear.push(save(&cap, dir, &file)?);
+                result
+                    .images
+                    .push((file, format!("checker, {label}: ANSI {:.0}:1", a.ratio)));
+            }
+        }
+        if k == 0 {
+            result.ansi_contrast = ansi;
+        }
         result
-            .images
-            .push((file, format!("checker, {label}: ANSI {:.0}:1", a.ratio)));
+            .ansi_by_preset
+            .push((lighting.name.to_string(), ansi));
     }
+    view.lighting = lightings[0];
     say(format!(
         "ANSI contrast on the board: dark {:.0}:1, LED {:.0}:1, projector lighting {:.0}:1",
         result.ansi_contrast[0], result.ansi_contrast[1], result.ansi_contrast[2]
@@ -437,7 +474,14 @@ fn bust_contrast(
     result.decoded_share = view.share;
     let comp = Compensation::measure(view)?;
     for condition in 0..3 {
-        let rms = textures_under(view, &comp, condition, dir, &mut result.images)?;
+        let rms = textures_under(
+            view,
+            &comp,
+            condition,
+            dir,
+            &mut result.images,
+            &mut result.linear,
+        )?;
         for (t, r) in TEXTURES.iter().zip(rms) {
             match result.rms_contrast.iter_mut().find(|(n, _)| n == t) {
                 Some((_, v)) => v[condition] = r,
@@ -528,6 +572,7 @@ fn textures_under(
     condition: usize,
     dir: &Path,
     images: &mut Vec<(String, String)>,
+    linear: &mut Vec<(String, f64)>,
 ) -> Result<Vec<f64>> {
     let (x0, y0, x1, y1) = comp.bounds;
     let (k, gain, width) = (comp.k, &comp.gain, view.width);
@@ -564,16 +609,18 @@ fn textures_under(
             .collect();
         rms.push(rms_contrast(&l)?);
         let file = format!("pm-{name}-{}.png", CONDITIONS[condition]);
-        save(&cap, dir, &file)?;
+        linear.push(save(&cap, dir, &file)?);
         images.push((file, format!("{name}, {}", CONDITIONS[condition])));
     }
     Ok(rms)
 }
 
-fn save(c: &Capture, dir: &Path, file: &str) -> Result<()> {
-    // One exposure for every projection-mapping image, so they compare by eye.
-    c.save_png(&dir.join(file), PngEncoding::Srgb8, 1.0)?;
+/// Writes `c` for viewing (one exposure for every projection-mapping image, so they compare by
+/// eye: 1.0 at full scale) and as linear 16-bit; returns the linear file and its scale.
+fn save(c: &Capture, dir: &Path, file: &str) -> Result<(String, f64)> {
+    use crate::report::png::{srgb8, write_linear16, write_srgb8_image};
+    write_srgb8_image(&dir.join(file), &srgb8(c, 1.0)?)?;
     let linear = file.replace(".png", ".linear16.png");
-    c.save_png(&dir.join(linear), PngEncoding::Linear16, 1.0)?;
-    Ok(())
+    let scale = write_linear16(&dir.join(&linear), c)?;
+    Ok((linear, scale))
 }

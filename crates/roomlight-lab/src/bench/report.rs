@@ -3,7 +3,8 @@
 
 use crate::bench::net::growth_exponent;
 use crate::bench::room::{Outcome, captures_cell};
-use crate::report::{escape, plot};
+use crate::report::escape;
+use crate::report::plot::{Figure, YScale, plot};
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -46,32 +47,49 @@ pub fn write(dir: &Path, outcome: &Outcome) -> Result<()> {
                 .collect::<Vec<_>>()
         };
         let by_capture = format!("{slug}-excess-captures.svg");
-        plot(
-            &dir.join(&by_capture),
-            &format!("{case}: excess over G* against captures"),
-            "captures",
-            "(G − G*) / G*",
-            &series(&|p| (p.capture as f64, p.excess)),
-            true,
-        )?;
         let by_time = format!("{slug}-excess-seconds.svg");
-        plot(
-            &dir.join(&by_time),
-            &format!("{case}: excess over G* against wall time"),
-            "seconds",
-            "(G − G*) / G*",
-            &series(&|p| (p.seconds, p.excess)),
-            true,
-        )?;
         let de = format!("{slug}-de00-captures.svg");
-        plot(
-            &dir.join(&de),
-            &format!("{case}: mean ΔE00 against captures"),
-            "captures",
-            "mean ΔE00",
-            &series(&|p| (p.capture as f64, p.mean_de00)),
-            false,
-        )?;
+        // Excess on a symmetric log scale (linear within 1e-4 of zero), so negative values show.
+        let excess = YScale::SymLog(1e-4);
+        let figures_of_case = [
+            (
+                &by_capture,
+                "excess over G* against captures",
+                "captures",
+                "(G − G*) / G* (symlog)",
+                series(&|p| (p.capture as f64, p.excess)),
+                excess,
+            ),
+            (
+                &by_time,
+                "excess over G* against wall-clock time",
+                "seconds",
+                "(G − G*) / G* (symlog)",
+                series(&|p| (p.seconds, p.excess)),
+                excess,
+            ),
+            (
+                &de,
+                "mean ΔE00 against captures",
+                "captures",
+                "mean ΔE00",
+                series(&|p| (p.capture as f64, p.mean_de00)),
+                YScale::Linear,
+            ),
+        ];
+        for (file, what, x_label, y_label, series, y) in &figures_of_case {
+            plot(
+                &dir.join(file),
+                &Figure {
+                    title: &format!("{case}: {what}"),
+                    x_label,
+                    y_label,
+                    series,
+                    y: *y,
+                    markers: &[],
+                },
+            )?;
+        }
         let _ = write!(
             figures,
             "<h3>{}</h3><div class=\"row\"><img src=\"{by_capture}\" alt=\"excess against captures\">\
