@@ -111,22 +111,11 @@ pub fn run(quick: bool, json: Option<&Path>) -> Result<NetRun> {
         .build()
         .context("starting the runtime")?;
     let sizes: &[usize] = if quick { &QUICK_SIZES } else { &SIZES };
-    println!(
-        "{:>6} {:>7} {:>10} {:>10} {:>11} {:>14} {:>13} {:>7} {:>13}",
-        "nodes",
-        "agents",
-        "median ms",
-        "p99 ms",
-        "compute ms",
-        "bytes out/rnd",
-        "bytes in/rnd",
-        "rounds",
-        "RSS KB/node"
-    );
+    println!("{}", header());
     let mut points = Vec::new();
     for &n in sizes {
         let point = runtime.block_on(case(n))?;
-        print_row(&point);
+        println!("{}", row(&point));
         points.push(point);
     }
     let fit = |f: fn(&NetPoint) -> f64| {
@@ -158,37 +147,44 @@ pub fn run(quick: bool, json: Option<&Path>) -> Result<NetRun> {
     Ok(run)
 }
 
-fn print_row(p: &NetPoint) {
+/// The table's header: 100 columns, as its rows.
+fn header() -> String {
+    format!(
+        "{:>6} {:>7} {:>10} {:>10} {:>11} {:>14} {:>13} {:>7} {:>13}",
+        "nodes",
+        "agents",
+        "median ms",
+        "p99 ms",
+        "compute ms",
+        "bytes out/rnd",
+        "bytes in/rnd",
+        "rounds",
+        "RSS KB/node"
+    )
+}
+
+/// One size's row, and its note (a size too slow to measure) on a line of its own below it,
+/// so that no line is wider than the header.
+fn row(p: &NetPoint) -> String {
     let rss = p
         .rss_kb_per_node
         .map_or_else(|| "n/a".to_string(), |v| format!("{v:.1}"));
-    if p.rounds == 0 {
-        println!(
-            "{:>6} {:>7} {:>10} {:>10} {:>11.3} {:>14} {:>13} {:>7} {rss:>13}  {}",
-            p.nodes,
-            p.agents,
-            "-",
-            "-",
-            p.compute_ms,
-            "-",
-            "-",
-            0,
-            p.note.as_deref().unwrap_or("")
-        );
-        return;
-    }
-    println!(
-        "{:>6} {:>7} {:>10.3} {:>10.3} {:>11.3} {:>14} {:>13} {:>7} {rss:>13}  {}",
+    let measured = |v: String| if p.rounds == 0 { "-".to_string() } else { v };
+    let mut line = format!(
+        "{:>6} {:>7} {:>10} {:>10} {:>11.3} {:>14} {:>13} {:>7} {rss:>13}",
         p.nodes,
         p.agents,
-        p.median_ms,
-        p.p99_ms,
+        measured(format!("{:.3}", p.median_ms)),
+        measured(format!("{:.3}", p.p99_ms)),
         p.compute_ms,
-        p.bytes_out_per_round,
-        p.bytes_in_per_round,
+        measured(p.bytes_out_per_round.to_string()),
+        measured(p.bytes_in_per_round.to_string()),
         p.rounds,
-        p.note.as_deref().unwrap_or("")
     );
+    if let Some(note) = &p.note {
+        line.push_str(&format!("\n{:>6} {note}", "↳"));
+    }
+    line
 }
 
 /// A synthetic room served by a camera agent over loopback gRPC, with a virtual camera, and
@@ -411,7 +407,34 @@ async fn measure_rounds(room: &mut SyntheticAgents, point: &mut NetPoint) -> Res
 
 #[cfg(test)]
 mod tests {
-    use super::{growth_exponent, said};
+    use super::{NetPoint, growth_exponent, header, row, said};
+
+    #[test]
+    fn every_line_of_the_table_fits_120_columns() {
+        let p = NetPoint {
+            nodes: 10_000,
+            agents: 1000,
+            median_ms: 129.812,
+            p99_ms: 1234.5,
+            compute_ms: 98.765,
+            bytes_out_per_round: 123_456_789,
+            bytes_in_per_round: 98_765_432,
+            rounds: 1234,
+            rss_kb_per_node: Some(12.3),
+            note: None,
+        };
+        let slow = NetPoint {
+            rounds: 0,
+            note: Some("too slow: not all joined within 180s, and then some more words".into()),
+            ..p.clone()
+        };
+        let lines = [header(), row(&p), row(&slow)].join("\n");
+        assert_eq!(lines.lines().count(), 4, "{lines}");
+        for line in lines.lines() {
+            assert!(line.chars().count() <= 120, "{line}");
+        }
+        assert!(lines.contains("↳ too slow"), "{lines}");
+    }
 
     #[test]
     fn sizes_are_said_as_a_person_writes_them() {
