@@ -95,6 +95,7 @@ pub fn graycode(command: GraycodeCommand) -> Result<()> {
 pub enum CertsCommand {
     /// Makes the room's CA: DIR/ca.pem and DIR/ca.key (0600). Keep the key off the room's PCs.
     Init {
+        /// The folder DIR the CA is written to.
         #[arg(long)]
         out: PathBuf,
     },
@@ -114,6 +115,7 @@ pub enum CertsCommand {
         /// An IP address the agent is reached by, for nodes that name it (repeatable).
         #[arg(long)]
         ip: Vec<IpAddr>,
+        /// The folder OUT the certificate, its key and the CA's certificate are written to.
         #[arg(long, default_value = ".")]
         out: PathBuf,
     },

@@ -61,6 +61,7 @@ enum Command {
     /// room (camera agent found and accepting, display, camera, files); a checklist, and a
     /// non-zero exit naming the first item that failed.
     Check {
+        /// A camera agent's config (it has `listen`) or a node agent's.
         #[arg(long)]
         config: PathBuf,
     },
@@ -122,6 +123,8 @@ enum HwCommand {
     /// The identify pattern (projector id, output, resolution, grid, corner marks) on an
     /// output, or on every output, until SIGINT or SIGTERM.
     Identify {
+        /// The output: a name (`HDMI-1`), an index, or a geometry `WxH+X+Y` (default: every
+        /// output).
         #[arg(long)]
         output: Option<roomlight_hw::OutputSelector>,
         /// The projector id shown.
@@ -140,6 +143,7 @@ enum HwCommand {
         /// A camera agent's config: its camera with every setting (exposure, controls, EXIF).
         #[arg(long)]
         config: Option<PathBuf>,
+        /// The PNG file to write.
         #[arg(long)]
         out: PathBuf,
         /// With --camera (a config has its own `timeout_s`).
@@ -168,7 +172,8 @@ fn shot(s: &str) -> Result<(PathBuf, f64), String> {
 /// Options of the demo.
 #[derive(Debug, clap::Args)]
 struct DemoArgs {
-    /// A smaller room (for tests).
+    /// The small test room (its camera at 640x480) and 15 captures per preset instead of 30;
+    /// with --synthetic, 25 nodes instead of 100 (seconds, for tests).
     #[arg(long)]
     quick: bool,
     /// The synthetic-room comparison of update rules instead of the simulated lab.

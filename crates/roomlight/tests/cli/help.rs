@@ -66,6 +66,21 @@ fn every_command_has_a_help_that_names_only_what_exists() {
         );
     }
     for (path, help) in &helps {
+        // Every option says what it is (clap leaves the text empty otherwise).
+        for line in help.lines().filter(|l| l.trim_start().starts_with("--")) {
+            let said = line.trim().split_once("  ").map_or("", |(_, h)| h.trim());
+            let next = help
+                .lines()
+                .skip_while(|l| *l != line)
+                .nth(1)
+                .unwrap_or("")
+                .trim();
+            assert!(
+                !said.is_empty() || !next.is_empty() && !next.starts_with('-'),
+                "roomlight {} --help: {line:?} has no help",
+                path.join(" ")
+            );
+        }
         let first = help.lines().next().unwrap_or("");
         assert!(
             first.split_whitespace().count() >= 3,
@@ -135,6 +150,10 @@ fn bench_console_help_says_its_consoles_and_phases() {
 fn demo_and_camera_help_say_what_they_run_and_print() {
     let demo = roomlight(&["demo", "--help"]);
     assert!(demo.contains("embedded lab"), "{demo}");
+    assert!(
+        demo.contains("15 captures per preset instead of 30"),
+        "{demo}"
+    );
     let camera = roomlight(&["camera", "--help"]);
     let flat = camera.split_whitespace().collect::<Vec<_>>().join(" ");
     assert!(flat.contains("at most a line a second"), "{camera}");
