@@ -430,7 +430,7 @@ fn draw_panel(img: &mut RgbImage, x0: u32, height: u32) {
         });
     };
     text(img, "DE00", x0, 4);
-    let (top, bar_h, bar_w) = (24, (height * 55 / 100).max(60), 18);
+    let (top, bar_h, bar_w) = (32, (height * 55 / 100).max(60), 18);
     for y in 0..bar_h {
         let t = 1.0 - f64::from(y) / f64::from(bar_h - 1);
         for x in 0..bar_w {

@@ -60,7 +60,7 @@ fn calibration_section(h: &mut String, report: &Report) {
 /// Per preset: the figures against the simulator's truth, the three pictures and each chart.
 fn reproduction_section(h: &mut String, report: &Report) {
     h.push_str(
-        "<h2>Lighting reproduction</h2><table><tr><th>preset</th><th>captures to 1% (model)</th>\
+        "<h2 id=\"reproduction\">Lighting reproduction</h2><table><tr><th>preset</th><th>captures to 1% (model)</th>\
 <th>captures to 1% (true)</th><th>captures until settled</th><th>mean ΔE00</th><th>max ΔE00</th><th>conventional mean ΔE00</th><th>true optimum mean ΔE00</th>\
 <th>excess over G* (measured model)</th><th>true excess</th></tr>",
     );
@@ -122,7 +122,7 @@ from the conventional start (capture 0) to the first capture whose excess is at 
 /// Per preset: ΔE00 over the whole room, the pixels no luminaire lights and the seam metric.
 fn whole_room_table(h: &mut String, report: &Report) {
     h.push_str(
-        "<h3>The whole room</h3><p>ΔE00 per camera pixel between the room under the LEDs and \
+        "<h3 id=\"whole-room\">The whole room</h3><p>ΔE00 per camera pixel between the room under the LEDs and \
 with the result (noiseless renders in the room camera's view; Lab with the LED picture's 99th \
 percentile luminance as L* = 100). Mean and 95th percentile over the pixels a luminaire lights \
 directly through a node (<i>reached</i>); the other pixels that see a surface are counted apart: \
@@ -206,7 +206,7 @@ largest value at 65535, nothing clipped): {}.</p>",
 fn pm_section(h: &mut String, pm: &crate::pm::PmResult) {
     let _ = write!(
         h,
-        "<h2>Projection mapping</h2><p>The texture projector under three lightings: a dark \
+        "<h2 id=\"projection-mapping\">Projection mapping</h2><p>The texture projector under three lightings: a dark \
 room, the LED preset, and the projectors' lighting (first preset). ANSI contrast of a 4×4 checker \
 on a 200 mm board in place of the bust: dark {:.0}:1, LED {:.0}:1, projector lighting {:.0}:1 \
 (the paper measured 180:1, 30:1 and 65:1).</p>",
@@ -274,7 +274,7 @@ large aperture (glare).</p><img src=\"shadow.svg\" alt=\"shadow profiles\">",
 fn hot_join_section(h: &mut String, j: &HotJoin) {
     let _ = write!(
         h,
-        "<h2>A projector leaves, an unmeasured one joins</h2><p>On the first preset, default rule: \
+        "<h2 id=\"hot-join\">A projector leaves, an unmeasured one joins</h2><p>On the first preset, default rule: \
 {} is switched off after {} captures; {}, dark until then and unknown to the camera agent, joins after {}. \
 The camera agent measures it hot ({} captures: its nodes at black, then each alone at white, while the \
 others keep their values), sends everyone <i>s</i> anew, and the room converges without the leaver: \
@@ -297,7 +297,7 @@ the new one joined.</p><img src=\"hot-join.svg\" alt=\"excess through the leave 
 /// to 1% excess, the plots against captures and against wall-clock time side by side.
 fn convergence_section(h: &mut String, report: &Report) {
     h.push_str(
-        "<h2>Convergence</h2><p>On the first preset, from the conventional start, each rule \
+        "<h2 id=\"convergence\">Convergence</h2><p>On the first preset, from the conventional start, each rule \
 for the same number of captures whether or not it would have settled. Captures to 1%: the first \
 capture (0 is the start) whose excess is at most 1%, on the measured model (what the rules \
 minimise) and on the truth; seconds: wall-clock time of the agents to that capture.</p>\

@@ -192,6 +192,14 @@ pub(crate) fn plot(path: &Path, figure: &Figure<'_>) -> Result<()> {
         .configure_mesh()
         .x_desc(figure.x_label)
         .y_desc(figure.y_label)
+        .x_label_formatter(&|v| {
+            // Whole numbers (captures) without a decimal point.
+            if (v - v.round()).abs() < 1e-9 {
+                format!("{}", v.round())
+            } else {
+                format!("{v:.1}")
+            }
+        })
         .y_label_formatter(&|v| tick_label(scale.inverse(*v)))
         .draw()
         .map_err(|e| fail(&e))?;
