@@ -308,7 +308,7 @@ pub fn measure(plan: &Plan) -> Result<Outcome> {
 /// `--out`.
 pub fn finish(plan: &Plan, outcome: &Outcome, t0: Instant) -> Result<()> {
     println!("{CAPTION}");
-    println!("{}", table(&outcome.records));
+    println!("{}", super::width::split(&mut table(&outcome.records), 2));
     for (case, why) in &outcome.failed {
         println!("{case}: could not run: {why}");
     }

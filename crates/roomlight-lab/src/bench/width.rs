@@ -2,7 +2,8 @@
 //! its column wraps inside it instead of the table running off the screen. A bench's table
 //! function calls [`fit`] on the table it built, rows and all; a table written into a markdown
 //! file calls [`markdown`] instead (one line per row, as markdown needs; its renderer reflows
-//! it).
+//! it). A table with more columns than 120 can show side by side is printed with [`split`]:
+//! several tables one under another, each repeating the columns that say what a row is.
 
 use comfy_table::{ColumnConstraint, ContentArrangement, Table, Width, presets::ASCII_MARKDOWN};
 
@@ -17,8 +18,76 @@ pub fn fit(table: &mut Table) -> &mut Table {
     table
         .set_content_arrangement(ContentArrangement::Dynamic)
         .set_width(MAX_COLUMNS);
-    // The widest line of each column's cells, headers left out, plus its padding of 2.
-    let mut widths: Vec<u16> = Vec::new();
+    let widths = cell_widths(table);
+    if framed(&widths) <= usize::from(MAX_COLUMNS) {
+        for (column, w) in table.column_iter_mut().zip(widths) {
+            let w = u16::try_from(w).unwrap_or(MAX_COLUMNS);
+            column.set_constraint(ColumnConstraint::LowerBoundary(Width::Fixed(w)));
+        }
+    }
+    table
+}
+
+/// `table` as printed within [`MAX_COLUMNS`]: whole ([`fit`]) when its cells can stand side by
+/// side, else as several tables one under another, each with the first `keys` columns (what
+/// a row is, e.g. case and rule) and as many of the others as fit, every cell whole.
+pub fn split(table: &mut Table, keys: usize) -> String {
+    let widths = cell_widths(table);
+    if framed(&widths) <= usize::from(MAX_COLUMNS) || widths.len() <= keys {
+        return fit(table).to_string();
+    }
+    let preset = table.current_style_as_preset();
+    let header: Vec<String> = table
+        .header()
+        .map(|h| h.cell_iter().map(|c| c.content()).collect())
+        .unwrap_or_default();
+    let rows: Vec<Vec<String>> = table
+        .row_iter()
+        .map(|r| r.cell_iter().map(|c| c.content()).collect())
+        .collect();
+    // Columns in groups, each as many as fit beside the keys.
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for k in keys..widths.len() {
+        let fits = groups.last().is_some_and(|g| {
+            let w: Vec<usize> = (0..keys)
+                .chain(g.iter().copied())
+                .chain([k])
+                .map(|c| widths[c])
+                .collect();
+            framed(&w) <= usize::from(MAX_COLUMNS)
+        });
+        match groups.last_mut() {
+            Some(g) if fits => g.push(k),
+            _ => groups.push(vec![k]),
+        }
+    }
+    let pick = |cells: &[String], columns: &[usize]| -> Vec<String> {
+        columns
+            .iter()
+            .map(|&c| cells.get(c).cloned().unwrap_or_default())
+            .collect()
+    };
+    groups
+        .iter()
+        .map(|g| {
+            let columns: Vec<usize> = (0..keys).chain(g.iter().copied()).collect();
+            let mut part = Table::new();
+            part.load_preset(&preset);
+            if !header.is_empty() {
+                part.set_header(pick(&header, &columns));
+            }
+            for row in &rows {
+                part.add_row(pick(row, &columns));
+            }
+            fit(&mut part).to_string()
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// The widest line of each column's cells, headers left out, plus its padding of 2.
+fn cell_widths(table: &Table) -> Vec<usize> {
+    let mut widths: Vec<usize> = Vec::new();
     for row in table.row_iter() {
         for (k, cell) in row.cell_iter().enumerate() {
             let wide = cell
@@ -26,23 +95,20 @@ pub fn fit(table: &mut Table) -> &mut Table {
                 .lines()
                 .map(|l| l.chars().count())
                 .max()
-                .unwrap_or(0);
-            let wide = u16::try_from(wide).unwrap_or(u16::MAX).saturating_add(2);
+                .unwrap_or(0)
+                + 2;
             match widths.get_mut(k) {
                 Some(w) => *w = (*w).max(wide),
                 None => widths.push(wide),
             }
         }
     }
-    // One border left of each column and one at the right end.
-    let frame = u16::try_from(widths.len() + 1).unwrap_or(u16::MAX);
-    let total = widths.iter().fold(frame, |sum, &w| sum.saturating_add(w));
-    if total <= MAX_COLUMNS {
-        for (column, w) in table.column_iter_mut().zip(widths) {
-            column.set_constraint(ColumnConstraint::LowerBoundary(Width::Fixed(w)));
-        }
-    }
-    table
+    widths
+}
+
+/// The width of a table of columns this wide: a border left of each and one at the end.
+fn framed(widths: &[usize]) -> usize {
+    widths.iter().sum::<usize>() + widths.len() + 1
 }
 
 /// Makes `table` a markdown table: the ASCII markdown preset, one line per row, as wide as its
@@ -167,6 +233,28 @@ mod tests {
         }
         // Header (wrapped), its rule, four rows, top and bottom.
         assert_eq!(printed.lines().count(), 2 + 1 + 4 + 2, "{printed}");
+    }
+
+    /// The room bench's many columns: split into tables that repeat case and rule.
+    #[test]
+    fn a_table_too_wide_for_its_cells_is_split_with_its_keys_repeated() {
+        let mut t = wide();
+        let printed = split(&mut t, 2);
+        let fits = |l: &str| l.chars().count() <= usize::from(MAX_COLUMNS);
+        assert!(printed.lines().all(fits), "{printed}");
+        // Every cell whole, the keys in every part.
+        for whole in ["(8.1e-5…3.3e-3)", "123456", "(11.0…14.2)", "reproducible"] {
+            assert!(printed.contains(whole), "{whole} in\n{printed}");
+        }
+        let parts = printed.lines().filter(|l| l.starts_with('┌')).count();
+        assert!(parts >= 2, "{printed}");
+        let key = "lab/warm-white-stale-errors";
+        assert_eq!(printed.matches(key).count(), 2 * parts, "{printed}");
+        // A table that fits is printed whole.
+        let mut narrow = Table::new();
+        narrow.set_header(["case", "rule"]).add_row(["a", "b"]);
+        let whole = split(&mut narrow, 2);
+        assert_eq!(whole, fit(&mut narrow).to_string());
     }
 
     #[test]
