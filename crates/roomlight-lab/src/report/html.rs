@@ -164,12 +164,19 @@ where the set of projectors lighting the room changes, against the other reached
 fn whole_room_figures(h: &mut String, p: &PresetOutcome) {
     let pic = &p.pictures;
     let (x, y, w, hh) = pic.crop;
+    // Twice their size when three fit side by side on the page (1100 px), else 1:1.
+    let zoom = if 6 * w + 16 <= 1100 { 2 } else { 1 };
+    let shown = if zoom == 2 {
+        "shown twice their size"
+    } else {
+        "shown at their size"
+    };
     let _ = write!(
         h,
         "<figure style=\"margin:1em 0\"><img src=\"{map}\" alt=\"ΔE00 map\"><figcaption>ΔE00 of the \
 result against the LEDs per camera pixel (mean {mean:.2}, 95th percentile {p95:.2} over reached pixels); \
 greys: not reached, black: no surface</figcaption></figure>\
-<p>Where the map is worst: the {w}×{hh} window at ({x}, {y}), camera pixels 1:1 (shown twice their size).</p>\
+<p>Where the map is worst: the {w}×{hh} window at ({x}, {y}), the camera's own pixels, not resampled ({shown}).</p>\
 <div class=\"row crops\">",
         map = escape(&pic.de00_map),
         mean = pic.whole_room.de00_mean,
@@ -180,7 +187,7 @@ greys: not reached, black: no surface</figcaption></figure>\
             h,
             "<figure><img src=\"{}\" width=\"{}\" alt=\"{caption}\"><figcaption>{caption}</figcaption></figure>",
             escape(file),
-            2 * w
+            zoom * w
         );
     }
     let linear: Vec<String> = pic
