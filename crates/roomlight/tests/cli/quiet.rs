@@ -135,14 +135,15 @@ fn summarised(text: &str) -> Option<(u64, u64)> {
 }
 
 /// An event a line is allowed for: a projector live or calibrated changing (the camera
-/// agent's stdout), a join or a leave (its log).
+/// agent's stdout), a join or a leave, a warning (rate-limited where it repeats: a loaded
+/// machine may make contributions late).
 fn is_event(text: &str) -> bool {
     let stdout_event = text
         .strip_prefix("round ")
         .and_then(|r| r.split_once(": "))
         .is_some_and(|(n, _)| n.parse::<u64>().is_ok());
     stdout_event
-        || [" joined", " left", " goodbye", "stream ended"]
+        || [" joined", " left", " goodbye", "stream ended", " WARN "]
             .iter()
             .any(|e| text.contains(e))
 }
