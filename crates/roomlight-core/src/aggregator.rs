@@ -70,6 +70,14 @@ impl ErrorAggregator {
         contribution: impl IntoIterator<Item = (PatchId, LinearRgb)>,
     ) -> Result<(), ModelError> {
         let items: Vec<(PatchId, LinearRgb)> = contribution.into_iter().collect();
+        self.check_contribution(&items)?;
+        self.apply_checked(&items);
+        Ok(())
+    }
+
+    /// Whether [`Self::add_contribution`] would take `items`: every patch known, every value
+    /// finite.
+    pub fn check_contribution(&self, items: &[(PatchId, LinearRgb)]) -> Result<(), ModelError> {
         for (k, &(i, delta)) in items.iter().enumerate() {
             if i as usize >= self.errors.len() {
                 return Err(ModelError::PatchOutOfRange {
@@ -93,10 +101,14 @@ impl ErrorAggregator {
                 other => other,
             })?;
         }
-        for (i, delta) in items {
+        Ok(())
+    }
+
+    /// Subtracts a contribution that [`Self::check_contribution`] accepted.
+    pub(crate) fn apply_checked(&mut self, items: &[(PatchId, LinearRgb)]) {
+        for &(i, delta) in items {
             self.errors[i as usize] -= delta;
         }
-        Ok(())
     }
 
     /// Closes a model round: the errors now held are the prediction `ê ← ê − Σ δ_n`.

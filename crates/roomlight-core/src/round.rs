@@ -40,9 +40,17 @@ pub enum Next {
 ///
 /// Drive it as: `match next() { Capture => measured(errors), Model => predicted() }`, send the
 /// round's errors, hand it each contribution ([`Controller::contribution`]); repeat.
+///
+/// A round's contributions are summed in a fixed order, not in the order they arrived:
+/// floating-point addition is not associative, and over the wire the order is the network's
+/// and the scheduler's, so the same room would otherwise predict errors that differ in their
+/// last bits from run to run — and, a few hundred rounds later, take a different number of
+/// captures.
 #[derive(Debug, Clone)]
 pub struct Controller {
     aggregator: ErrorAggregator,
+    /// The contributions of the round sent last, checked, not yet subtracted.
+    contributions: Vec<Vec<(PatchId, LinearRgb)>>,
     /// The per-patch noise `σ` of the captures, for the settle rule.
     noise: Vec<LinearRgb>,
     model_rounds: usize,
@@ -61,6 +69,7 @@ impl Controller {
     pub fn new(noise: Vec<LinearRgb>, model_rounds: usize) -> Self {
         Self {
             aggregator: ErrorAggregator::new(noise.len()),
+            contributions: Vec::new(),
             noise,
             model_rounds,
             pending: 0,
@@ -95,6 +104,8 @@ impl Controller {
     /// errors have the wrong length or a value that is not finite.
     pub fn measured(&mut self, errors: Vec<LinearRgb>) -> Result<RoundSummary, ModelError> {
         let mut summary = self.aggregator.measured(errors)?;
+        // The capture measured what the contributions changed: they are in its errors.
+        self.contributions.clear();
         let noise = objective_noise(self.aggregator.errors(), &self.noise);
         self.settle.observe(summary.objective, noise);
         self.pending = self.model_rounds;
@@ -109,6 +120,7 @@ impl Controller {
             return None;
         }
         self.pending -= 1;
+        self.apply_contributions();
         let mut summary = self.aggregator.predicted();
         summary.restart |= std::mem::take(&mut self.changed);
         Some(summary)
@@ -124,15 +136,40 @@ impl Controller {
 
     /// One node's contribution change `δ_n` to the round just sent: the predicted errors lose
     /// it. Refused whole (nothing applied) if a patch is unknown or a value is not finite.
+    /// Contributions are subtracted when the errors are next asked for, in an order that
+    /// depends only on what they are (see [`Controller`]).
     pub fn contribution(
         &mut self,
         delta: impl IntoIterator<Item = (PatchId, LinearRgb)>,
     ) -> Result<(), ModelError> {
-        self.aggregator.add_contribution(delta)
+        let items: Vec<(PatchId, LinearRgb)> = delta.into_iter().collect();
+        self.aggregator.check_contribution(&items)?;
+        self.contributions.push(items);
+        Ok(())
+    }
+
+    /// Subtracts the pending contributions in their canonical order: by patch ids, then by the
+    /// values' bits (a total order on the contributions themselves, so the sum is the same
+    /// whatever order they arrived in; equal contributions are interchangeable).
+    fn apply_contributions(&mut self) {
+        if self.contributions.is_empty() {
+            return;
+        }
+        let mut pending = std::mem::take(&mut self.contributions);
+        let key =
+            |&(i, v): &(PatchId, LinearRgb)| (i, v[0].to_bits(), v[1].to_bits(), v[2].to_bits());
+        pending.sort_unstable_by(|a, b| a.iter().map(key).cmp(b.iter().map(key)));
+        for items in &pending {
+            self.aggregator.apply_checked(items);
+        }
+        // The allocation is kept for the next round.
+        pending.clear();
+        self.contributions = pending;
     }
 
     /// The errors of the last round (measured, less the contributions since), one per patch.
-    pub fn errors(&self) -> &[LinearRgb] {
+    pub fn errors(&mut self) -> &[LinearRgb] {
+        self.apply_contributions();
         self.aggregator.errors()
     }
 
@@ -260,7 +297,9 @@ impl Projectors {
             self.generation += 1;
         }
         self.counts = [0; 5];
-        self.projectors.drain().map(|(id, _)| id).collect()
+        let mut ids: Vec<String> = self.projectors.drain().map(|(id, _)| id).collect();
+        ids.sort_unstable();
+        ids
     }
 
     /// A projector by id.
@@ -365,20 +404,24 @@ impl Projectors {
         !self.dark() || self.any_uncalibrated()
     }
 
-    /// The projectors waiting for their calibration (O(projectors): asked once per cycle).
+    /// The projectors waiting for their calibration, by id (O(projectors): asked once per
+    /// cycle). Sorted, so that which is calibrated first does not depend on a hash's order.
     pub fn uncalibrated(&self) -> Vec<String> {
         if !self.any_uncalibrated() {
             return Vec::new();
         }
-        self.projectors
+        let mut ids: Vec<String> = self
+            .projectors
             .iter()
             .filter(|(_, p)| !p.calibrated)
             .map(|(id, _)| id.clone())
-            .collect()
+            .collect();
+        ids.sort_unstable();
+        ids
     }
 
     /// Starts `round`: every calibrated projector that is ready is sent it (and awaited);
-    /// `(sent, late)` by id.
+    /// `(sent, late)` by id, each sorted (messages leave in the same order on every run).
     pub fn start_round(&mut self, round: u64) -> (Vec<String>, Vec<String>) {
         let mut sent = Vec::new();
         let mut late = Vec::new();
@@ -392,6 +435,8 @@ impl Projectors {
                 late.push(id.clone());
             }
         }
+        sent.sort_unstable();
+        late.sort_unstable();
         for id in &sent {
             self.update(id, |p| p.awaiting = Some(round));
         }
