@@ -148,12 +148,17 @@ fn run_child(bench: &str, evidence: &Evidence, args: &[&str]) -> (Section, bool)
     (section, ok)
 }
 
-/// The room's records as a markdown table under the caption the terminal shows, and the
-/// cases that could not run.
+/// The room's records as a markdown table under the caption the terminal shows, its notes, and
+/// the cases that could not run.
 fn room_markdown(outcome: &Outcome) -> String {
     let mut table = room::table(&outcome.records);
     super::width::markdown(&mut table);
-    let mut md = format!("{}.\n\n{table}\n", room::CAPTION);
+    let mut md = format!(
+        "{}.\n\n{table}\n\n{}\n\n{}\n",
+        room::CAPTION,
+        room::TIME_NOTE,
+        room::FLOOR_NOTE
+    );
     for (case, why) in &outcome.failed {
         md.push_str(&format!("\n- {case}: could not run: {why}"));
     }

@@ -214,6 +214,18 @@ impl SyntheticAgents {
         start: Option<Vec<LinearRgb>>,
         model_rounds: usize,
     ) -> Result<Self> {
+        Self::camera_with(problem, plant, start, model_rounds, VirtualRoom::camera).await
+    }
+
+    /// [`Self::camera`] with the camera `camera` makes of the virtual room (e.g. one that
+    /// holds or logs its captures).
+    pub async fn camera_with<C: roomlight_agent::hardware::Camera>(
+        problem: &roomlight_core::Problem,
+        plant: PlantConfig,
+        start: Option<Vec<LinearRgb>>,
+        model_rounds: usize,
+        camera: impl FnOnce(&VirtualRoom) -> C,
+    ) -> Result<Self> {
         let nodes = problem.nodes();
         let agents = nodes.div_ceil(NODES_PER_AGENT);
         let owners: HashMap<String, Vec<u32>> = (0..agents)
@@ -246,7 +258,7 @@ impl SyntheticAgents {
                 hot: Default::default(),
                 survey: None,
             },
-            room.camera(),
+            camera(&room),
             listener,
             None,
             camera::Extras::default(),

@@ -6,6 +6,7 @@
 use anyhow::Result;
 use roomlight_calib::procedure::Target;
 use roomlight_calib::response::Response;
+use roomlight_core::optimum::Optimum;
 use roomlight_core::{LinearRgb, Problem};
 use roomlight_sim::{Frame, NodeRegion, ProjectorImage, Room};
 
@@ -112,4 +113,18 @@ pub fn uncut_problem(cal: &Calibrated, model: &Model) -> Result<Problem> {
         model.problem.target().to_vec(),
         model.problem.noise().to_vec(),
     )?)
+}
+
+/// `(G_c(x) − G*_c)/G*_c` per colour channel: each channel's objective over its own optimum
+/// (the problem is separable by channel, so `best` is each channel's optimum too). A channel
+/// whose optimum is 0 has its excess over `1e-9 · G(black)`, as [`Optimum::excess`] does; 0
+/// when that is 0 too.
+pub fn channel_excess(problem: &Problem, best: &Optimum, x: &[LinearRgb]) -> [f64; 3] {
+    let errors = problem.errors(x);
+    std::array::from_fn(|c| {
+        let g = 0.5 * errors.iter().map(|e| e[c] * e[c]).sum::<f64>();
+        let star = best.objective_per_channel[c];
+        let den = star.max(1e-9 * best.objective_black);
+        if den > 0.0 { (g - star) / den } else { 0.0 }
+    })
 }

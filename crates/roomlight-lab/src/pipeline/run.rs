@@ -1,9 +1,16 @@
 //! One run of the real agents over loopback gRPC on a measured model: options, churn (a
 //! projector leaving, another joining), the trace against the truth, bytes per round.
+//!
+//! A run is deterministic at a fixed seed: its captures and excess are the same on every run
+//! and every machine. The rounds wait for every acknowledgement and contribution (the deadline
+//! is far beyond any round, so no node is ever late on a loaded machine); the round controller
+//! sums contributions in a fixed order; the camera's latency is a schedule in captures; and
+//! the driver acts (a projector leaves or joins, the run stops) only between two captures,
+//! each capture held until it has handled the last status ([`super::gate`]).
 
 use anyhow::{Context, Result, bail};
 use roomlight_agent::AgentError;
-use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus};
+use roomlight_agent::camera::{self, CameraConfig, Overview, RoomModel, RoomStatus};
 use roomlight_agent::node::{self, NodeConfig};
 use roomlight_core::metrics::{PatchDeltaE, patch_delta_e};
 use roomlight_core::optimum::{Optimum, optimum};
@@ -17,6 +24,7 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 
+use super::gate;
 use super::*;
 
 /// How the agents run for one target.
@@ -165,6 +173,24 @@ pub struct RunResult {
     pub bytes_per_round: f64,
 }
 
+/// What the bench reads of a run beyond its [`RunResult`].
+#[derive(Debug, Clone)]
+pub struct RunDetail {
+    pub result: RunResult,
+    /// Per trace point: wall time of the rounds up to its values — the agents' computation
+    /// and messages, without the simulated camera's time or the driver's (what a real room
+    /// adds to the camera's shots).
+    pub rounds_seconds: Vec<f64>,
+    /// `(G_c − G*_c)/G*_c` per colour channel at the end, on the measured model (each
+    /// channel's objective over its own optimum: the problem is separable by channel).
+    pub final_excess_rgb: [f64; 3],
+    /// The camera noise of the last captures (noisy minus noiseless sampling of the same
+    /// frame, on the model's patches), oldest first.
+    pub noise: Vec<Vec<LinearRgb>>,
+    /// The measured model's optimum (of the room left behind after a leave).
+    pub best: Optimum,
+}
+
 /// Runs the camera agent and one node agent per projector over loopback gRPC on `model`, from
 /// its conventional start until the camera agent reports settled (or `max_captures`), and
 /// measures the result against the simulator's truth.
@@ -177,6 +203,19 @@ pub fn run_agents(
     options: RunOptions,
     bar: &indicatif::ProgressBar,
 ) -> Result<RunResult> {
+    Ok(run_detailed(room, cal, model, transport, truth, options, bar)?.result)
+}
+
+/// [`run_agents`], with what the bench reads beyond the result.
+pub fn run_detailed(
+    room: &Arc<Room>,
+    cal: &Calibrated,
+    model: &Model,
+    transport: &Transport,
+    truth: &Truth,
+    options: RunOptions,
+    bar: &indicatif::ProgressBar,
+) -> Result<RunDetail> {
     let churn = ChurnPlan::new(room, cal, &options)?;
     let mut initial = model.conventional.clone();
     for &n in &churn.joining {
@@ -200,8 +239,8 @@ pub fn run_agents(
         best: &reference.best,
         bar,
     };
-    let last = runtime.block_on(session.drive(&owners, &mut steady))?;
-    report(model, truth, &hw, &reference, &last, t0, &steady)
+    let end = runtime.block_on(session.drive(&owners, &mut steady))?;
+    report(model, truth, &hw, &reference, &end, t0, &steady)
 }
 
 /// The nodes and agent names a churn moves, checked against the budget and the calibration
@@ -285,6 +324,7 @@ fn sim_hardware(
         log: Arc::new(Mutex::new(Vec::new())),
         latency: options.latency,
         delayed: Arc::new(Mutex::new(VecDeque::new())),
+        gate: Arc::new(super::gate::Gate::new()),
     }
 }
 
@@ -326,14 +366,32 @@ struct Session<'a> {
 /// A node agent's cancellation token and task.
 type NodeTask = (CancellationToken, JoinHandle<Result<(), AgentError>>);
 
+/// How long a round waits for acknowledgements and contributions: far beyond any round of the
+/// bench (tens of milliseconds), so that no node is left out of a round because the machine
+/// was busy. No case of the bench is about nodes that are late by the clock; the stale cases
+/// delay the camera's images by a schedule in captures instead.
+const ROUND_DEADLINE: Duration = Duration::from_secs(30);
+
+/// How long the driver waits for projectors to attach or leave.
+const CHURN_LIMIT: Duration = Duration::from_secs(60);
+
+/// The run at its end: the last status, what the nodes showed and how many captures were
+/// taken then (the camera agent may take one more while it stops), and when.
+struct End {
+    status: RoomStatus,
+    x: Vec<LinearRgb>,
+    captures: usize,
+    at: Instant,
+}
+
 impl Session<'_> {
     /// Starts the camera agent and the node agents, runs the rounds until the camera agent
-    /// stops the run, then stops and joins every agent; returns the last status.
+    /// stops the run, then stops and joins every agent; returns the run's end.
     async fn drive(
         &self,
         owners: &HashMap<String, Vec<u32>>,
         steady: &mut PerRound,
-    ) -> Result<RoomStatus> {
+    ) -> Result<End> {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let endpoint = format!("http://{}", listener.local_addr()?);
         let cancel = CancellationToken::new();
@@ -342,7 +400,7 @@ impl Session<'_> {
             (Some(_), Some(id)) => [id.clone()].into(),
             _ => Default::default(),
         };
-        let (status, camera_task) = camera::serve(
+        let served = camera::serve_room(
             self.camera_config(),
             RoomModel {
                 problem: self.model.problem.clone(),
@@ -353,23 +411,40 @@ impl Session<'_> {
             },
             self.hw.clone(),
             listener,
+            None,
+            camera::Extras::default(),
             cancel.clone(),
         );
-        let mut node_tasks: HashMap<_, _> = owners
+        self.hw.gate.follow(served.status.clone());
+        let mut overview = served.control.overview();
+        // Projectors in the order of their ids: the same spawn order on every run.
+        let mut ids: Vec<&String> = owners
             .keys()
             .filter(|id| Some(*id) != self.churn.joining_id.as_ref())
+            .collect();
+        ids.sort();
+        let mut node_tasks: HashMap<_, _> = ids
+            .into_iter()
             .map(|id| self.spawn_node(&endpoint, &cancel, id))
             .collect();
         let outcome = tokio::time::timeout(
             Duration::from_secs(120),
-            self.rounds(status, &endpoint, &cancel, &mut node_tasks, steady),
+            self.rounds(
+                served.status,
+                &mut overview,
+                (&endpoint, &cancel),
+                &mut node_tasks,
+                steady,
+            ),
         )
         .await;
         cancel.cancel();
+        // The camera agent finishes the capture it was held at, and stops.
+        self.hw.gate.open();
         for (_, (_, task)) in node_tasks {
             let _ = tokio::time::timeout(Duration::from_secs(5), task).await;
         }
-        let _ = tokio::time::timeout(Duration::from_secs(5), camera_task).await;
+        let _ = tokio::time::timeout(Duration::from_secs(5), served.handle).await;
         outcome.with_context(|| {
             format!(
                 "the agents neither stopped nor took {} captures within 120 s",
@@ -384,7 +459,7 @@ impl Session<'_> {
             room: "lab".into(),
             token: "demo".into(),
             heartbeat: Duration::from_millis(500),
-            deadline: Duration::from_secs(2),
+            deadline: ROUND_DEADLINE,
             model_rounds: options.model_rounds,
             calibration_epoch: 1,
             stale_frames: if options.discard_stale {
@@ -417,21 +492,30 @@ impl Session<'_> {
         (id.to_string(), (token, task))
     }
 
-    /// Follows the camera agent's status: the live line, the churn at its captures, and the
-    /// stop (every agent live, the joiner in, settled or out of captures).
+    /// Follows the camera agent's status, in step with its captures (each is held until the
+    /// status before it has been handled here): the first capture once every projector present
+    /// from the start is in the rounds, the churn at its captures, and the stop (every agent
+    /// live, the joiner in, settled or out of captures) right after a capture's rounds.
     async fn rounds(
         &self,
         mut status: watch::Receiver<RoomStatus>,
-        endpoint: &str,
-        cancel: &CancellationToken,
+        overview: &mut watch::Receiver<Overview>,
+        (endpoint, cancel): (&str, &CancellationToken),
         node_tasks: &mut HashMap<String, NodeTask>,
         steady: &mut PerRound,
-    ) -> Result<RoomStatus> {
+    ) -> Result<End> {
         let options = self.options;
+        let present: Vec<String> = node_tasks.keys().cloned().collect();
+        gate::wait_for_projectors(overview, CHURN_LIMIT, |ps| {
+            present.iter().all(|id| gate::live(ps, id))
+        })
+        .await
+        .context("the node agents present from the start")?;
+        self.hw.gate.handled(0);
         let (mut left, mut joined) = (false, self.churn.joining_id.is_none());
         loop {
             status.changed().await?;
-            let s = status.borrow().clone();
+            let s = status.borrow_and_update().clone();
             steady.add(&s);
             self.show_progress(&s);
             if let (Some(c), Some(id)) = (options.churn, &self.churn.leaving_id)
@@ -439,6 +523,9 @@ impl Session<'_> {
                 && s.captures >= c.leave_at
             {
                 self.leave(node_tasks, id).await;
+                gate::wait_for_projectors(overview, CHURN_LIMIT, |ps| !gate::attached(ps, id))
+                    .await
+                    .context("the leaving projector")?;
                 left = true;
             }
             if let (Some(c), Some(id)) = (options.churn, &self.churn.joining_id)
@@ -446,14 +533,38 @@ impl Session<'_> {
                 && s.captures >= c.join_at
             {
                 let (id, handles) = self.spawn_node(endpoint, cancel, id);
-                node_tasks.insert(id, handles);
+                node_tasks.insert(id.clone(), handles);
+                // In the rounds from the next capture on; one joining hot is calibrated first.
+                let hot = c.hot;
+                gate::wait_for_projectors(overview, CHURN_LIMIT, |ps| {
+                    if hot {
+                        gate::attached(ps, &id)
+                    } else {
+                        gate::live(ps, &id)
+                    }
+                })
+                .await
+                .context("the joining projector")?;
                 joined = true;
             }
             let settled_or_done =
                 s.settled && options.stop_when_settled || s.captures >= options.max_captures;
             if s.live_projectors == node_tasks.len() && joined && settled_or_done {
-                return Ok(s);
+                // The next capture is held: nothing moves until the gate opens.
+                let captures = self
+                    .hw
+                    .log
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .len();
+                return Ok(End {
+                    status: s,
+                    x: self.hw.shown(),
+                    captures,
+                    at: Instant::now(),
+                });
             }
+            self.hw.gate.handled(s.captures);
         }
     }
 
@@ -489,39 +600,51 @@ impl Session<'_> {
     }
 }
 
-/// The run's values against the truth, from what the agents left shown and the capture log.
+/// Captures whose camera noise a run keeps (see [`RunResult::noise`]).
+const NOISE_CAPTURES: usize = 5;
+
+/// The run's values against the truth, from what the agents showed at the run's end and the
+/// log of the captures taken until then.
 fn report(
     model: &Model,
     truth: &Truth,
     hw: &SimHardware,
     reference: &Reference,
-    last: &RoomStatus,
+    end: &End,
     t0: Instant,
     steady: &PerRound,
-) -> Result<RunResult> {
+) -> Result<RunDetail> {
     let Reference {
         best,
         true_best,
         de_conv,
     } = reference;
-    let end = Instant::now();
-    let x = hw
-        .shown
-        .lock()
-        .unwrap_or_else(PoisonError::into_inner)
-        .clone();
+    let last = &end.status;
+    let x = end.x.clone();
     let final_values = hw.noiseless(&x)?;
     let de = patch_delta_e(&truth.target, &final_values)?;
-    // The room after k captures' rounds is what capture k + 1 saw; after the last, what it shows.
-    let log = std::mem::take(&mut *hw.log.lock().unwrap_or_else(PoisonError::into_inner));
+    // The room after k captures' rounds is what capture k + 1 saw; after the last, what it
+    // showed at the end.
+    let mut log = std::mem::take(&mut *hw.log.lock().unwrap_or_else(PoisonError::into_inner));
+    log.truncate(end.captures);
     let capture_seconds: f64 = log.iter().map(|l| l.took.as_secs_f64()).sum();
+    // The rounds before each state: from the end of the capture before it to the request of
+    // the next capture (or the end), less nothing else: the gate holds only after the request.
+    let mut rounds = 0.0;
+    let mut rounds_seconds = Vec::with_capacity(log.len() + 1);
+    let mut previous_end: Option<Instant> = None;
     let states = log
         .iter()
-        .map(|l| (l.at, &l.shown, &l.noiseless, Some(&l.measured)))
-        .chain(std::iter::once((end, &x, &final_values, None)));
+        .map(|l| (l.asked, l.at, &l.shown, &l.noiseless, Some(&l.measured)))
+        .chain(std::iter::once((end.at, end.at, &x, &final_values, None)));
     let trace = states
         .enumerate()
-        .map(|(k, (at, shown, values, measured))| {
+        .map(|(k, (asked, at, shown, values, measured))| {
+            if let Some(p) = previous_end {
+                rounds += asked.saturating_duration_since(p).as_secs_f64();
+            }
+            rounds_seconds.push(rounds);
+            previous_end = Some(at);
             Ok(TracePoint {
                 capture: k as u64,
                 seconds: at.saturating_duration_since(t0).as_secs_f64(),
@@ -542,9 +665,20 @@ fn report(
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    let noise = log[log.len().saturating_sub(NOISE_CAPTURES)..]
+        .iter()
+        .map(|l| {
+            l.measured
+                .iter()
+                .zip(&l.noiseless)
+                .map(|(m, n)| *m - *n)
+                .collect()
+        })
+        .collect();
     let de_best = patch_delta_e(&truth.target, &truth.problem.response(&true_best.x))?;
     let g = model.problem.objective(&x);
-    Ok(RunResult {
+    let final_excess_rgb = channel_excess(&model.problem, best, &x);
+    let result = RunResult {
         captures: last.captures,
         settled: last.settled,
         trace,
@@ -556,11 +690,18 @@ fn report(
         de00: de.per_patch,
         conventional_de00: de_conv.per_patch.clone(),
         best_mean_de00: de_best.mean,
-        seconds: t0.elapsed().as_secs_f64(),
+        seconds: end.at.saturating_duration_since(t0).as_secs_f64(),
         capture_seconds,
         rounds: last.round,
         bytes_per_round: steady.bytes_per_round(),
         calibrated_hot: last.calibrated_hot,
+    };
+    Ok(RunDetail {
+        result,
+        rounds_seconds,
+        final_excess_rgb,
+        noise,
+        best: best.clone(),
     })
 }
 

@@ -31,9 +31,14 @@ pub(super) struct SimHardware {
     /// many captures earlier (the first one while there is none that old): stale errors.
     pub(super) latency: usize,
     pub(super) delayed: Arc<Mutex<VecDeque<Vec<LinearRgb>>>>,
+    /// Holds each capture until the run's driver has handled the last status.
+    pub(super) gate: Arc<gate::Gate>,
 }
 
 pub(super) struct CaptureLog {
+    /// When the capture was asked for (the rounds before it had ended).
+    pub(super) asked: Instant,
+    /// When it was handed over.
     pub(super) at: Instant,
     /// How long the capture took (render, noise, sampling): the simulated camera's time.
     pub(super) took: Duration,
@@ -64,7 +69,7 @@ impl SimHardware {
             .clone()
     }
 
-    pub(super) fn measure(&self) -> Result<Vec<LinearRgb>> {
+    pub(super) fn measure(&self, asked: Instant) -> Result<Vec<LinearRgb>> {
         let started = Instant::now();
         let shown = self.shown();
         let capture = self.render(&shown)?;
@@ -87,6 +92,7 @@ impl SimHardware {
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .push(CaptureLog {
+                asked,
                 at: Instant::now(),
                 took: started.elapsed(),
                 shown,
@@ -114,9 +120,12 @@ impl Camera for SimHardware {
     fn capture(
         &mut self,
     ) -> impl Future<Output = Result<Vec<LinearRgb>, roomlight_agent::AgentError>> + Send {
-        std::future::ready(
-            self.measure()
-                .map_err(|e| roomlight_agent::AgentError::Protocol(format!("capture: {e:#}"))),
-        )
+        let hw = self.clone();
+        async move {
+            let asked = Instant::now();
+            hw.gate.wait().await;
+            hw.measure(asked)
+                .map_err(|e| roomlight_agent::AgentError::Protocol(format!("capture: {e:#}")))
+        }
     }
 }
