@@ -7,9 +7,8 @@ use crate::image_io::LinearImage;
 use roomlight_core::LinearRgb;
 use serde::{Deserialize, Serialize};
 
-/// Fewest ramp levels accepted: the ends and two levels between, which fit the one exponent
-/// per channel and check it.
-pub const MIN_LEVELS: usize = 4;
+/// Fewest ramp levels accepted.
+pub const MIN_LEVELS: usize = 9;
 
 /// The codes of a ramp of `levels` steps from 0 to 1.
 pub fn ramp_codes(levels: usize) -> Result<Vec<f64>, CalibError> {
@@ -111,11 +110,11 @@ pub fn fit_response(
                 used += 1;
             }
         }
-        if used < 2 || sxx <= 0.0 {
+        if used < 3 || sxx <= 0.0 {
             return Err(CalibError::Invalid {
                 field: "ramp",
                 problem: format!(
-                    "channel {c}: only {used} levels above the noise, expected at least 2"
+                    "channel {c}: only {used} levels above the noise, expected at least 3"
                 ),
             });
         }

@@ -56,16 +56,6 @@ pub enum Frame {
     /// Node values (linear light) drawn through the projector's [`Assignment`]; nodes not
     /// listed are black.
     Nodes(Vec<(u32, LinearRgb)>),
-    /// One structured-light pattern per colour channel (R, G, B), each drawn in that channel
-    /// only (`None`: the channel is black): an RGB camera separates up to three patterns in
-    /// one capture. Only for rigs that [`Rig::shows_colours`].
-    /// With `shown`, drawn only on those projector pixels (row-major), black elsewhere, as
-    /// [`Frame::Masked`] is.
-    Channels {
-        patterns: [Option<Pattern>; 3],
-        coding: Coding,
-        shown: Option<Arc<[bool]>>,
-    },
 }
 
 impl Frame {
@@ -95,37 +85,6 @@ impl Frame {
             } => {
                 let manifest = Manifest::with_coding(width, height, *coding)?;
                 Ok(manifest.pattern_image_where(*pattern, shown)?.pixels)
-            }
-            Self::Channels {
-                patterns,
-                coding,
-                shown,
-            } => {
-                let manifest = Manifest::with_coding(width, height, *coding)?;
-                if let Some(shown) = shown
-                    && shown.len() != n
-                {
-                    return Err(crate::CalibError::Invalid {
-                        field: "pattern mask",
-                        problem: format!(
-                            "{} pixels, the projector has {width}x{height}",
-                            shown.len()
-                        ),
-                    });
-                }
-                let planes: Vec<Option<Vec<f32>>> = patterns
-                    .iter()
-                    .map(|p| p.map(|p| manifest.pattern_values(p)))
-                    .collect();
-                let lit = |i: usize| shown.as_ref().is_none_or(|s| s[i]);
-                Ok((0..n)
-                    .map(|i| {
-                        std::array::from_fn(|c| match &planes[c] {
-                            Some(v) if lit(i) => v[i],
-                            _ => 0.0,
-                        })
-                    })
-                    .collect())
             }
             Self::Nodes(values) => Ok(match assignment {
                 Some(a) if a.width == width && a.height == height => a.draw(values),
@@ -232,12 +191,6 @@ pub trait Rig: Send {
 
     /// Whether [`Frame::Masked`] can be shown (a second structured-light pass needs it).
     fn shows_masks(&self) -> bool {
-        false
-    }
-
-    /// Whether [`Frame::Channels`] can be shown (structured light multiplexed over the colour
-    /// channels needs it; without it every pattern takes a capture of its own).
-    fn shows_colours(&self) -> bool {
         false
     }
 

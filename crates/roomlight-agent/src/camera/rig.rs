@@ -195,8 +195,6 @@ pub(super) fn show_pattern(
             }
             (structured(*pattern, *coding), pack_mask(shown))
         }
-        // The wire has no message for it yet; this rig does not claim `shows_colours`.
-        Frame::Channels { .. } => return Err("patterns by colour channel"),
         Frame::Nodes(values) => (
             v1::show::Pattern::Nodes(v1::NodeValues {
                 values: values

@@ -18,12 +18,10 @@ use crate::graycode::{
 };
 use crate::image_io::LinearImage;
 use crate::nodes::{NodeConfig, charts_lit, segment_beside, whole_frame};
-use crate::response::Response;
+use crate::response::{Response, fit_response, footprint_ramp, ramp_codes};
 use crate::rig::{Assignment, Frame, Projector, ProjectorKind, ProjectorRole, Rig, RigError};
 use roomlight_core::LinearRgb;
 
-mod lanes;
-mod ramps;
 mod steps;
 mod target;
 
@@ -45,9 +43,7 @@ pub struct Settings {
     /// lab grouped floor-right with the large aperture, and 0.32% of floor-right's decoded
     /// pixels came out off by more than 2 (none coded alone).
     pub footprint_share_large: f32,
-    /// Levels of the response ramp, its ends (the dark and white captures) included: a power
-    /// law per channel has one parameter, so two levels between the ends fit it and check
-    /// the fit; every projector shows them at once ([`Procedure::responses`]).
+    /// Levels of the response ramp (DESIGN §4.3: at least 9).
     pub ramp_levels: usize,
     /// How the attenuation of a room brought up is multiplexed.
     pub scheme: Scheme,
@@ -58,13 +54,6 @@ pub struct Settings {
     /// the projector) averages them away; it needs plain Gray code, as a defocused
     /// projector does ([`Settings::coding`]).
     pub fine_stripes: bool,
-    /// Structured light in three lanes, one per colour channel, on rigs that
-    /// [`Rig::shows_colours`]: a third of the captures.
-    pub colour_lanes: bool,
-    /// The second pass in colour lanes too (17 captures instead of 43). Off: the second pass
-    /// is for dim faces, and one channel's third of their light decoded floor-right's grazing
-    /// face (lab, 320×240 camera) to 86% within ±1 where whole patterns reach 99.7%.
-    pub colour_second_pass: bool,
 }
 
 impl Default for Settings {
@@ -74,12 +63,10 @@ impl Default for Settings {
             decode_large: DecodeConfig::strict(),
             footprint_share: 0.1,
             footprint_share_large: 0.01,
-            ramp_levels: 4,
+            ramp_levels: 9,
             scheme: Scheme::Hadamard,
             nodes: NodeConfig::default(),
             fine_stripes: true,
-            colour_lanes: true,
-            colour_second_pass: false,
         }
     }
 }

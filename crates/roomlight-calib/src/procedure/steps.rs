@@ -3,9 +3,7 @@
 //! shown or photos come from.
 
 use super::*;
-use super::{lanes, ramps};
 use crate::graycode::Pattern;
-use crate::response::{fit_response, ramp_codes};
 use std::sync::Arc;
 
 /// Runs the steps of calibration on a rig, counting captures and reporting progress.
@@ -132,10 +130,8 @@ impl<'a, R: Rig> Procedure<'a, R> {
 
     /// The first structured-light pass on `projectors` (see [`Self::structured_light`]):
     /// those whose footprints do not overlap coded at the same time, each decoding the camera
-    /// pixels it lights most, its direct light elsewhere zeroed ([`disown`]); on a rig that
-    /// [`Rig::shows_colours`] (and with [`Settings::colour_lanes`]) three patterns to a
-    /// capture, one per colour channel ([`lanes`]). White and black are `whites` and `dark`,
-    /// not captured again. In the order of `projectors`.
+    /// pixels it lights most, its direct light elsewhere zeroed ([`disown`]). In the order of
+    /// `projectors`.
     pub async fn code(
         &mut self,
         projectors: &[Projector],
@@ -146,17 +142,19 @@ impl<'a, R: Rig> Procedure<'a, R> {
             .iter()
             .map(|p| Manifest::with_coding(p.width, p.height, self.settings.coding(p)))
             .collect::<Result<_, _>>()?;
-        let bits: Vec<Vec<Pattern>> = manifests.iter().map(lanes::bit_patterns).collect();
         let groups = coding_groups(projectors, dark, whites, &self.settings);
-        let lengths: Vec<usize> = groups
+        let planned = groups
             .iter()
-            .map(|g| g.iter().map(|&k| bits[k].len()).max().unwrap_or(0))
-            .collect();
-        let colour = self.settings.colour_lanes && self.rig.shows_colours();
-        let schedule = lanes::Schedule::new(&lengths, colour);
+            .map(|g| {
+                g.iter()
+                    .map(|&k| manifests[k].patterns.len())
+                    .max()
+                    .unwrap_or(0)
+            })
+            .sum();
         self.report(Event::Stage {
             stage: Stage::StructuredLight,
-            captures: schedule.captures(),
+            captures: planned,
         });
         self.report(Event::Grouped {
             groups: groups
@@ -164,121 +162,15 @@ impl<'a, R: Rig> Procedure<'a, R> {
                 .map(|g| g.iter().map(|&k| projectors[k].id.clone()).collect())
                 .collect(),
         });
-        let mut captures = Vec::with_capacity(schedule.captures());
-        for j in 0..schedule.captures() {
-            let shown = schedule.at(j);
-            let frames: Vec<(&str, Frame)> = groups
-                .iter()
-                .enumerate()
-                .flat_map(|(g, members)| {
-                    let (shown, bits, manifests) = (&shown, &bits, &manifests);
-                    members.iter().map(move |&k| {
-                        let pattern = |item: &Option<lanes::Item>| {
-                            item.filter(|i| i.group == g)
-                                .and_then(|i| bits[k].get(i.step).copied())
-                        };
-                        let coding = manifests[k].coding;
-                        let frame = if colour {
-                            Frame::Channels {
-                                patterns: std::array::from_fn(|c| pattern(&shown[c])),
-                                coding,
-                                shown: None,
-                            }
-                        } else {
-                            match pattern(&shown[0]) {
-                                Some(pattern) => Frame::Structured { pattern, coding },
-                                None => Frame::BLACK,
-                            }
-                        };
-                        (projectors[k].id.as_str(), frame)
-                    })
-                })
-                .collect();
-            captures.push(
-                self.show_and_capture(Stage::StructuredLight, &frames)
-                    .await?,
-            );
-        }
-        self.black(projectors).await?;
         let dark_intensity = dark.intensity();
         let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
-        let places = schedule.places();
-        let saturation = self.rig.camera().saturation;
         let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
-        let captures = Arc::new(captures);
-        for (g, group) in groups.iter().enumerate() {
-            let white =
-                lanes::group_white(dark, &group.iter().map(|&k| &whites[k]).collect::<Vec<_>>());
-            let jobs: Vec<(Projector, Manifest, DecodeConfig, Option<Vec<bool>>)> = group
-                .iter()
-                .zip(owned_pixels(group, &gains))
-                .map(|(&k, ours)| {
-                    let p = &projectors[k];
-                    // Clipping here is planned around by the second passes, not refused.
-                    let mut config = DecodeConfig {
-                        refuse_saturated: false,
-                        ..self.settings.decoder(p)
-                    };
-                    if colour {
-                        config = lanes::channel_decoder(config);
-                    }
-                    (p.clone(), manifests[k].clone(), config, ours)
-                })
-                .collect();
-            let (captures, places, dark) = (Arc::clone(&captures), places.clone(), dark.clone());
-            let decoded =
-                self.rig
-                    .offload(move || {
-                        jobs.iter()
-                            .map(|(p, m, config, ours)| {
-                                let mut step = 0usize;
-                                let images: Vec<LinearImage> = m
-                                    .patterns
-                                    .iter()
-                                    .map(|f| match f.pattern {
-                                        Pattern::White => white.clone(),
-                                        Pattern::Black => dark.clone(),
-                                        Pattern::Bit { .. } => {
-                                            step += 1;
-                                            let at = |s| places.get(&(g, s)).copied();
-                                            match at(step - 1) {
-                                                Some((j, Some(c))) => lanes::channel_image(
-                                                    &captures[j],
-                                                    c,
-                                                    &white,
-                                                    &dark,
-                                                    saturation,
-                                                ),
-                                                Some((j, None)) => captures[j].clone(),
-                                                None => dark.clone(),
-                                            }
-                                        }
-                                    })
-                                    .collect();
-                                let mut corr = decode_where(m, config, ours.as_deref(), |f| {
-                                    let j = m
-                                        .patterns
-                                        .iter()
-                                        .position(|q| q.file == f.file)
-                                        .unwrap_or(0);
-                                    Ok(&images[j])
-                                })
-                                .map_err(|source| ProcedureError::Projector {
-                                    projector: p.id.clone(),
-                                    source,
-                                })?;
-                                disown(&mut corr, ours.as_deref());
-                                Ok::<_, ProcedureError>(corr)
-                            })
-                            .collect::<Result<Vec<_>, _>>()
-                    })
-                    .await??;
-            for (&k, corr) in group.iter().zip(decoded) {
-                self.report(Event::Decoded {
-                    projector: projectors[k].id.clone(),
-                    share: corr.decoded_share(),
-                });
-                corrs[k] = Some(corr);
+        for group in &groups {
+            let decoded = self
+                .code_group(projectors, &manifests, group, &gains)
+                .await?;
+            for (&k, c) in group.iter().zip(decoded) {
+                corrs[k] = Some(c);
             }
         }
         Ok(projectors
@@ -292,6 +184,87 @@ impl<'a, R: Rig> Procedure<'a, R> {
                 })
             })
             .collect())
+    }
+
+    /// Shows one group's patterns slot by slot (member `k` its own pattern `j`, black once it
+    /// has no more), captures each, leaves the members black and decodes each.
+    async fn code_group(
+        &mut self,
+        projectors: &[Projector],
+        manifests: &[Manifest],
+        group: &[usize],
+        gains: &[Vec<f32>],
+    ) -> Result<Vec<Correspondence>, ProcedureError> {
+        let longest = group
+            .iter()
+            .map(|&k| manifests[k].patterns.len())
+            .max()
+            .unwrap_or(0);
+        let mut captures = Vec::with_capacity(longest);
+        for j in 0..longest {
+            let frames: Vec<(&str, Frame)> = group
+                .iter()
+                .map(|&k| {
+                    let frame = match manifests[k].patterns.get(j) {
+                        Some(f) => Frame::Structured {
+                            pattern: f.pattern,
+                            coding: manifests[k].coding,
+                        },
+                        None => Frame::BLACK,
+                    };
+                    (projectors[k].id.as_str(), frame)
+                })
+                .collect();
+            captures.push(
+                self.show_and_capture(Stage::StructuredLight, &frames)
+                    .await?,
+            );
+        }
+        let members: Vec<Projector> = group.iter().map(|&k| projectors[k].clone()).collect();
+        self.black(&members).await?;
+        let jobs: Vec<(Projector, Manifest, DecodeConfig, Option<Vec<bool>>)> = group
+            .iter()
+            .zip(owned_pixels(group, gains))
+            .map(|(&k, ours)| {
+                let p = &projectors[k];
+                // Clipping here is planned around by the second passes, not refused.
+                let config = DecodeConfig {
+                    refuse_saturated: false,
+                    ..self.settings.decoder(p)
+                };
+                (p.clone(), manifests[k].clone(), config, ours)
+            })
+            .collect();
+        let corrs = self
+            .rig
+            .offload(move || {
+                jobs.iter()
+                    .map(|(p, m, config, ours)| {
+                        let mut corr = decode_where(m, config, ours.as_deref(), |f| {
+                            let j = m
+                                .patterns
+                                .iter()
+                                .position(|q| q.file == f.file)
+                                .unwrap_or(0);
+                            Ok(&captures[j])
+                        })
+                        .map_err(|source| ProcedureError::Projector {
+                            projector: p.id.clone(),
+                            source,
+                        })?;
+                        disown(&mut corr, ours.as_deref());
+                        Ok::<_, ProcedureError>(corr)
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .await??;
+        for (p, corr) in members.iter().zip(&corrs) {
+            self.report(Event::Decoded {
+                projector: p.id.clone(),
+                share: corr.decoded_share(),
+            });
+        }
+        Ok(corrs)
     }
 
     /// A second structured-light pass on standard projector `p` coded with XOR-04 (shown
@@ -315,15 +288,9 @@ impl<'a, R: Rig> Procedure<'a, R> {
             }
             _ => return Ok(None),
         };
-        let colour = self.settings.colour_second_pass
-            && self.settings.colour_lanes
-            && self.rig.shows_colours();
-        let bits = lanes::bit_patterns(manifest);
-        let schedule = lanes::Schedule::new(&[bits.len()], colour);
-        let planned = 3 + schedule.captures();
         self.report(Event::Stage {
             stage: Stage::SecondPass,
-            captures: planned,
+            captures: manifest.patterns.len() + 1,
         });
         let refused = |source| ProcedureError::Projector {
             projector: p.id.clone(),
@@ -341,67 +308,62 @@ impl<'a, R: Rig> Procedure<'a, R> {
         let exposure = plan
             .exposure(corr, &white, limits.saturation, limits.longest_exposure)
             .map_err(refused)?;
-        // White and black at the pass's exposure, then the bit patterns (three to a capture
-        // on a rig that shows colours).
-        let mut ends = Vec::with_capacity(2);
-        for pattern in [Pattern::White, Pattern::Black] {
-            self.rig.show(&[(&p.id, masked(pattern))]).await?;
-            ends.push(self.capture(Stage::SecondPass, exposure).await?);
-        }
-        let mut captures = Vec::with_capacity(schedule.captures());
-        for j in 0..schedule.captures() {
-            let at = schedule.at(j);
-            let pattern = |c: usize| at[c].and_then(|i| bits.get(i.step).copied());
-            let frame = if colour {
-                Frame::Channels {
-                    patterns: std::array::from_fn(pattern),
-                    coding: manifest.coding,
-                    shown: Some(Arc::clone(&shown)),
-                }
-            } else {
-                pattern(0).map_or(Frame::BLACK, masked)
-            };
-            self.rig.show(&[(&p.id, frame)]).await?;
+        let mut captures = Vec::with_capacity(manifest.patterns.len());
+        for f in &manifest.patterns {
+            self.rig.show(&[(&p.id, masked(f.pattern))]).await?;
             captures.push(self.capture(Stage::SecondPass, exposure).await?);
         }
         self.rig.show(&[(&p.id, Frame::BLACK)]).await?;
-        let (white_e, black_e) = (&ends[0], &ends[1]);
-        let places = schedule.places();
-        let clip = limits.saturation / exposure.max(1.0);
-        let mut step = 0usize;
-        let images: Vec<LinearImage> = manifest
-            .patterns
-            .iter()
-            .map(|f| match f.pattern {
-                Pattern::White => white_e.clone(),
-                Pattern::Black => black_e.clone(),
-                Pattern::Bit { .. } => {
-                    step += 1;
-                    let at = |s| places.get(&(0, s)).copied();
-                    match at(step - 1) {
-                        Some((j, Some(c))) => {
-                            lanes::channel_image(&captures[j], c, white_e, black_e, clip)
-                        }
-                        Some((j, None)) => captures[j].clone(),
-                        None => black_e.clone(),
-                    }
-                }
-            })
-            .collect();
-        let config = if colour {
-            lanes::channel_decoder(config)
-        } else {
-            config
-        };
-        let mut pass = plan
-            .finish(manifest, &config, corr, exposure, &images)
+        let pass = plan
+            .finish(manifest, &config, corr, exposure, &captures)
             .map_err(refused)?;
-        pass.captures = planned;
         self.report(Event::SecondPass {
             projector: p.id.clone(),
             pass,
         });
         Ok(Some(pass))
+    }
+
+    /// Projector `d`'s response (DESIGN §4.3): a ramp of uniform codes read over the camera
+    /// pixels it was decoded on; its first level is `dark` and its last `white` (taken
+    /// before), the levels between are captured now. Leaves the projector black.
+    pub async fn response(
+        &mut self,
+        d: Decoded,
+        dark: &LinearImage,
+        white: &LinearImage,
+    ) -> Result<Measured, ProcedureError> {
+        let codes = ramp_codes(self.settings.ramp_levels)?;
+        let mut ramp = Vec::with_capacity(codes.len());
+        for (j, &code) in codes.iter().enumerate() {
+            ramp.push(if j == 0 {
+                dark.clone()
+            } else if j + 1 == codes.len() {
+                white.clone()
+            } else {
+                let frame = Frame::Uniform([code as f32; 3]);
+                self.show_and_capture(Stage::Responses, &[(&d.projector.id, frame)])
+                    .await?
+            });
+        }
+        self.rig.show(&[(&d.projector.id, Frame::BLACK)]).await?;
+        let (measured, noise) = footprint_ramp(&ramp, &d.corr);
+        let response = fit_response(&codes, &measured, &noise).map_err(|source| {
+            ProcedureError::Projector {
+                projector: d.projector.id.clone(),
+                source,
+            }
+        })?;
+        self.report(Event::Response {
+            projector: d.projector.id.clone(),
+            gamma: response.gamma,
+        });
+        Ok(Measured {
+            projector: d.projector,
+            corr: d.corr,
+            response,
+            second: d.second,
+        })
     }
 
     /// Hands every placed projector its nodes.
@@ -514,10 +476,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
         })
     }
 
-    /// The responses of decoded projectors (DESIGN §2), `whites[k]` being `projectors[k]`'s:
-    /// every decoded projector shows each inner level of the ramp at once (one capture per
-    /// level; its ends are `dark` and the whites, taken before), and each one's share is
-    /// unmixed from the pixels it lights most ([`ramps`]). Leaves them black.
+    /// The responses of decoded projectors, `whites[k]` being `projectors[k]`'s.
     pub async fn responses(
         &mut self,
         decoded: Vec<Decoded>,
@@ -525,60 +484,17 @@ impl<'a, R: Rig> Procedure<'a, R> {
         dark: &LinearImage,
         whites: &[LinearImage],
     ) -> Result<Vec<Measured>, ProcedureError> {
-        let decoded: Vec<(Decoded, usize)> = decoded
-            .into_iter()
-            .filter_map(|d| {
-                let k = projectors.iter().position(|p| p.id == d.projector.id)?;
-                Some((d, k))
-            })
-            .collect();
-        let codes = ramp_codes(self.settings.ramp_levels)?;
-        let inner = &codes[1..codes.len() - 1];
-        let planned = if decoded.is_empty() { 0 } else { inner.len() };
+        let levels = self.settings.ramp_levels.saturating_sub(2);
         self.report(Event::Stage {
             stage: Stage::Responses,
-            captures: planned,
+            captures: decoded.len() * levels,
         });
-        if decoded.is_empty() {
-            return Ok(Vec::new());
-        }
-        let mut levels = Vec::with_capacity(inner.len());
-        for &code in inner {
-            let frames: Vec<(&str, Frame)> = decoded
-                .iter()
-                .map(|(d, _)| (d.projector.id.as_str(), Frame::Uniform([code as f32; 3])))
-                .collect();
-            levels.push(self.show_and_capture(Stage::Responses, &frames).await?);
-        }
-        let shown: Vec<Projector> = decoded.iter().map(|(d, _)| d.projector.clone()).collect();
-        self.black(&shown).await?;
-        let dark_intensity = dark.intensity();
-        let ws: Vec<&LinearImage> = decoded.iter().map(|(_, k)| &whites[*k]).collect();
-        let gains: Vec<Vec<f32>> = ws.iter().map(|w| gain(w, &dark_intensity)).collect();
-        let pixels: Vec<Vec<usize>> = decoded
-            .iter()
-            .enumerate()
-            .map(|(i, (d, _))| ramps::ramp_pixels(&d.corr, i, &gains, ws[i]))
-            .collect();
-        let ramps = ramps::unmix(&levels, dark, &ws, &pixels)?;
         let mut measured = Vec::with_capacity(decoded.len());
-        for ((d, _), (shares, noise)) in decoded.into_iter().zip(ramps) {
-            let response = fit_response(&codes, &shares, &noise).map_err(|source| {
-                ProcedureError::Projector {
-                    projector: d.projector.id.clone(),
-                    source,
-                }
-            })?;
-            self.report(Event::Response {
-                projector: d.projector.id.clone(),
-                gamma: response.gamma,
-            });
-            measured.push(Measured {
-                projector: d.projector,
-                corr: d.corr,
-                response,
-                second: d.second,
-            });
+        for d in decoded {
+            let Some(k) = projectors.iter().position(|p| p.id == d.projector.id) else {
+                continue;
+            };
+            measured.push(self.response(d, dark, &whites[k]).await?);
         }
         Ok(measured)
     }

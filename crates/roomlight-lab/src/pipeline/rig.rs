@@ -25,7 +25,6 @@ pub struct SimRig<'a> {
     /// Room indices of the live projectors, in the order they went live.
     live: Vec<usize>,
     shows_masks: bool,
-    shows_colours: bool,
     captures: usize,
 }
 
@@ -39,7 +38,6 @@ impl<'a> SimRig<'a> {
             assignments: HashMap::new(),
             live: (0..room.projectors().len()).collect(),
             shows_masks: true,
-            shows_colours: true,
             captures: 0,
         }
     }
@@ -72,12 +70,6 @@ impl<'a> SimRig<'a> {
     /// Whether the rig shows masked patterns (a rig that cannot skips the second pass).
     pub fn set_shows_masks(&mut self, shows: bool) {
         self.shows_masks = shows;
-    }
-
-    /// Whether the rig shows patterns by colour channel (a rig that cannot takes a capture per
-    /// pattern).
-    pub fn set_shows_colours(&mut self, shows: bool) {
-        self.shows_colours = shows;
     }
 
     /// Captures taken.
@@ -163,12 +155,6 @@ impl Rig for SimRig<'_> {
             if matches!(frame, Frame::Masked { .. }) && !self.shows_masks {
                 return Err(RigError::Unsupported(id.to_string(), "masked patterns"));
             }
-            if matches!(frame, Frame::Channels { .. }) && !self.shows_colours {
-                return Err(RigError::Unsupported(
-                    id.to_string(),
-                    "patterns by colour channel",
-                ));
-            }
             self.frames[k] = self.sim_frame(k, frame)?;
         }
         Ok(())
@@ -203,9 +189,5 @@ impl Rig for SimRig<'_> {
 
     fn shows_masks(&self) -> bool {
         self.shows_masks
-    }
-
-    fn shows_colours(&self) -> bool {
-        self.shows_colours
     }
 }
