@@ -4,7 +4,7 @@
 use crate::bench::net::growth_exponent;
 use crate::bench::room::{Outcome, captures_cell};
 use crate::report::escape;
-use crate::report::plot::{Figure, YScale, plot};
+use crate::report::plot::{Figure, Marker, YScale, plot};
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -33,6 +33,7 @@ pub fn write(dir: &Path, outcome: &Outcome) -> Result<()> {
         "scaling": scaling_points(outcome),
         "failed": outcome.failed,
         "curves": outcome.curves,
+        "events": outcome.events,
     });
     let path = dir.join("bench.json");
     std::fs::write(&path, serde_json::to_string_pretty(&json)?)
@@ -77,6 +78,18 @@ pub fn write(dir: &Path, outcome: &Outcome) -> Result<()> {
                 YScale::Linear,
             ),
         ];
+        // Churn is scheduled in captures: the capture plots mark it; the wall-clock plot does
+        // not, since each rule reaches a capture at its own time.
+        let markers: Vec<Marker> = outcome
+            .events
+            .iter()
+            .filter(|(c, _)| c == case)
+            .flat_map(|(_, events)| events)
+            .map(|(capture, label)| Marker {
+                x: *capture as f64,
+                label: label.clone(),
+            })
+            .collect();
         for (file, what, x_label, y_label, series, y) in &figures_of_case {
             plot(
                 &dir.join(file),
@@ -86,7 +99,11 @@ pub fn write(dir: &Path, outcome: &Outcome) -> Result<()> {
                     y_label,
                     series,
                     y: *y,
-                    markers: &[],
+                    markers: if *x_label == "captures" {
+                        &markers
+                    } else {
+                        &[]
+                    },
                 },
             )?;
         }
@@ -226,4 +243,52 @@ the camera agent's per-node state and the streams included).</p>\
         );
     }
     scaling
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::room::Point;
+
+    #[test]
+    fn a_churn_case_marks_leave_and_join_on_its_capture_plots() {
+        let point = |capture: u64| Point {
+            capture,
+            seconds: capture as f64 * 0.5,
+            excess: 1.0 / (1.0 + capture as f64),
+            mean_de00: 2.0,
+            rounds_seconds: 0.1,
+        };
+        let case = "small/leave-2-join-4";
+        let outcome = Outcome {
+            curves: vec![(
+                case.into(),
+                vec![("model-20".into(), (0..8).map(point).collect())],
+            )],
+            events: vec![(
+                case.into(),
+                vec![
+                    (2, "wall-left leaves".into()),
+                    (4, "floor-right joins".into()),
+                ],
+            )],
+            ..Outcome::default()
+        };
+        let dir = tempfile::tempdir().expect("tempdir");
+        write(dir.path(), &outcome).expect("written");
+        let read = |f: &str| std::fs::read_to_string(dir.path().join(f)).expect(f);
+        let slug = "small-leave-2-join-4";
+        for f in ["excess-captures", "de00-captures"] {
+            let svg = read(&format!("{slug}-{f}.svg"));
+            assert!(
+                svg.contains("wall-left leaves") && svg.contains("floor-right joins"),
+                "{f}"
+            );
+        }
+        let by_time = read(&format!("{slug}-excess-seconds.svg"));
+        assert!(!by_time.contains("leaves"));
+        let json: serde_json::Value = serde_json::from_str(&read("bench.json")).expect("json");
+        assert_eq!(json["events"][0][1][1][0], 4);
+        assert_eq!(json["events"][0][1][1][1], "floor-right joins");
+    }
 }

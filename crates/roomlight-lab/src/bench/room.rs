@@ -64,6 +64,9 @@ pub struct Outcome {
     pub scaling: Option<crate::bench::net::NetRun>,
     /// Cases that could not run, and why (reported, not left out).
     pub failed: Vec<(String, String)>,
+    /// Per case with churn: the capture after which each event lands and what it is ("wall-left
+    /// leaves"), for the markers of its plots.
+    pub events: Vec<(String, Vec<(u64, String)>)>,
 }
 
 /// A rule of the comparison: its name, the node rule, the model rounds per capture, and
@@ -435,6 +438,16 @@ impl Bench {
             curves.push((rule_name.to_string(), curve));
         }
         outcome.curves.push((name.to_string(), curves));
+        if let Some(c) = variant.churn {
+            let projector = |k: usize| self.room.projectors()[k].name.clone();
+            outcome.events.push((
+                name.to_string(),
+                vec![
+                    (c.leave_at, format!("{} leaves", projector(c.leaving))),
+                    (c.join_at, format!("{} joins", projector(c.joining))),
+                ],
+            ));
+        }
         Ok(())
     }
 }
