@@ -143,7 +143,7 @@ target on the simulator's noiseless truth. Figures are medians over repeated run
 (range in brackets); captures are counted from the start (capture 0); after a projector leaves and another \
 joins, captures to a level count from the join. Compute is the node updates timed alone, messages the rest \
 of the wall time after the simulated camera. Timings come from one shared machine: compare them as ratios.</p>\
-<table><tr><th>case</th><th>rule</th><th>captures to 1%</th><th>to 0.1%</th><th>final excess</th>\
+<table><tr><th>case</th><th>rule</th><th>captures to 1%</th><th>to 0.1%</th><th>final excess</th><th>to 1% true</th><th>final true</th>\
 <th>mean ΔE00</th><th>max ΔE00</th><th>compute µs/round</th><th>message ms/round</th><th>capture ms</th>\
 <th>bytes/round</th><th>diverged</th><th>repeats</th></tr>{rows}</table>{failed}\
 <h2>Model only what the scene needs</h2><ul>{sparsity}</ul>{scaling}\
@@ -157,7 +157,7 @@ fn record_rows(outcome: &Outcome) -> String {
     for r in &outcome.records {
         let _ = write!(
             rows,
-            "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.1e} ({:.1e}…{:.1e})</td>\
+            "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.1e} ({:.1e}…{:.1e})</td><td>{}</td><td>{:.1e}</td>\
 <td>{:.2} ({:.2}…{:.2})</td><td>{:.2}</td><td>{:.1}</td><td>{:.2}</td><td>{:.0}</td><td>{:.0}</td><td>{}</td><td>{}</td></tr>",
             if r.diverged { " class=\"bad\"" } else { "" },
             escape(&r.case),
@@ -167,6 +167,8 @@ fn record_rows(outcome: &Outcome) -> String {
             r.final_excess,
             r.spread.final_excess[0],
             r.spread.final_excess[1],
+            captures_cell(r.captures_to_1pct_true, [None, None], r.captures),
+            r.final_true_excess,
             r.mean_de00,
             r.spread.mean_de00[0],
             r.spread.mean_de00[1],
@@ -256,6 +258,7 @@ mod tests {
             capture,
             seconds: capture as f64 * 0.5,
             excess: 1.0 / (1.0 + capture as f64),
+            true_excess: 0.5 / (1.0 + capture as f64),
             mean_de00: 2.0,
             rounds_seconds: 0.1,
         };

@@ -427,11 +427,16 @@ impl Bench {
             let (calibration, floor) = first.unwrap_or_default();
             let (record, curve) = summarise((name, rule_name), &runs, calibration, floor);
             println!(
-                "  {name} {rule_name}: to 1% {}, final excess {:.1e}, mean ΔE00 {:.2}",
+                "  {name} {rule_name}: to 1% {} (true {}), final excess {:.1e} (true {:.1e}), \
+mean ΔE00 {:.2}",
                 record
                     .captures_to_1pct
                     .map_or("never".into(), |c| c.to_string()),
+                record
+                    .captures_to_1pct_true
+                    .map_or("never".into(), |c| c.to_string()),
                 record.final_excess,
+                record.final_true_excess,
                 record.mean_de00
             );
             outcome.records.push(record);
@@ -494,12 +499,14 @@ fn scene_run(d: &RunDetail, compute_us_per_round: f64, settle_from: u64) -> Run 
                 capture: p.capture,
                 seconds: p.seconds,
                 excess: p.model_excess,
+                true_excess: p.true_excess,
                 mean_de00: p.mean_de00,
                 rounds_seconds,
             })
             .collect(),
         settle_from,
         final_excess: r.trace.last().map_or(f64::NAN, |p| p.model_excess),
+        final_true_excess: r.trace.last().map_or(f64::NAN, |p| p.true_excess),
         final_excess_rgb: d.final_excess_rgb,
         mean_de00: crate::report::mean(&r.de00),
         max_de00: r.de00.iter().copied().fold(0.0, f64::max),

@@ -435,6 +435,8 @@ fn bench_room_quick_records_every_rule_through_the_agents() {
             "captures_to_1pct",
             "captures_to_0_1pct",
             "final_excess",
+            "captures_to_1pct_true",
+            "final_true_excess",
             "mean_de00",
             "max_de00",
             "compute_us_per_round",
