@@ -422,7 +422,7 @@ fn graycode_generate_then_decode_identity_and_refuse_bad_folders() {
 #[test]
 fn bench_room_quick_records_every_rule_through_the_agents() {
     let rows = bench_quick_rows("room", &["--repeats", "2"]);
-    assert_eq!(rows.len(), 6, "{rows:?}");
+    assert_eq!(rows.len(), 7, "{rows:?}");
     let by_rule = |rule: &str| {
         rows.iter()
             .find(|r| r["rule"] == rule)
@@ -519,7 +519,7 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         // rule and case must not diverge.
         let stale = r["case"].as_str().is_some_and(|c| c.contains("stale"));
         let coping =
-            !stale || matches!(r["rule"].as_str(), Some("safe-delay" | "model-20-discard"));
+            !stale || matches!(r["rule"].as_str(), Some("safe-delay" | "model-100-discard"));
         if coping {
             assert_eq!(r["diverged"], false, "{r}");
         }
@@ -540,10 +540,25 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         "small/leave-2-join-4-hot",
         "synthetic-100",
     ] {
-        reaches(case, "model-20");
+        reaches(case, "model-100");
     }
-    reaches("small/stale-1", "model-20-discard");
-    reaches("small/stale-2", "model-20-discard");
+    reaches("small/stale-2", "model-100-discard");
+    // Enough model rounds between captures: 1% within three captures where the room allows it
+    // (2 or fewer at 2026-11-27 16:37 UTC; the bench is deterministic at a seed).
+    for (case, rule) in [
+        ("small-reflective", "model-100"),
+        ("small-two-on-one-wall", "model-100"),
+        ("small-node-without-chart", "model-100"),
+        ("small-uncorrected-gamma", "model-100"),
+        ("small-bright-target", "model-100"),
+        ("small/stale-1", "model-100-discard"),
+    ] {
+        let r = row(case, rule);
+        assert!(
+            r["captures_to_1pct"].as_u64().is_some_and(|c| c <= 3),
+            "{case} {rule}: {r}"
+        );
+    }
     let excess =
         |case: &str, rule: &str| row(case, rule)["final_excess"].as_f64().unwrap_or(f64::NAN);
     for case in [
@@ -551,8 +566,8 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         "small-node-without-chart",
         "small-heavy-noise",
     ] {
-        assert!(excess(case, "model-20") < excess(case, "paper"), "{case}");
-        assert!(excess(case, "model-20") < 0.5, "{case}");
+        assert!(excess(case, "model-100") < excess(case, "paper"), "{case}");
+        assert!(excess(case, "model-100") < 0.5, "{case}");
     }
     // The damped step survives two stale captures and ends below where it started.
     assert!(excess("small/stale-2", "safe-delay") < excess("small/stale-2", "paper"));
@@ -610,9 +625,9 @@ fn bench_case_filter_runs_only_the_matching_cases() {
         [
             "paper",
             "momentum",
-            "model-20",
+            "model-100",
             "safe-delay",
-            "model-20-discard"
+            "model-100-discard"
         ]
     );
 }
