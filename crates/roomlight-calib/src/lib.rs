@@ -17,6 +17,7 @@
 //! for the tests only).
 
 pub mod attenuation;
+pub mod centroid;
 pub mod charts;
 pub mod cone;
 pub mod graycode;

@@ -5,6 +5,7 @@
 
 use crate::pipeline::SimRig;
 use anyhow::{Context, Result};
+use roomlight_calib::centroid::{block_centres, spots};
 use roomlight_calib::charts::{ChartCorners, PatchStatus, sample_charts};
 use roomlight_calib::graycode::{Correspondence, DecodeConfig, Manifest, decode};
 use roomlight_calib::image_io::LinearImage;
@@ -111,6 +112,11 @@ pub fn run(quick: bool) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     let (decoded_all, decode_secs) = structured_light(&room)?;
+    for k in 0..room.projectors().len() {
+        if room.projectors()[k].kind == ProjectorKind::LargeAperture {
+            area_centroids(&room, k)?;
+        }
+    }
     let charts = crate::pipeline::chart_corners(&room)?;
     chart_sampling(&room, &charts)?;
     let n = room.projectors().len();
@@ -144,6 +150,102 @@ pub fn run(quick: bool) -> Result<()> {
     );
     decode_speed()
 }
+
+/// Projector pixels per block whose centroid the large aperture's measure finds.
+const CENTROID_BLOCK: u32 = 16;
+/// Blocks shown at once are this many blocks apart (in x and y), so that their blurs do not
+/// meet.
+const CENTROID_SPACING: u32 = 6;
+/// Fewest camera pixels a block's sharp image covers for its centroid to be checked.
+const CENTROID_MIN_PIXELS: usize = 16;
+
+/// The large aperture `k`'s footprint measured by light-weighted centroids (issue 21, item
+/// 7): lattices of `CENTROID_BLOCK`-pixel blocks, `CENTROID_SPACING` blocks apart, each
+/// photographed (LEDs off, camera noise) minus a black photograph; every spot of light found
+/// ([`spots`]) has its centroid compared with where the block's sharp image lands by the
+/// simulator's true correspondence (the mean of the camera pixels it lights through the lens
+/// centre). A block counts where its sharp image covers at least `CENTROID_MIN_PIXELS` camera
+/// pixels; its error is the distance to the nearest spot's centroid (none: a miss).
+fn area_centroids(room: &Room, k: usize) -> Result<()> {
+    let t = Instant::now();
+    let p = &room.projectors()[k];
+    let (pw, ph) = (p.pinhole.width, p.pinhole.height);
+    let cw = room.camera().width as usize;
+    let truth = room.true_correspondence(k);
+    let centres = block_centres(&truth, cw, (pw, ph), CENTROID_BLOCK);
+    let (bw, bh) = (pw.div_ceil(CENTROID_BLOCK), ph.div_ceil(CENTROID_BLOCK));
+    let n = room.projectors().len();
+    let mut noise = CameraNoise::with_seed(room, 31);
+    let green = |c: &Capture| c.pixels.iter().map(|v| v[1]).collect::<Vec<f32>>();
+    let black = green(&noise.expose(&room.render(&vec![Frame::Black; n], None)?));
+    let mut errors: Vec<f64> = Vec::new();
+    let mut frames = 0usize;
+    for (oy, ox) in (0..CENTROID_SPACING).flat_map(|y| (0..CENTROID_SPACING).map(move |x| (y, x))) {
+        let shown: Vec<usize> = (oy..bh)
+            .step_by(CENTROID_SPACING as usize)
+            .flat_map(|by| {
+                (ox..bw)
+                    .step_by(CENTROID_SPACING as usize)
+                    .map(move |bx| (by * bw + bx) as usize)
+            })
+            .collect();
+        let mut pixels = vec![[0.0f32; 3]; (pw * ph) as usize];
+        for &b in &shown {
+            let (bx, by) = (b as u32 % bw, b as u32 / bw);
+            for y in by * CENTROID_BLOCK..((by + 1) * CENTROID_BLOCK).min(ph) {
+                for x in bx * CENTROID_BLOCK..((bx + 1) * CENTROID_BLOCK).min(pw) {
+                    pixels[(y * pw + x) as usize] = [1.0; 3];
+                }
+            }
+        }
+        let mut all = vec![Frame::Black; n];
+        all[k] = Frame::Linear(ProjectorImage {
+            width: pw,
+            height: ph,
+            pixels,
+        });
+        let lit = green(&noise.expose(&room.render(&all, None)?));
+        frames += 1;
+        let diff: Vec<f32> = lit.iter().zip(&black).map(|(l, b)| l - b).collect();
+        let mut sorted = diff.clone();
+        sorted.sort_by(f32::total_cmp);
+        let top = sorted[sorted.len() * 999 / 1000];
+        let found = spots(&diff, cw, CENTROID_FLOOR * top, CENTROID_MIN_PIXELS)?;
+        for &b in &shown {
+            let Some((c, count)) = centres[b] else {
+                continue;
+            };
+            if count < CENTROID_MIN_PIXELS {
+                continue;
+            }
+            let err = found
+                .iter()
+                .map(|s| ((s.centroid[0] - c[0]).powi(2) + (s.centroid[1] - c[1]).powi(2)).sqrt())
+                .fold(f64::INFINITY, f64::min);
+            errors.push(err);
+        }
+    }
+    let m = errors.len().max(1) as f64;
+    let share = |bar: f64| 100.0 * errors.iter().filter(|e| **e <= bar).count() as f64 / m;
+    let mut sorted = errors.clone();
+    sorted.sort_by(f64::total_cmp);
+    println!(
+        "{:<18} light-weighted centroids of {}x{} blocks: {} blocks seen, {:.2}% within ±1 camera px, {:.2}% within ±2; median {:.2} px, 99th percentile {:.2} px ({frames} captures, {:.1} s)",
+        p.name,
+        CENTROID_BLOCK,
+        CENTROID_BLOCK,
+        errors.len(),
+        share(1.0),
+        share(2.0),
+        sorted.get(sorted.len() / 2).copied().unwrap_or(0.0),
+        sorted.get(sorted.len() * 99 / 100).copied().unwrap_or(0.0),
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// A spot's floor, as a share of the brightest light in the capture (its 99.9th percentile).
+const CENTROID_FLOOR: f32 = 0.05;
 
 /// The charts sampled under the first LED preset: which patches are usable, and how long
 /// sampling takes.
@@ -198,6 +300,9 @@ fn partition(
         "  partition of unity, segmented together: {}",
         partition_of_unity(&truth, &weights, &seg.excluded, &away)
     );
+    if std::env::var_os("ROOMLIGHT_DIAG").is_some() {
+        partition_misses(&truth, corr, &weights, &seg.excluded, &away, cw);
+    }
     let mut claimed = vec![0.0f32; cw * ch];
     let (mut weights, mut dark) = (Vec::new(), Vec::new());
     for c in corr {
@@ -563,4 +668,64 @@ fn second_pass(
         under(0.02)
     );
     Ok(done.captures)
+}
+
+/// Where the partition of unity misses in overlaps (with `ROOMLIGHT_DIAG` set): each overlap
+/// point off by more than 1e-3, by what the decode says about its contributors.
+fn partition_misses(
+    truth: &[Vec<Option<u32>>],
+    corr: &[Correspondence],
+    weights: &[Vec<f32>],
+    dark: &[Vec<bool>],
+    skip: &[bool],
+    cw: usize,
+) {
+    let (mut undecoded, mut off_pixel, mut exact) = ([0usize; 2], [0usize; 2], [0usize; 2]);
+    let mut samples = Vec::new();
+    for i in 0..skip.len() {
+        let reaching: Vec<(usize, u32)> = truth
+            .iter()
+            .enumerate()
+            .filter_map(|(k, t)| t[i].map(|p| (k, p)))
+            .collect();
+        if skip[i] || reaching.len() < 2 || reaching.iter().any(|&(k, p)| dark[k][p as usize]) {
+            continue;
+        }
+        let sum: f32 = reaching.iter().map(|&(k, p)| weights[k][p as usize]).sum();
+        let miss = (sum - 1.0).abs();
+        if miss <= 1e-3 {
+            continue;
+        }
+        let big = usize::from(miss > 0.05);
+        let decoded: Vec<Option<u32>> = reaching
+            .iter()
+            .map(|&(k, _)| corr[k].map[i].map(|(x, y)| y * corr[k].projector_width + x))
+            .collect();
+        if decoded.iter().any(Option::is_none) {
+            undecoded[big] += 1;
+        } else if reaching
+            .iter()
+            .zip(&decoded)
+            .any(|((_, t), d)| Some(*t) != *d)
+        {
+            off_pixel[big] += 1;
+        } else {
+            exact[big] += 1;
+        }
+        if samples.len() < 12 && big == 1 {
+            samples.push(format!(
+                "({}, {}) sum {sum:.3} truth {:?} decoded {:?}",
+                i % cw,
+                i / cw,
+                reaching,
+                decoded
+            ));
+        }
+    }
+    println!(
+        "  misses in overlaps (> 1e-3 / > 0.05): a contributor not decoded there {undecoded:?}, decoded off its true pixel {off_pixel:?}, all decoded exactly {exact:?}"
+    );
+    for s in samples {
+        println!("    {s}");
+    }
 }
