@@ -32,7 +32,9 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         return synthetic(args);
     }
     let t0 = Instant::now();
+    let mut phases = Phases::default();
     let (name, room) = build_room(args.quick)?;
+    phases.done("room", t0);
     let mut calibration = vec![format!(
         "simulated room built in {:.1} s ({} projectors, {} charts, camera {}×{})",
         t0.elapsed().as_secs_f64(),
@@ -46,6 +48,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut noise = roomlight_sim::CameraNoise::with_seed(&room, args.seed);
     let bar = progress_bar()?;
+    let t = Instant::now();
     let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| {
         bar.println(&line);
         if bar.is_hidden() {
@@ -53,14 +56,20 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         }
         calibration.push(line);
     })?;
+    phases.done("calibration", t);
     let t = Instant::now();
-    let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
-    let transport = pipeline::Transport::new(basis, &cal.corners, pipeline::sample_config(&room))?;
+    let transport = pipeline::Transport::new(
+        &room,
+        &cal.regions,
+        &cal.corners,
+        pipeline::sample_config(&room),
+    )?;
     println!(
         "simulated hardware: each node's light rendered once in {:.1} s",
         t.elapsed().as_secs_f64()
     );
     let reach = crate::whole_room::ReachMap::new(&room, &cal.regions)?;
+    phases.done("node basis and reach", t);
     let lab = Lab {
         room: &room,
         cal: &cal,
@@ -68,17 +77,30 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         transport: &transport,
         bar: &bar,
         options: args,
+        phases: std::cell::RefCell::new(phases),
     };
     let (presets, rules) = lab.presets(&mut noise, dir)?;
     // One capture per preset measures its target.
     let captures = cal.captures + presets.len();
     let (hot_join, pm) = match presets.first() {
-        Some(first) => (lab.hot_join(first)?, Some(lab.pm(&presets)?)),
+        Some(first) => {
+            let t = Instant::now();
+            let hot_join = lab.hot_join(first)?;
+            lab.phases.borrow_mut().done("hot join", t);
+            let t = Instant::now();
+            let pm = lab.pm(&presets)?;
+            lab.phases.borrow_mut().done("projection mapping", t);
+            (hot_join, Some(pm))
+        }
         None => (None, None),
     };
+    let mut phases = lab.phases.into_inner();
+    let t = Instant::now();
+    let shadows = shadows(&room)?;
+    phases.done("shadows", t);
     let report = Report {
         pm,
-        shadows: shadows(&room)?,
+        shadows,
         hot_join,
         room: name,
         seed: args.seed,
@@ -89,7 +111,10 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         rules,
         wall_seconds: t0.elapsed().as_secs_f64(),
     };
+    let t = Instant::now();
     report::write(dir, &report)?;
+    phases.done("report", t);
+    println!("{phases}");
     println!(
         "report: {} (demo finished in {:.1} s)",
         dir.join("index.html").display(),
@@ -168,6 +193,8 @@ struct Lab<'a> {
     transport: &'a pipeline::Transport,
     bar: &'a indicatif::ProgressBar,
     options: &'a DemoOptions,
+    /// Wall time per phase, for the closing line.
+    phases: std::cell::RefCell<Phases>,
 }
 
 impl Lab<'_> {
@@ -181,6 +208,7 @@ impl Lab<'_> {
         let mut presets = Vec::new();
         let mut rules = Vec::new();
         for (preset, spec) in self.room.scene().presets.iter().enumerate() {
+            let t = Instant::now();
             let model = pipeline::measure_target(self.room, self.cal, preset, noise)?;
             let truth = pipeline::Truth::new(self.room, self.transport, &model, preset)?;
             let result = self.agents(
@@ -189,12 +217,17 @@ impl Lab<'_> {
                 RunOptions::default_rule(self.options.seed + preset as u64),
             )?;
             print_preset(&spec.name, &result);
+            self.phases.borrow_mut().done("preset runs", t);
+            let t = Instant::now();
             let pictures = report::pictures::preset_pictures(
                 self.room, self.cal, &model, &result, self.reach, preset, &spec.name, dir,
             )?;
             print_whole_room(&spec.name, &pictures.whole_room);
+            self.phases.borrow_mut().done("pictures and whole room", t);
             if preset == 0 {
+                let t = Instant::now();
                 rules = self.compare_rules(&model, &truth)?;
+                self.phases.borrow_mut().done("rules compared", t);
             }
             presets.push(PresetOutcome {
                 name: spec.name.clone(),
@@ -382,6 +415,47 @@ fn shadows(room: &roomlight_sim::Room) -> Result<Option<crate::shadow::ShadowCom
 
 /// Patches per colour chart.
 const PATCHES_PER_CHART: usize = 24;
+
+/// Wall time per phase of the demo (phases met again add up), in the order first met, and the
+/// process's peak memory when each last ended: the closing line.
+#[derive(Debug, Default)]
+struct Phases(Vec<(&'static str, f64, Option<f64>)>);
+
+impl Phases {
+    fn done(&mut self, name: &'static str, since: Instant) {
+        let s = since.elapsed().as_secs_f64();
+        let peak = peak_memory_mb();
+        match self.0.iter_mut().find(|(n, ..)| *n == name) {
+            Some((_, total, at)) => {
+                *total += s;
+                *at = peak;
+            }
+            None => self.0.push((name, s, peak)),
+        }
+    }
+}
+
+impl std::fmt::Display for Phases {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let list: Vec<String> = self
+            .0
+            .iter()
+            .map(|(name, s, peak)| match peak {
+                Some(mb) => format!("{name} {s:.1} s (peak {mb:.0} MB)"),
+                None => format!("{name} {s:.1} s"),
+            })
+            .collect();
+        write!(f, "phases: {}", list.join(", "))
+    }
+}
+
+/// The process's peak resident memory (Linux's VmHWM), in MB of 10⁶ bytes; `None` elsewhere.
+fn peak_memory_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024.0 / 1e6)
+}
 
 /// The synthetic-room comparison: the in-memory loop against the paper's rule, then the agents.
 fn synthetic(args: &DemoOptions) -> Result<()> {

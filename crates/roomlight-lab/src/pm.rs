@@ -294,6 +294,8 @@ pub fn run(
     let board_room = Room::build(evaluation_scene(base, true, true)?)
         .context("building the room with the contrast board")?;
     let board_mask: Vec<bool> = board_room.pixels().iter().map(|p| p.target).collect();
+    // Only its mask is needed: the room goes before the evaluation views are built.
+    drop(board_room);
     let board_regions = cal.regions_with_mask(room, &board_mask)?;
     let mut result = PmResult {
         ansi_contrast: [0.0; 3],

@@ -3,6 +3,7 @@
 //! by Gauss–Seidel sweeps to a stated tolerance.
 
 use crate::geometry::{EPS, Geometry};
+use rayon::prelude::*;
 use roomlight_core::LinearRgb;
 
 /// Form factors of a closed room and the solver.
@@ -36,26 +37,39 @@ impl Radiosity {
     pub fn build(geometry: &Geometry, closed: bool) -> Self {
         let els = &geometry.elements;
         let n = els.len();
+        // Each element's pairs with the later ones on a core of its own (the visibility rays
+        // dominate), then written both ways.
+        let pairs: Vec<Vec<(usize, f32)>> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let (ci, ni, ai) = (els[i].center, els[i].normal, els[i].area);
+                ((i + 1)..n)
+                    .filter_map(|j| {
+                        let (cj, nj, aj) = (els[j].center, els[j].normal, els[j].area);
+                        let d = cj - ci;
+                        let r2 = d.length_squared();
+                        if r2 <= 1e-12 {
+                            return None;
+                        }
+                        let r = r2.sqrt();
+                        let cos_i = ni.dot(d) / r;
+                        let cos_j = -nj.dot(d) / r;
+                        if cos_i <= 1e-4
+                            || cos_j <= 1e-4
+                            || !geometry.visible(ci + ni * EPS, cj + nj * EPS)
+                        {
+                            return None;
+                        }
+                        let kij =
+                            ai * aj * cos_i * cos_j / (std::f32::consts::PI * r2 + 0.5 * (ai + aj));
+                        Some((j, kij))
+                    })
+                    .collect()
+            })
+            .collect();
         let mut k = vec![0.0f32; n * n];
-        for i in 0..n {
-            let (ci, ni, ai) = (els[i].center, els[i].normal, els[i].area);
-            for j in (i + 1)..n {
-                let (cj, nj, aj) = (els[j].center, els[j].normal, els[j].area);
-                let d = cj - ci;
-                let r2 = d.length_squared();
-                if r2 <= 1e-12 {
-                    continue;
-                }
-                let r = r2.sqrt();
-                let cos_i = ni.dot(d) / r;
-                let cos_j = -nj.dot(d) / r;
-                if cos_i <= 1e-4 || cos_j <= 1e-4 {
-                    continue;
-                }
-                if !geometry.visible(ci + ni * EPS, cj + nj * EPS) {
-                    continue;
-                }
-                let kij = ai * aj * cos_i * cos_j / (std::f32::consts::PI * r2 + 0.5 * (ai + aj));
+        for (i, row) in pairs.into_iter().enumerate() {
+            for (j, kij) in row {
                 k[i * n + j] = kij;
                 k[j * n + i] = kij;
             }

@@ -127,3 +127,61 @@ fn captures_write_png_in_each_encoding() {
         }
     }
 }
+
+/// The node captures visited one at a time are those of the stored basis, to the bit.
+#[test]
+fn visited_node_captures_equal_the_basis_captures() {
+    let room = Room::build(scenes::small().expect("scene")).expect("room");
+    let nodes = halves(&room);
+    let basis = NodeBasis::new(&room, &nodes, None).expect("basis");
+    let mut seen = Vec::new();
+    NodeBasis::visit_node_captures(&room, &nodes, None, |node, capture| {
+        seen.push((node, capture));
+        Ok(())
+    })
+    .expect("visit");
+    assert_eq!(seen.len(), nodes.len() + 1);
+    for (node, capture) in seen {
+        let mut x = vec![LinearRgb::ZERO; nodes.len()];
+        if let Some(n) = node {
+            x[n] = LinearRgb::ONE;
+        }
+        assert_eq!(capture, basis.capture(&x), "node {node:?}");
+    }
+}
+
+/// A render sums every probe's light in one order: one thread and every core give the same
+/// capture to the bit, with images on the projectors (their own light tables), the LEDs on and
+/// inter-reflection.
+#[test]
+fn a_render_is_the_same_on_one_thread_and_on_all() {
+    let room = Room::build(scenes::small().expect("scene")).expect("room");
+    let preset = Some(room.preset("on").expect("preset"));
+    let frames: Vec<Frame> = room
+        .projectors()
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let (w, h) = (p.pinhole.width, p.pinhole.height);
+            Frame::Image(ProjectorImage {
+                width: w,
+                height: h,
+                pixels: (0..w * h)
+                    .map(|i| {
+                        let s = ((i % w) / 8 + (i / w) / 8 + k as u32) % 5;
+                        [0.2 * s as f32, 0.5, 1.0 - 0.2 * s as f32]
+                    })
+                    .collect(),
+            })
+        })
+        .collect();
+    let all = room.render(&frames, preset).expect("render");
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool")
+        .install(|| room.render(&frames, preset))
+        .expect("render");
+    assert_eq!(all, one);
+    assert!(all.pixels.iter().any(|p| p[0] > 0.0));
+}

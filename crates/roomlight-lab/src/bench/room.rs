@@ -365,9 +365,12 @@ impl Bench {
         let t0 = Instant::now();
         let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| println!("  {line}"))?;
         let calibration_seconds = t0.elapsed().as_secs_f64();
-        let basis = Arc::new(roomlight_sim::NodeBasis::new(&room, &cal.regions, None)?);
-        let transport =
-            pipeline::Transport::new(basis, &cal.corners, pipeline::sample_config(&room))?;
+        let transport = pipeline::Transport::new(
+            &room,
+            &cal.regions,
+            &cal.corners,
+            pipeline::sample_config(&room),
+        )?;
         Ok(Self {
             room,
             cal,

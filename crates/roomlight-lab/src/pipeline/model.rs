@@ -4,6 +4,7 @@
 //! surveying a room.
 
 use anyhow::Result;
+use rayon::prelude::*;
 use roomlight_calib::procedure::Target;
 use roomlight_calib::response::Response;
 use roomlight_core::optimum::Optimum;
@@ -76,8 +77,9 @@ impl FrameBuilder {
     /// The frames for node values `x` (a missing value counts as black).
     pub fn frames(&self, x: &[LinearRgb]) -> Vec<Frame> {
         let linear = Response::linear();
+        // One projector's frame per task: independent, the same on any number of cores.
         self.projectors
-            .iter()
+            .par_iter()
             .enumerate()
             .map(|(k, (width, height, nodes))| {
                 let mut light = vec![LinearRgb::ZERO; (width * height) as usize];

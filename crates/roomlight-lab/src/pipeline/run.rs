@@ -372,6 +372,13 @@ type NodeTask = (CancellationToken, JoinHandle<Result<(), AgentError>>);
 /// delay the camera's images by a schedule in captures instead.
 const ROUND_DEADLINE: Duration = Duration::from_secs(30);
 
+/// How long a run may take: 10 s a capture, at least 120 s. A capture takes a fraction of a
+/// second on a quiet machine, but several on a loaded one (2026-11-27, a 2-core VM at load 14:
+/// 8 s), where a flat 120 s failed a 30-capture run of the demo.
+fn run_limit(max_captures: u64) -> Duration {
+    Duration::from_secs(max_captures.saturating_mul(10).max(120))
+}
+
 /// How long the driver waits for projectors to attach or leave.
 const CHURN_LIMIT: Duration = Duration::from_secs(60);
 
@@ -427,8 +434,9 @@ impl Session<'_> {
             .into_iter()
             .map(|id| self.spawn_node(&endpoint, &cancel, id))
             .collect();
+        let limit = run_limit(self.options.max_captures);
         let outcome = tokio::time::timeout(
-            Duration::from_secs(120),
+            limit,
             self.rounds(
                 served.status,
                 &mut overview,
@@ -447,8 +455,9 @@ impl Session<'_> {
         let _ = tokio::time::timeout(Duration::from_secs(5), served.handle).await;
         outcome.with_context(|| {
             format!(
-                "the agents neither stopped nor took {} captures within 120 s",
-                self.options.max_captures
+                "the agents neither stopped nor took {} captures within {} s",
+                self.options.max_captures,
+                limit.as_secs()
             )
         })?
     }

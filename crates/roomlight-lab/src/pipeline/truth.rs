@@ -4,7 +4,7 @@
 use anyhow::Result;
 use roomlight_calib::charts::{ChartCorners, SampleConfig};
 use roomlight_core::{AttenuationColumn, LinearRgb, Problem};
-use roomlight_sim::{Frame, NodeBasis, Room};
+use roomlight_sim::{Frame, NodeBasis, NodeRegion, Room};
 use std::sync::Arc;
 
 use super::*;
@@ -20,29 +20,36 @@ pub struct Transport {
 }
 
 impl Transport {
-    /// Renders each node alone at full white (and all black), noiselessly, and samples the charts.
+    /// Renders each node alone at full white (and all black), noiselessly, and samples the
+    /// charts: the captures of a [`NodeBasis`], one at a time.
     pub fn new(
-        basis: Arc<NodeBasis>,
+        room: &Room,
+        regions: &[NodeRegion],
         corners: &[ChartCorners],
         config: SampleConfig,
     ) -> Result<Self> {
-        let nodes = basis.nodes();
-        let black = sample(
-            &basis.capture(&vec![LinearRgb::ZERO; nodes]),
-            corners,
-            &config,
-        )?;
-        let columns = (0..nodes)
-            .map(|n| {
-                let mut x = vec![LinearRgb::ZERO; nodes];
-                x[n] = LinearRgb::ONE;
-                Ok(sample(&basis.capture(&x), corners, &config)?
-                    .iter()
-                    .zip(&black)
-                    .map(|(a, b)| (*a - *b).map(|v| v.max(0.0)))
-                    .collect())
-            })
-            .collect::<Result<_>>()?;
+        let mut black: Vec<LinearRgb> = Vec::new();
+        let mut columns: Vec<Vec<LinearRgb>> = Vec::with_capacity(regions.len());
+        let mut failed = None;
+        NodeBasis::visit_node_captures(room, regions, None, |node, capture| {
+            match sample(&capture, corners, &config) {
+                Ok(values) => match node {
+                    None => black = values,
+                    Some(_) => columns.push(
+                        values
+                            .iter()
+                            .zip(&black)
+                            .map(|(a, b)| (*a - *b).map(|v| v.max(0.0)))
+                            .collect(),
+                    ),
+                },
+                Err(e) => failed = failed.take().or(Some(e)),
+            }
+            Ok(())
+        })?;
+        if let Some(e) = failed {
+            return Err(e);
+        }
         Ok(Self {
             corners: Arc::new(corners.to_vec()),
             config,

@@ -39,10 +39,80 @@ struct NodePart {
 impl NodeBasis {
     /// Renders each node's response with every other projector black and the LEDs of `preset`.
     pub fn new(room: &Room, nodes: &[NodeRegion], preset: Option<usize>) -> Result<Self, SimError> {
+        let mut parts = Vec::with_capacity(nodes.len());
+        let (black_capture, black_patches) = Self::render_parts(room, nodes, preset, |_, part| {
+            parts.push(part);
+            Ok(())
+        })?;
+        Ok(Self {
+            black_capture,
+            black_patches,
+            nodes: parts,
+            width: room.camera.width,
+            height: room.camera.height,
+        })
+    }
+
+    /// What [`Self::capture`] returns with every node black, then with node `n` alone at full
+    /// light (`[1, 1, 1]`), for each node in turn, to `visit(n, capture)`: the same captures
+    /// without keeping every node's image (one at a time in memory instead of all of them).
+    pub fn visit_node_captures(
+        room: &Room,
+        nodes: &[NodeRegion],
+        preset: Option<usize>,
+        mut visit: impl FnMut(Option<usize>, Capture) -> Result<(), SimError>,
+    ) -> Result<(), SimError> {
+        let (width, height) = (room.camera.width, room.camera.height);
+        let mut black: Option<Vec<[f32; 3]>> = None;
+        let mut n = 0;
+        let (black_capture, _) = Self::render_parts(room, nodes, preset, |black_capture, part| {
+            if black.is_none() {
+                black = Some(black_capture.to_vec());
+                visit(
+                    None,
+                    Capture {
+                        width,
+                        height,
+                        pixels: black_capture.to_vec(),
+                    },
+                )?;
+            }
+            let mut pixels = black_capture.to_vec();
+            part.add_capture(&mut pixels, [1.0; 3]);
+            visit(
+                Some(n),
+                Capture {
+                    width,
+                    height,
+                    pixels,
+                },
+            )?;
+            n += 1;
+            Ok(())
+        })?;
+        if black.is_none() {
+            visit(
+                None,
+                Capture {
+                    width,
+                    height,
+                    pixels: black_capture,
+                },
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The black render and each node's part in turn, handed to `keep` with the black capture.
+    fn render_parts(
+        room: &Room,
+        nodes: &[NodeRegion],
+        preset: Option<usize>,
+        mut keep: impl FnMut(&[[f32; 3]], NodePart) -> Result<(), SimError>,
+    ) -> Result<(Vec<[f32; 3]>, Vec<LinearRgb>), SimError> {
         let n = room.projectors.len();
         let black_frames = vec![Frame::Black; n];
         let (black_capture, black_patches) = room.render_with_patches(&black_frames, preset)?;
-        let mut parts = Vec::with_capacity(nodes.len());
         for node in nodes {
             let p = room
                 .projectors
@@ -91,15 +161,9 @@ impl NodeBasis {
                         .collect(),
                 );
             }
-            parts.push(part);
+            keep(&black_capture, part)?;
         }
-        Ok(Self {
-            black_capture,
-            black_patches,
-            nodes: parts,
-            width: room.camera.width,
-            height: room.camera.height,
-        })
+        Ok((black_capture, black_patches))
     }
 
     /// Number of nodes.
@@ -131,27 +195,33 @@ impl NodeBasis {
     pub fn capture(&self, x: &[LinearRgb]) -> Capture {
         let mut out = self.black_capture.clone();
         for (part, xn) in self.nodes.iter().zip(x) {
-            let xn = xn.clamp_unit().0.map(|v| v as f32);
-            if part.capture.len() == 1 {
-                for (o, v) in out.iter_mut().zip(&part.capture[0]) {
-                    o[0] += v[0] * xn[0];
-                    o[1] += v[1] * xn[1];
-                    o[2] += v[2] * xn[2];
-                }
-            } else {
-                for (c, image) in part.capture.iter().enumerate() {
-                    for (o, v) in out.iter_mut().zip(image) {
-                        o[0] += v[0] * xn[c];
-                        o[1] += v[1] * xn[c];
-                        o[2] += v[2] * xn[c];
-                    }
-                }
-            }
+            part.add_capture(&mut out, xn.clamp_unit().0.map(|v| v as f32));
         }
         Capture {
             width: self.width,
             height: self.height,
             pixels: out,
+        }
+    }
+}
+
+impl NodePart {
+    /// `out += ` this node's change of the capture at linear light `xn`.
+    fn add_capture(&self, out: &mut [[f32; 3]], xn: [f32; 3]) {
+        if self.capture.len() == 1 {
+            for (o, v) in out.iter_mut().zip(&self.capture[0]) {
+                o[0] += v[0] * xn[0];
+                o[1] += v[1] * xn[1];
+                o[2] += v[2] * xn[2];
+            }
+        } else {
+            for (c, image) in self.capture.iter().enumerate() {
+                for (o, v) in out.iter_mut().zip(image) {
+                    o[0] += v[0] * xn[c];
+                    o[1] += v[1] * xn[c];
+                    o[2] += v[2] * xn[c];
+                }
+            }
         }
     }
 }

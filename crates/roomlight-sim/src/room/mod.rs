@@ -6,10 +6,12 @@ use crate::geometry::{EPS, Geometry, V3};
 use crate::optics::{Fisheye, Light, Projector};
 use crate::radiosity::Radiosity;
 use crate::scene::{Scene, SceneError};
+use rayon::prelude::*;
 use roomlight_core::LinearRgb;
 
 mod basis;
 mod capture;
+mod direct;
 mod noise;
 mod probes;
 mod summed_area;
@@ -296,99 +298,48 @@ impl Room {
 
     /// Direct irradiance on every probe of a set.
     fn direct(&self, probes: &Probes, frames: &[Frame], preset: Option<usize>) -> Vec<LinearRgb> {
-        let mut e = vec![LinearRgb::ZERO; probes.albedo.len()];
-        for ((frame, projector), map) in frames.iter().zip(&self.projectors).zip(&probes.projectors)
-        {
-            match frame {
-                Frame::Black | Frame::Uniform(_) => {
-                    let code = match frame {
-                        Frame::Uniform(c) => *c,
-                        _ => [0.0; 3],
-                    };
-                    let light = projector.light(code);
-                    for (ei, &w) in e.iter_mut().zip(&map.white) {
-                        if w > 0.0 {
-                            *ei += light * f64::from(w);
-                        }
-                    }
-                }
-                Frame::Image(img) => {
-                    for &(probe, px, f) in &map.entries {
-                        e[probe as usize] +=
-                            projector.light(img.pixels[px as usize]) * f64::from(f);
-                    }
-                    if !map.boxes.is_empty() {
-                        let table = SummedArea::new(img.width, img.height, |i| {
-                            projector.light(img.pixels[i])
-                        });
-                        for &(probe, b, f) in &map.boxes {
-                            e[probe as usize] += table.mean(b) * f64::from(f);
-                        }
-                    }
-                }
-                Frame::Linear(img) => {
-                    for &(probe, px, f) in &map.entries {
-                        e[probe as usize] +=
-                            projector.light_linear(img.pixels[px as usize]) * f64::from(f);
-                    }
-                    if !map.boxes.is_empty() {
-                        let table = SummedArea::new(img.width, img.height, |i| {
-                            projector.light_linear(img.pixels[i])
-                        });
-                        for &(probe, b, f) in &map.boxes {
-                            e[probe as usize] += table.mean(b) * f64::from(f);
-                        }
-                    }
-                }
-            }
-        }
-        if let Some(p) = preset {
-            let spec = &self.scene.presets[p];
-            for name in &spec.lights {
-                let Some(l) = self.lights.iter().position(|l| &l.name == name) else {
-                    continue;
-                };
-                let light = &self.lights[l];
-                let rgb = spec
-                    .cct_k
-                    .map_or(light.rgb, crate::optics::cct_to_linear_rgb)
-                    * light.intensity;
-                for (ei, &g) in e.iter_mut().zip(&probes.lights[l]) {
-                    if g > 0.0 {
-                        *ei += rgb * f64::from(g);
-                    }
-                }
-            }
-        }
-        e
+        self.direct_sets(&[probes], frames, preset)
+            .pop()
+            .unwrap_or_default()
     }
 
-    /// Indirect irradiance on the elements (zero with inter-reflection off).
-    fn indirect(&self, frames: &[Frame], preset: Option<usize>) -> Vec<LinearRgb> {
+    /// Indirect irradiance on the elements from their direct irradiance (zero with
+    /// inter-reflection off).
+    fn indirect(&self, element_direct: &[LinearRgb]) -> Vec<LinearRgb> {
         match &self.radiosity {
-            Some(r) => {
-                r.solve(
-                    &self.direct(&self.element_probes, frames, preset),
-                    RADIOSITY_TOLERANCE,
-                )
-                .indirect
-            }
+            Some(r) => r.solve(element_direct, RADIOSITY_TOLERANCE).indirect,
             None => vec![LinearRgb::ZERO; self.geometry.elements.len()],
         }
+    }
+
+    /// Direct irradiance on the elements and on each probe set, in one pass over the frames.
+    fn direct_with_elements(
+        &self,
+        sets: &[&Probes],
+        frames: &[Frame],
+        preset: Option<usize>,
+    ) -> (Vec<LinearRgb>, Vec<Vec<LinearRgb>>) {
+        if self.radiosity.is_none() {
+            return (Vec::new(), self.direct_sets(sets, frames, preset));
+        }
+        let mut all = vec![&self.element_probes];
+        all.extend_from_slice(sets);
+        let mut direct = self.direct_sets(&all, frames, preset);
+        let elements = direct.remove(0);
+        (elements, direct)
     }
 
     /// Camera value of each probe: `exposure · ρ/π · (E_direct + H)`.
     fn values(
         &self,
         probes: &Probes,
-        frames: &[Frame],
-        preset: Option<usize>,
+        direct: &[LinearRgb],
         indirect: &[LinearRgb],
     ) -> Vec<LinearRgb> {
         let k = self.scene.camera.exposure / std::f64::consts::PI;
-        let direct = self.direct(probes, frames, preset);
         direct
-            .iter()
+            .par_iter()
+            .with_min_len(4096)
             .zip(&probes.albedo)
             .zip(&probes.interp)
             .map(|((&e, &rho), weights)| {
@@ -410,15 +361,13 @@ impl Room {
         preset: Option<usize>,
     ) -> Result<(Vec<[f32; 3]>, Vec<LinearRgb>), SimError> {
         self.check_frames(frames)?;
-        let indirect = self.indirect(frames, preset);
-        let capture = self
-            .values(&self.camera_probes, frames, preset, &indirect)
-            .into_iter()
-            .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32])
-            .collect();
+        let (elements, direct) =
+            self.direct_with_elements(&[&self.camera_probes, &self.patch_probes], frames, preset);
+        let indirect = self.indirect(&elements);
+        let capture = to_f32(self.values(&self.camera_probes, &direct[0], &indirect));
         Ok((
             capture,
-            Self::aggregate_patches(&self.values(&self.patch_probes, frames, preset, &indirect)).0,
+            Self::aggregate_patches(&self.values(&self.patch_probes, &direct[1], &indirect)).0,
         ))
     }
 
@@ -436,15 +385,12 @@ impl Room {
     /// The noiseless capture for these frames (one per projector) and LED preset.
     pub fn render(&self, frames: &[Frame], preset: Option<usize>) -> Result<Capture, SimError> {
         self.check_frames(frames)?;
-        let indirect = self.indirect(frames, preset);
-        let values = self.values(&self.camera_probes, frames, preset, &indirect);
+        let (elements, direct) = self.direct_with_elements(&[&self.camera_probes], frames, preset);
+        let indirect = self.indirect(&elements);
         Ok(Capture {
             width: self.camera.width,
             height: self.camera.height,
-            pixels: values
-                .into_iter()
-                .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32])
-                .collect(),
+            pixels: to_f32(self.values(&self.camera_probes, &direct[0], &indirect)),
         })
     }
 
@@ -468,8 +414,9 @@ impl Room {
         preset: Option<usize>,
     ) -> Result<(Vec<LinearRgb>, Vec<LinearRgb>), SimError> {
         self.check_frames(frames)?;
-        let indirect = self.indirect(frames, preset);
-        let samples = self.values(&self.patch_probes, frames, preset, &indirect);
+        let (elements, direct) = self.direct_with_elements(&[&self.patch_probes], frames, preset);
+        let indirect = self.indirect(&elements);
+        let samples = self.values(&self.patch_probes, &direct[0], &indirect);
         Ok(Self::aggregate_patches(&samples))
     }
 
@@ -606,4 +553,12 @@ impl Room {
         }
         e
     }
+}
+
+/// Linear camera values as the capture's f32 pixels.
+fn to_f32(values: Vec<LinearRgb>) -> Vec<[f32; 3]> {
+    values
+        .into_iter()
+        .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32])
+        .collect()
 }

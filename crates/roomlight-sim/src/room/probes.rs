@@ -6,6 +6,7 @@ use super::{PATCH_SAMPLES, PixelInfo, Probes, ProjectorMap, Room, Sample};
 use crate::geometry::{EPS, Geometry};
 use crate::optics::{Fisheye, Light, Pinhole, Projector};
 use parry3d::query::Ray;
+use rayon::prelude::*;
 use roomlight_core::LinearRgb;
 
 /// A set of probes before their transport is computed: per probe its albedo and bilinear
@@ -19,39 +20,48 @@ pub(super) struct ProbeSet {
 /// One ray per camera pixel: what each pixel sees, and a probe per pixel.
 pub(super) fn camera_view(camera: &Fisheye, geometry: &Geometry) -> (Vec<PixelInfo>, ProbeSet) {
     let (w, h) = (camera.width, camera.height);
+    // The rays over the cores, in pixel order.
+    let seen: Vec<_> = (0..w * h)
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|index| {
+            let (u, v) = (index % w, index / w);
+            camera
+                .ray(u as f32 + 0.5, v as f32 + 0.5)
+                .and_then(|d| geometry.cast(&Ray::new(camera.position, d), 100.0))
+                .map(|hit| {
+                    let (chart, albedo) = geometry.albedo_at(hit.face, hit.point);
+                    let interp = geometry.element_weights(hit.face, hit.point);
+                    (hit, chart, albedo, interp)
+                })
+        })
+        .collect();
     let mut pixels = Vec::with_capacity((w * h) as usize);
     let mut camera_samples: Vec<Sample> = Vec::new();
     let mut camera_albedo = Vec::with_capacity((w * h) as usize);
     let mut camera_interp = Vec::with_capacity((w * h) as usize);
-    for v in 0..h {
-        for u in 0..w {
-            let index = v * w + u;
-            let hit = camera
-                .ray(u as f32 + 0.5, v as f32 + 0.5)
-                .and_then(|d| geometry.cast(&Ray::new(camera.position, d), 100.0));
-            match hit {
-                Some(hit) => {
-                    let (chart, albedo) = geometry.albedo_at(hit.face, hit.point);
-                    pixels.push(PixelInfo {
-                        point: Some(hit.point.to_array()),
-                        face: Some(hit.face),
-                        target: geometry.faces[hit.face].target,
-                        chart,
-                    });
-                    camera_albedo.push(albedo);
-                    camera_interp.push(geometry.element_weights(hit.face, hit.point));
-                    camera_samples.push((index, hit.point, hit.normal, 1.0, None));
-                }
-                None => {
-                    pixels.push(PixelInfo {
-                        point: None,
-                        face: None,
-                        target: false,
-                        chart: None,
-                    });
-                    camera_albedo.push(LinearRgb::ZERO);
-                    camera_interp.push([(0, 0.0); 4]);
-                }
+    for (index, seen) in seen.into_iter().enumerate() {
+        match seen {
+            Some((hit, chart, albedo, interp)) => {
+                pixels.push(PixelInfo {
+                    point: Some(hit.point.to_array()),
+                    face: Some(hit.face),
+                    target: geometry.faces[hit.face].target,
+                    chart,
+                });
+                camera_albedo.push(albedo);
+                camera_interp.push(interp);
+                camera_samples.push((index as u32, hit.point, hit.normal, 1.0, None));
+            }
+            None => {
+                pixels.push(PixelInfo {
+                    point: None,
+                    face: None,
+                    target: false,
+                    chart: None,
+                });
+                camera_albedo.push(LinearRgb::ZERO);
+                camera_interp.push([(0, 0.0); 4]);
             }
         }
     }
@@ -135,14 +145,15 @@ impl Room {
         } = set;
         let samples = samples.as_slice();
         let count = albedo.len();
+        // Each projector's and light's transport on its own core (independent, same result).
         let projectors = self
             .projectors
-            .iter()
+            .par_iter()
             .map(|projector| self.projector_map(projector, count, samples))
             .collect();
         let lights = self
             .lights
-            .iter()
+            .par_iter()
             .map(|light| self.light_factors(light, count, samples))
             .collect();
         Probes {

@@ -1,0 +1,140 @@
+//! Direct light on the probes for a set of frames: each projector's light per pixel computed once
+//! per render and shared by every probe set (camera pixels, elements, chart patches), the probes
+//! split over the cores. Every probe sums its terms in the same order as one loop over the
+//! projectors, their entries and their boxes, then the LED panels, would: the result is the
+//! same to the bit on any number of threads.
+
+use super::{Frame, Probes, ProjectorMap, Room, SummedArea};
+use crate::optics::Projector;
+use rayon::prelude::*;
+use roomlight_core::LinearRgb;
+
+/// Probes a task of the parallel loops handles at least.
+const CHUNK: usize = 4096;
+
+impl Room {
+    /// Direct irradiance on every probe of each set, for these frames and LED preset.
+    pub(super) fn direct_sets(
+        &self,
+        sets: &[&Probes],
+        frames: &[Frame],
+        preset: Option<usize>,
+    ) -> Vec<Vec<LinearRgb>> {
+        let mut out: Vec<Vec<LinearRgb>> = sets
+            .iter()
+            .map(|p| vec![LinearRgb::ZERO; p.albedo.len()])
+            .collect();
+        for (k, (frame, projector)) in frames.iter().zip(&self.projectors).enumerate() {
+            match frame {
+                Frame::Black | Frame::Uniform(_) => {
+                    let code = match frame {
+                        Frame::Uniform(c) => *c,
+                        _ => [0.0; 3],
+                    };
+                    let light = projector.light(code);
+                    for (e, set) in out.iter_mut().zip(sets) {
+                        add_weighted(e, &set.projectors[k].white, light);
+                    }
+                }
+                Frame::Image(img) | Frame::Linear(img) => {
+                    let linear = matches!(frame, Frame::Linear(_));
+                    let light = pixel_light(projector, &img.pixels, linear);
+                    let maps: Vec<&ProjectorMap> = sets.iter().map(|s| &s.projectors[k]).collect();
+                    let table = maps
+                        .iter()
+                        .any(|m| !m.boxes.is_empty())
+                        .then(|| SummedArea::new(img.width, img.height, |i| light[i]));
+                    for (e, map) in out.iter_mut().zip(maps) {
+                        add_entries(e, &map.entries, |&px| light[px as usize]);
+                        if let Some(table) = &table {
+                            add_entries(e, &map.boxes, |b| table.mean(*b));
+                        }
+                    }
+                }
+            }
+        }
+        if let Some(p) = preset {
+            let spec = &self.scene.presets[p];
+            for name in &spec.lights {
+                let Some(l) = self.lights.iter().position(|l| &l.name == name) else {
+                    continue;
+                };
+                let light = &self.lights[l];
+                let rgb = spec
+                    .cct_k
+                    .map_or(light.rgb, crate::optics::cct_to_linear_rgb)
+                    * light.intensity;
+                for (e, set) in out.iter_mut().zip(sets) {
+                    add_weighted(e, &set.lights[l], rgb);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// `e_i += light · w_i` where `w_i > 0`.
+fn add_weighted(e: &mut [LinearRgb], weights: &[f32], light: LinearRgb) {
+    e.par_iter_mut()
+        .with_min_len(CHUNK)
+        .zip(weights.par_iter())
+        .for_each(|(ei, &w)| {
+            if w > 0.0 {
+                *ei += light * f64::from(w);
+            }
+        });
+}
+
+/// The light of every pixel of a frame (codes, or linear shares). Neighbouring pixels often
+/// share a code (a pattern's stripes, a node's flat inside), so each task keeps its last one.
+fn pixel_light(projector: &Projector, pixels: &[[f32; 3]], linear: bool) -> Vec<LinearRgb> {
+    let light = |c: [f32; 3]| {
+        if linear {
+            projector.light_linear(c)
+        } else {
+            projector.light(c)
+        }
+    };
+    pixels
+        .par_chunks(CHUNK)
+        .flat_map_iter(|chunk| {
+            let mut last: Option<([f32; 3], LinearRgb)> = None;
+            chunk.iter().map(move |&c| {
+                // Equal bits, equal light (a NaN code never reaches here: frames are checked).
+                match last {
+                    Some((code, l)) if code.map(f32::to_bits) == c.map(f32::to_bits) => l,
+                    _ => {
+                        let l = light(c);
+                        last = Some((c, l));
+                        l
+                    }
+                }
+            })
+        })
+        .collect()
+}
+
+/// `e[probe] += value(item) · factor` for every `(probe, item, factor)`, in the order given for
+/// each probe. The transport lists its entries by probe, so the probes are split into ranges
+/// over the cores; a list out of that order is summed in one loop.
+fn add_entries<T: Sync>(
+    e: &mut [LinearRgb],
+    items: &[(u32, T, f32)],
+    value: impl Fn(&T) -> LinearRgb + Sync,
+) {
+    if !items.is_sorted_by_key(|i| i.0) {
+        for (probe, item, f) in items {
+            e[*probe as usize] += value(item) * f64::from(*f);
+        }
+        return;
+    }
+    e.par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| {
+        let lo = (c * CHUNK) as u32;
+        let hi = lo + chunk.len() as u32;
+        let a = items.partition_point(|i| i.0 < lo);
+        let b = items.partition_point(|i| i.0 < hi);
+        for (probe, item, f) in &items[a..b] {
+            chunk[(probe - lo) as usize] += value(item) * f64::from(*f);
+        }
+    });
+}
