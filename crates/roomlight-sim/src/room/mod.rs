@@ -352,7 +352,7 @@ impl Room {
                 let rgb = spec
                     .cct_k
                     .map_or(light.rgb, crate::optics::cct_to_linear_rgb)
-                    * light.intensity;
+                    * (light.intensity * spec.intensity);
                 for (ei, &g) in e.iter_mut().zip(&probes.lights[l]) {
                     if g > 0.0 {
                         *ei += rgb * f64::from(g);
