@@ -23,7 +23,9 @@ fn edited(from: &str, to: &str) -> String {
 fn embedded_scenes_parse_and_the_small_room_builds() {
     let lab = scenes::lab().expect("lab");
     assert_eq!(lab.charts.len(), 12);
-    assert_eq!(lab.presets.len(), 4);
+    assert_eq!(lab.presets.len(), 5);
+    let paper = lab.presets.iter().find(|p| p.name == "paper").expect("paper preset");
+    assert!((paper.intensity - 0.14).abs() < 1e-12);
     let luminaires = lab
         .projectors
         .iter()
