@@ -29,7 +29,10 @@ fn target_patches_split_the_eroded_mask_and_sample_like_chart_patches() {
         assert_eq!(p.len(), 16);
         for &i in p {
             let (x, y) = (i % w, i / w);
-            assert!((5..13).contains(&x) && (7..15).contains(&y), "pixel {x},{y}");
+            assert!(
+                (5..13).contains(&x) && (7..15).contains(&y),
+                "pixel {x},{y}"
+            );
         }
     }
     // Each pixel's value is its column: a patch's mean is the mean of its columns.
@@ -71,11 +74,16 @@ fn a_dark_target_scales_its_rows_and_weight_zero_leaves_it_out() {
     let zero = all.clone().with_dark(2..3, 0.0).expect("w = 0");
     assert_eq!(zero, plain, "weight 0 is the model over the charts alone");
     assert_eq!(
-        zero.problem(zero.columns(&columns).unwrap()).unwrap(),
-        plain.problem(plain.columns(&columns).unwrap()).unwrap()
+        zero.problem(zero.columns(&columns).expect("ok"))
+            .expect("ok"),
+        plain
+            .problem(plain.columns(&columns).expect("ok"))
+            .expect("ok")
     );
     let dark = all.clone().with_dark(2..3, 4.0).expect("w = 4");
-    let problem = dark.problem(dark.columns(&columns).unwrap()).unwrap();
+    let problem = dark
+        .problem(dark.columns(&columns).expect("ok"))
+        .expect("ok");
     // The target patch: reference = black level, row × √4 = 2.
     assert_eq!(problem.target()[2], LinearRgb::splat(0.02));
     assert_eq!(problem.black()[2], LinearRgb::splat(0.02));
@@ -89,7 +97,11 @@ fn a_dark_target_scales_its_rows_and_weight_zero_leaves_it_out() {
     let e = problem.errors(&x);
     assert!((e[2][0].abs() - 2.0 * 0.05).abs() < 1e-12, "{:?}", e[2]);
     for bad in [-1.0, f64::NAN, f64::INFINITY] {
-        let err = all.clone().with_dark(2..3, bad).unwrap_err().to_string();
+        let err = all
+            .clone()
+            .with_dark(2..3, bad)
+            .expect_err("refused")
+            .to_string();
         assert!(err.contains("dark target weight"), "{err}");
     }
 }

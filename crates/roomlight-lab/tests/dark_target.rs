@@ -4,6 +4,7 @@
 //! on the target and raises the board's ANSI contrast, both measured on the simulator's
 //! noiseless renders.
 
+#[allow(dead_code)]
 mod support;
 
 use roomlight_lab::dark_target::{curve, target_light};
@@ -51,14 +52,14 @@ fn a_weight_darkens_the_target_at_a_cost_and_weight_zero_is_todays_model() {
     let frames = pipeline::FrameBuilder::new(&room, &cal.regions, cal.responses.clone());
     let black = vec![Frame::Black; room.projectors().len()];
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let dark = room.render(&black, None).unwrap();
-    let led = target_light(&room.render(&black, Some(0)).unwrap(), &dark, &mask).unwrap();
+    let dark = room.render(&black, None).expect("ok");
+    let led = target_light(&room.render(&black, Some(0)).expect("ok"), &dark, &mask).expect("ok");
     let lit_heavy = target_light(
-        &room.render(&frames.frames(&points[2].x), None).unwrap(),
+        &room.render(&frames.frames(&points[2].x), None).expect("ok"),
         &dark,
         &mask,
     )
-    .unwrap();
+    .expect("ok");
     assert!((lit_heavy / led - shares[2]).abs() < 1e-9);
     assert!(
         points[2].room_de00_mean > points[0].room_de00_mean,
@@ -76,7 +77,7 @@ fn a_weight_darkens_the_target_at_a_cost_and_weight_zero_is_todays_model() {
         })
         .collect();
     let dir = std::env::temp_dir().join(format!("roomlight-dark-target-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::create_dir_all(&dir).expect("temp dir");
     let result = pm::run(&room, &cal, &lightings[..1], &lightings, SEED, &dir, |_| {});
     std::fs::remove_dir_all(&dir).ok();
     let ansi = result.expect("projection mapping").tradeoff_ansi;

@@ -24,7 +24,11 @@ fn embedded_scenes_parse_and_the_small_room_builds() {
     let lab = scenes::lab().expect("lab");
     assert_eq!(lab.charts.len(), 12);
     assert_eq!(lab.presets.len(), 5);
-    let paper = lab.presets.iter().find(|p| p.name == "paper").expect("paper preset");
+    let paper = lab
+        .presets
+        .iter()
+        .find(|p| p.name == "paper")
+        .expect("paper preset");
     assert!((paper.intensity - 0.14).abs() < 1e-12);
     let luminaires = lab
         .projectors
@@ -179,8 +183,11 @@ fn a_presets_intensity_scales_its_light_linearly() {
         "lights = [\"ceiling\"]\n\n[[preset]]\nname = \"dim\"\nlights = [\"ceiling\"]\nintensity = 0.15",
     );
     let scene = Scene::from_toml(&text, "test.toml").expect("scene");
-    assert_eq!(scene.presets[0].intensity, 1.0, "left out, it is 1");
-    assert_eq!(scene.presets[1].intensity, 0.15);
+    assert!(
+        (scene.presets[0].intensity - 1.0).abs() < 1e-15,
+        "left out, it is 1"
+    );
+    assert!((scene.presets[1].intensity - 0.15).abs() < 1e-15);
     let room = Room::build(scene).expect("room");
     let dark_frames = vec![roomlight_sim::Frame::Black; room.projectors().len()];
     let dark = room.render(&dark_frames, None).expect("dark");

@@ -102,7 +102,11 @@ impl Target {
             let on_target = dark.contains(&i);
             out.patches.push(i);
             out.black.push(self.black[k]);
-            out.target.push(if on_target { self.black[k] } else { self.target[k] });
+            out.target.push(if on_target {
+                self.black[k]
+            } else {
+                self.target[k]
+            });
             out.noise.push(self.noise[k]);
             out.scale.push(if on_target { s } else { self.scale[k] });
         }
@@ -111,7 +115,11 @@ impl Target {
 
     /// Values measured on the model's patches, scaled as the model's rows are.
     pub fn scaled(&self, values: &[LinearRgb]) -> Vec<LinearRgb> {
-        values.iter().zip(&self.scale).map(|(v, s)| *v * *s).collect()
+        values
+            .iter()
+            .zip(&self.scale)
+            .map(|(v, s)| *v * *s)
+            .collect()
     }
 
     /// The same from a black capture's samples: patches it did not measure are left out.
