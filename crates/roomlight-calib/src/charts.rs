@@ -408,6 +408,45 @@ fn nonuniform(values: &[[f32; 3]], side: &[(bool, bool)], config: &SampleConfig)
 }
 
 /// Samples every chart; patches are numbered chart-major (chart `m`, patch `k` → `24 m + k`).
+/// Samples a region given by its camera pixels (row-major indices), e.g. a patch of the
+/// projection-mapping target: the trimmed mean and its standard error as for a chart patch
+/// (never below the camera's noise model), saturated if any pixel reaches `saturation`.
+pub fn sample_region(image: &LinearImage, pixels: &[u32], config: &SampleConfig) -> PatchSample {
+    let empty = |status| PatchSample {
+        mean: LinearRgb::ZERO,
+        std_error: LinearRgb::ZERO,
+        pixels: 0,
+        status,
+    };
+    let mut values = Vec::with_capacity(pixels.len());
+    for &i in pixels {
+        match image.pixels.get(i as usize) {
+            Some(v) => values.push(*v),
+            None => return empty(PatchStatus::OutOfImage),
+        }
+    }
+    if values.iter().flatten().any(|v| *v >= config.saturation) {
+        return empty(PatchStatus::Saturated);
+    }
+    if values.len() < 4 {
+        return empty(PatchStatus::TooFewPixels);
+    }
+    let (mean, sample_se, pixels) = trimmed(&mut values);
+    let std_error = LinearRgb(std::array::from_fn(|c| {
+        let model = ((f64::from(config.read_noise).powi(2)
+            + f64::from(config.shot_noise).powi(2) * mean[c].max(0.0))
+            / pixels as f64)
+            .sqrt();
+        sample_se[c].max(model)
+    }));
+    PatchSample {
+        mean,
+        std_error,
+        pixels,
+        status: PatchStatus::Ok,
+    }
+}
+
 pub fn sample_charts(
     image: &LinearImage,
     charts: &[ChartCorners],

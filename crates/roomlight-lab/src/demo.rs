@@ -49,7 +49,9 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     let mut noise = roomlight_sim::CameraNoise::with_seed(&room, args.seed);
     let bar = progress_bar()?;
     let t = Instant::now();
-    let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| {
+    // With patches on the target measured too, for the dark-target trade-off (the chart
+    // patches' values, and so every model at weight 0, are the same as without).
+    let cal = pipeline::calibrate_with(&room, true, &mut noise, &bar, |line| {
         bar.println(&line);
         if bar.is_hidden() {
             println!("{line}");
@@ -79,16 +81,20 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         options: args,
         phases: std::cell::RefCell::new(phases),
     };
-    let (presets, rules) = lab.presets(&mut noise, dir)?;
+    let (presets, rules, lit) = lab.presets(&mut noise, dir)?;
     // One capture per preset measures its target.
     let captures = cal.captures + presets.len();
+    let mut dark_target = match &lit {
+        Some((preset, lit)) => Some(lab.dark_target(*preset, lit)?),
+        None => None,
+    };
     let (hot_join, pm) = match presets.first() {
         Some(first) => {
             let t = Instant::now();
             let hot_join = lab.hot_join(first)?;
             lab.phases.borrow_mut().done("hot join", t);
             let t = Instant::now();
-            let pm = lab.pm(&presets)?;
+            let pm = lab.pm(&presets, dark_target.as_mut())?;
             lab.phases.borrow_mut().done("projection mapping", t);
             (hot_join, Some(pm))
         }
@@ -100,6 +106,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     phases.done("shadows", t);
     let report = Report {
         pm,
+        dark_target,
         shadows,
         hot_join,
         room: name,
@@ -200,16 +207,29 @@ struct Lab<'a> {
 impl Lab<'_> {
     /// Every preset: its target measured, the agents from the default rule's start, its
     /// pictures; on the first, every rule compared.
+    /// Also the LED capture's samples of the dark-target trade-off's preset
+    /// ([`crate::dark_target::preset`]).
+    #[allow(clippy::type_complexity)]
     fn presets(
         &self,
         noise: &mut roomlight_sim::CameraNoise,
         dir: &std::path::Path,
-    ) -> Result<(Vec<PresetOutcome>, Vec<RuleOutcome>)> {
+    ) -> Result<(
+        Vec<PresetOutcome>,
+        Vec<RuleOutcome>,
+        Option<(usize, Vec<roomlight_calib::charts::PatchSample>)>,
+    )> {
         let mut presets = Vec::new();
         let mut rules = Vec::new();
+        let mut kept = None;
+        let tradeoff = crate::dark_target::preset(self.room.scene());
         for (preset, spec) in self.room.scene().presets.iter().enumerate() {
             let t = Instant::now();
-            let model = pipeline::measure_target(self.room, self.cal, preset, noise)?;
+            let lit = pipeline::measure_lit(self.room, self.cal, preset, noise)?;
+            let model = pipeline::Model::for_weight(self.cal, &lit, 0.0)?;
+            if Some(preset) == tradeoff {
+                kept = Some((preset, lit));
+            }
             let truth = pipeline::Truth::new(self.room, self.transport, &model, preset)?;
             let result = self.agents(
                 &model,
@@ -241,7 +261,46 @@ impl Lab<'_> {
                 pictures,
             });
         }
-        Ok((presets, rules))
+        Ok((presets, rules, kept))
+    }
+
+    /// The dark-target trade-off curve on `preset` (its LED capture sampled as `lit`): the
+    /// model's optimum at each weight, the whole room under it (the board's ANSI contrast is
+    /// added by [`Self::pm`]).
+    fn dark_target(
+        &self,
+        preset: usize,
+        lit: &[roomlight_calib::charts::PatchSample],
+    ) -> Result<report::DarkTarget> {
+        let t = Instant::now();
+        let points = crate::dark_target::curve(
+            self.room,
+            self.cal,
+            self.reach,
+            preset,
+            lit,
+            &crate::dark_target::WEIGHTS,
+        )?;
+        println!(
+            "dark target on {}: the model's optimum at weights {} ({:.1} s)",
+            self.room.scene().presets[preset].name,
+            points
+                .iter()
+                .map(|p| format!(
+                    "{}: whole-room ΔE00 {:.2}, light on the target {:.0}% of the LEDs'",
+                    p.weight,
+                    p.room_de00_mean,
+                    100.0 * p.target_light_share
+                ))
+                .collect::<Vec<_>>()
+                .join("; "),
+            t.elapsed().as_secs_f64()
+        );
+        Ok(report::DarkTarget {
+            preset: self.room.scene().presets[preset].name.clone(),
+            patches: self.cal.target_patch_range().len(),
+            points,
+        })
     }
 
     /// The agents on one target, with the live line while they run.
@@ -365,8 +424,25 @@ impl Lab<'_> {
 
     /// Projection mapping with the first preset's result; the board's contrast under every
     /// preset's.
-    fn pm(&self, presets: &[PresetOutcome]) -> Result<crate::pm::PmResult> {
+    fn pm(
+        &self,
+        presets: &[PresetOutcome],
+        dark_target: Option<&mut report::DarkTarget>,
+    ) -> Result<crate::pm::PmResult> {
         let t = Instant::now();
+        let tradeoff: Vec<crate::pm::Lighting<'_>> = dark_target
+            .as_ref()
+            .map(|d| {
+                d.points
+                    .iter()
+                    .map(|p| crate::pm::Lighting {
+                        preset: 0,
+                        name: "dark-target",
+                        x: &p.x,
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
         let lightings: Vec<crate::pm::Lighting<'_>> = presets
             .iter()
             .enumerate()
@@ -380,10 +456,34 @@ impl Lab<'_> {
             self.room,
             self.cal,
             &lightings,
+            &tradeoff,
             self.options.seed,
             &self.options.out,
             |line| println!("{line}"),
         )?;
+        drop(tradeoff);
+        println!(
+            "ANSI contrast on the board per preset, dark/LED/projector lighting: {}",
+            pm.ansi_by_preset
+                .iter()
+                .map(|(n, a)| format!("{n} {:.0}/{:.1}/{:.1}", a[0], a[1], a[2]))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        if let Some(d) = dark_target {
+            for (p, a) in d.points.iter_mut().zip(&pm.tradeoff_ansi) {
+                p.ansi_contrast = *a;
+            }
+            println!(
+                "dark target on {}: ANSI contrast under the optimum's projector lighting {}",
+                d.preset,
+                d.points
+                    .iter()
+                    .map(|p| format!("w {}: {:.0}:1", p.weight, p.ansi_contrast))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
         println!(
             "projection mapping and contrast: {:.1} s",
             t.elapsed().as_secs_f64()

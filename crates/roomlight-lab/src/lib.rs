@@ -8,6 +8,7 @@
 
 pub mod bench;
 pub mod commands;
+pub mod dark_target;
 pub mod demo;
 pub mod graycode_files;
 pub mod pipeline;

@@ -38,6 +38,9 @@ pub struct PmResult {
     pub images: Vec<(String, String)>,
     /// Share of the target's camera pixels the texture projector's decode reached.
     pub decoded_share: f64,
+    /// The board's ANSI contrast under projector lighting with each of the extra lightings
+    /// `run` was given (the dark-target trade-off curve's optima), in their order.
+    pub tradeoff_ansi: Vec<f64>,
 }
 
 /// The lab seen by an evaluation camera near the texture projector; with `board`, the bust
@@ -272,11 +275,14 @@ pub struct Lighting<'a> {
 
 /// Runs projection mapping and the contrast measurements under `lightings` (the first for the
 /// textures on the bust and the pictures; every one for the board's ANSI contrast), `room` the
-/// calibrated room. Writes its images into `dir`.
-pub fn run(
+/// calibrated room; then the board's ANSI contrast under projector lighting for each of
+/// `tradeoff` (one capture each, after every other, so the rest sees the same noise with or
+/// without them). Writes its images into `dir`.
+pub fn run<'a>(
     room: &Room,
     cal: &Calibrated,
-    lightings: &[Lighting<'_>],
+    lightings: &[Lighting<'a>],
+    tradeoff: &[Lighting<'a>],
     seed: u64,
     dir: &Path,
     mut say: impl FnMut(String),
@@ -304,6 +310,7 @@ pub fn run(
         rms_contrast: Vec::new(),
         images: Vec::new(),
         decoded_share: 0.0,
+        tradeoff_ansi: Vec::new(),
     };
     let lights = Lights { cal, texture_k };
     for board in [true, false] {
@@ -313,6 +320,12 @@ pub fn run(
         let mut view = View::new(&eval, &lights, regions, first, seed)?;
         if board {
             board_contrast(&mut view, lightings, dir, &mut result, &mut say)?;
+            for lighting in tradeoff {
+                view.lighting = *lighting;
+                let ansi = checker_ansi(&mut view, 2)?.0;
+                result.tradeoff_ansi.push(ansi);
+            }
+            view.lighting = first;
         } else {
             bust_contrast(&mut view, dir, &mut result, &mut say)?;
         }
@@ -393,20 +406,13 @@ impl<'a> View<'a> {
     }
 }
 
-/// ANSI contrast of a 4×4 checker projected on the board in the dark, then under each
-/// lighting's LEDs and projectors (pictures of the first only).
-fn board_contrast<'a>(
-    view: &mut View<'a>,
-    lightings: &[Lighting<'a>],
-    dir: &Path,
-    result: &mut PmResult,
-    say: &mut impl FnMut(String),
-) -> Result<()> {
+/// The 4×4 checker projected on the board (white at the top left) under lighting `condition`
+/// of the view's lighting: its ANSI contrast and the capture.
+fn checker_ansi(view: &mut View<'_>, condition: usize) -> Result<(f64, Capture)> {
     let width = view.width;
     let Some(rect) = inner_rect(&view.mask, width) else {
         bail!("the board is not visible to the evaluation camera");
     };
-    // The 4×4 checker, white at the top left, defined on the board's rectangle.
     let cell = |i: usize| -> Option<f64> {
         let (u, v) = ((i as u32 % width) as f64, (i as u32 / width) as f64);
         let (s, t) = ((u - rect.x) / rect.width, (v - rect.y) / rect.height);
@@ -417,6 +423,30 @@ fn board_contrast<'a>(
     };
     let mask = &view.mask;
     let checker = warp(&view.corr, |i| if mask[i] { cell(i) } else { None });
+    let frames = view.with_texture(condition, checker);
+    let cap = view.shoot(&frames, condition)?;
+    let l: Vec<f32> = lum(&cap).iter().map(|&v| v as f32).collect();
+    let a = ansi_contrast(
+        GrayImage {
+            width: cap.width as usize,
+            height: cap.height as usize,
+            pixels: &l,
+        },
+        rect,
+        true,
+    )?;
+    Ok((a.ratio, cap))
+}
+
+/// ANSI contrast of a 4×4 checker projected on the board in the dark, then under each
+/// lighting's LEDs and projectors (pictures of the first only).
+fn board_contrast<'a>(
+    view: &mut View<'a>,
+    lightings: &[Lighting<'a>],
+    dir: &Path,
+    result: &mut PmResult,
+    say: &mut impl FnMut(String),
+) -> Result<()> {
     let mut dark = 0.0;
     for (k, lighting) in lightings.iter().enumerate() {
         view.lighting = *lighting;
@@ -426,28 +456,17 @@ fn board_contrast<'a>(
             if condition == 0 && k > 0 {
                 continue;
             }
-            let frames = view.with_texture(condition, checker.clone());
-            let cap = view.shoot(&frames, condition)?;
-            let l: Vec<f32> = lum(&cap).iter().map(|&v| v as f32).collect();
-            let a = ansi_contrast(
-                GrayImage {
-                    width: cap.width as usize,
-                    height: cap.height as usize,
-                    pixels: &l,
-                },
-                rect,
-                true,
-            )?;
-            ansi[condition] = a.ratio;
+            let (ratio, cap) = checker_ansi(view, condition)?;
+            ansi[condition] = ratio;
             if condition == 0 {
-                dark = a.ratio;
+                dark = ratio;
             }
             if k == 0 {
                 let file = format!("pm-checker-{label}.png");
                 result.linear.push(save(&cap, dir, &file)?);
                 result
                     .images
-                    .push((file, format!("checker, {label}: ANSI {:.0}:1", a.ratio)));
+                    .push((file, format!("checker, {label}: ANSI {ratio:.0}:1")));
             }
         }
         if k == 0 {

@@ -28,6 +28,7 @@ fn setup(room: &Room) -> Setup {
         corners: chart_corners(room).expect("charts in view"),
         sample: SampleConfig::default(),
         target_mask: room.pixels().iter().map(|p| p.target).collect(),
+        target_patches: Vec::new(),
     }
 }
 

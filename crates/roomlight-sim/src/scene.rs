@@ -213,6 +213,13 @@ pub struct PresetSpec {
     /// Overrides every listed light's colour temperature.
     #[serde(default)]
     pub cct_k: Option<f64>,
+    /// Scales every listed light's intensity (finite, > 0; 1 when left out): a dimmer.
+    #[serde(default = "unit_intensity")]
+    pub intensity: f64,
+}
+
+fn unit_intensity() -> f64 {
+    1.0
 }
 
 /// A fisheye camera with the equidistant model `r = f θ`.
@@ -563,6 +570,13 @@ impl Scene {
                 format!("preset {}", p.name),
                 "cct_k",
                 "expected 1667 to 25000 K",
+            ));
+        }
+        if !(p.intensity.is_finite() && p.intensity > 0.0) {
+            return Err(self.invalid(
+                format!("preset {}", p.name),
+                "intensity",
+                format!("is {}, expected a finite scale > 0", p.intensity),
             ));
         }
         Ok(())

@@ -23,7 +23,13 @@ fn edited(from: &str, to: &str) -> String {
 fn embedded_scenes_parse_and_the_small_room_builds() {
     let lab = scenes::lab().expect("lab");
     assert_eq!(lab.charts.len(), 12);
-    assert_eq!(lab.presets.len(), 4);
+    assert_eq!(lab.presets.len(), 5);
+    let paper = lab
+        .presets
+        .iter()
+        .find(|p| p.name == "paper")
+        .expect("paper preset");
+    assert!((paper.intensity - 0.14).abs() < 1e-12);
     let luminaires = lab
         .projectors
         .iter()
@@ -107,6 +113,27 @@ fn each_kind_of_mistake_is_refused_with_the_right_message() {
             &["light ceiling", "cct_k"],
         ),
         (
+            edited(
+                "lights = [\"ceiling\"]",
+                "lights = [\"ceiling\"]\nintensity = 0.0",
+            ),
+            &["preset on", "intensity", "finite scale > 0"],
+        ),
+        (
+            edited(
+                "lights = [\"ceiling\"]",
+                "lights = [\"ceiling\"]\nintensity = -2.0",
+            ),
+            &["preset on", "intensity", "> 0"],
+        ),
+        (
+            edited(
+                "lights = [\"ceiling\"]",
+                "lights = [\"ceiling\"]\nintensity = nan",
+            ),
+            &["preset on", "intensity"],
+        ),
+        (
             edited("gamma = [2.0, 2.2, 2.4]", "gamma = [2.0, 0.0, 2.4]"),
             &["projector right", "gamma"],
         ),
@@ -144,6 +171,43 @@ fn each_kind_of_mistake_is_refused_with_the_right_message() {
             assert!(message.contains(e), "message {message:?} lacks {e:?}");
         }
     }
+}
+
+/// A preset's intensity scales its LEDs' light linearly: the render with the lights at a scale
+/// minus the dark room is that scale times the render at 1 minus the dark room, on every patch
+/// and pixel (direct light and inter-reflection alike).
+#[test]
+fn a_presets_intensity_scales_its_light_linearly() {
+    let text = edited(
+        "lights = [\"ceiling\"]",
+        "lights = [\"ceiling\"]\n\n[[preset]]\nname = \"dim\"\nlights = [\"ceiling\"]\nintensity = 0.15",
+    );
+    let scene = Scene::from_toml(&text, "test.toml").expect("scene");
+    assert!(
+        (scene.presets[0].intensity - 1.0).abs() < 1e-15,
+        "left out, it is 1"
+    );
+    assert!((scene.presets[1].intensity - 0.15).abs() < 1e-15);
+    let room = Room::build(scene).expect("room");
+    let dark_frames = vec![roomlight_sim::Frame::Black; room.projectors().len()];
+    let dark = room.render(&dark_frames, None).expect("dark");
+    let full = room.render(&dark_frames, Some(0)).expect("full");
+    let dim = room.render(&dark_frames, Some(1)).expect("dim");
+    let mut compared = 0;
+    for ((d, f), m) in dark.pixels.iter().zip(&full.pixels).zip(&dim.pixels) {
+        for c in 0..3 {
+            let (full_light, dim_light) = (f64::from(f[c] - d[c]), f64::from(m[c] - d[c]));
+            // Below the camera's clipping only.
+            if f64::from(f[c]) < 0.9 * room.scene().camera.saturation {
+                assert!(
+                    (dim_light - 0.15 * full_light).abs() <= 1e-5 + 1e-4 * full_light.abs(),
+                    "{dim_light} against 0.15 × {full_light}"
+                );
+                compared += usize::from(full_light > 1e-3);
+            }
+        }
+    }
+    assert!(compared > 1000, "only {compared} lit values compared");
 }
 
 #[test]

@@ -156,6 +156,7 @@ fn setup(survey: &Survey) -> Setup {
         corners: survey.corners.clone(),
         sample: survey.sample,
         target_mask: survey.target_mask.clone(),
+        target_patches: Vec::new(),
     }
 }
 

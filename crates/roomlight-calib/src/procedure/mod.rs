@@ -11,7 +11,9 @@
 
 use crate::CalibError;
 use crate::attenuation::{Attenuation, Scheme, differential, plan, solve};
-use crate::charts::{ChartCorners, PatchSample, PatchStatus, SampleConfig, sample_charts};
+use crate::charts::{
+    ChartCorners, PatchSample, PatchStatus, SampleConfig, sample_charts, sample_region,
+};
 use crate::graycode::{
     Coding, Correspondence, DecodeConfig, Manifest, SecondPass, SecondPassPlan, decode_where,
     group_disjoint,
@@ -99,6 +101,72 @@ pub struct Setup {
     pub corners: Vec<ChartCorners>,
     pub sample: SampleConfig,
     pub target_mask: Vec<bool>,
+    /// Camera regions on the target (pixel lists, [`target_patches`]) measured like chart
+    /// patches, after them: room patches `24 · charts ..`, so that the light the nodes throw on
+    /// the target can enter the objective ([`Target::with_dark`]). Empty: none (as before).
+    pub target_patches: Vec<Vec<u32>>,
+}
+
+impl Setup {
+    /// Every room patch of a capture: the charts' patches, chart by chart, then the target
+    /// patches.
+    pub fn sample_room(&self, image: &LinearImage) -> Result<Vec<PatchSample>, CalibError> {
+        let mut all = sample_charts(image, &self.corners, &self.sample)?;
+        all.extend(
+            self.target_patches
+                .iter()
+                .map(|r| sample_region(image, r, &self.sample)),
+        );
+        Ok(all)
+    }
+
+    /// The room patches that are target patches.
+    pub fn target_patch_range(&self) -> std::ops::Range<usize> {
+        let first = self.corners.len() * crate::charts::COLUMNS * crate::charts::ROWS;
+        first..first + self.target_patches.len()
+    }
+}
+
+/// The target's camera pixels (`mask`, `width` wide), eroded by one pixel (its rim mixes in
+/// the background), split into up to `side × side` patches by a grid over their bounding box;
+/// patches of fewer than 4 pixels are left out. Empty when the mask is.
+pub fn target_patches(mask: &[bool], width: u32, side: u32) -> Vec<Vec<u32>> {
+    let w = width as usize;
+    if w == 0 || side == 0 {
+        return Vec::new();
+    }
+    let h = mask.len() / w;
+    let inner: Vec<bool> = (0..mask.len())
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            mask[i]
+                && x > 0
+                && y > 0
+                && x + 1 < w
+                && y + 1 < h
+                && mask[i - 1]
+                && mask[i + 1]
+                && mask[i - w]
+                && mask[i + w]
+        })
+        .collect();
+    let pixels: Vec<usize> = (0..inner.len()).filter(|&i| inner[i]).collect();
+    let (Some(x0), Some(x1)) = (
+        pixels.iter().map(|i| i % w).min(),
+        pixels.iter().map(|i| i % w).max(),
+    ) else {
+        return Vec::new();
+    };
+    let (y0, y1) = (pixels[0] / w, pixels[pixels.len() - 1] / w);
+    let side = side as usize;
+    let (bw, bh) = (x1 - x0 + 1, y1 - y0 + 1);
+    let mut cells = vec![Vec::new(); side * side];
+    for &i in &pixels {
+        let (cx, cy) = (((i % w) - x0) * side / bw, ((i / w) - y0) * side / bh);
+        cells[cy * side + cx].push(i as u32);
+    }
+    cells.retain(|c| c.len() >= 4);
+    cells
 }
 
 /// The steps, for progress.

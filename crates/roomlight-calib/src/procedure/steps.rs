@@ -398,14 +398,14 @@ impl<'a, R: Rig> Procedure<'a, R> {
                     .await?
             }
         };
-        let black = sample_charts(&black, &setup.corners, &setup.sample)?;
+        let black = setup.sample_room(&black)?;
         let mut measured = Vec::with_capacity(rows.len());
         for on in &rows {
             let frames = node_frames(&owners(placed), |j| on[j]);
             let image = self
                 .show_and_capture(Stage::Attenuation, &borrow(&frames))
                 .await?;
-            measured.push(sample_charts(&image, &setup.corners, &setup.sample)?);
+            measured.push(setup.sample_room(&image)?);
         }
         let off = node_frames(&owners(placed), |_| false);
         self.rig.show(&borrow(&off)).await?;
@@ -429,13 +429,13 @@ impl<'a, R: Rig> Procedure<'a, R> {
         let one = [(id.to_string(), nodes.to_vec())];
         let off = node_frames(&one, |_| false);
         let image = self.show_and_capture(Stage::Hot, &borrow(&off)).await?;
-        let black = sample_charts(&image, &setup.corners, &setup.sample)?;
+        let black = setup.sample_room(&image)?;
         let mut measurable: Vec<bool> = black.iter().map(|s| s.status == PatchStatus::Ok).collect();
         let (mut columns, mut sigma) = (Vec::new(), Vec::new());
         for (j, &node) in nodes.iter().enumerate() {
             let frames = node_frames(&one, |i| i == j);
             let image = self.show_and_capture(Stage::Hot, &borrow(&frames)).await?;
-            let white = sample_charts(&image, &setup.corners, &setup.sample)?;
+            let white = setup.sample_room(&image)?;
             for (m, w) in measurable.iter_mut().zip(&white) {
                 *m &= w.status == PatchStatus::Ok;
             }

@@ -21,6 +21,11 @@ pub struct Target {
     pub target: Vec<LinearRgb>,
     /// Its standard error (the patch noise).
     pub noise: Vec<LinearRgb>,
+    /// Each model patch's row scale: 1 on chart patches, `√w` on the target patches kept dark
+    /// with weight `w` ([`Target::with_dark`]). The problem, its columns and what the camera
+    /// measures on the patch are all multiplied by it, so `G` weighs the patch's squared error
+    /// by `w` and the core needs no change.
+    pub scale: Vec<f64>,
 }
 
 impl Target {
@@ -56,8 +61,65 @@ impl Target {
             black: patches.iter().map(|&i| black[i]).collect(),
             target: patches.iter().map(|&i| lit[i].mean).collect(),
             noise: patches.iter().map(|&i| lit[i].std_error).collect(),
+            scale: vec![1.0; patches.len()],
             patches,
         })
+    }
+
+    /// The room patches in `dark` (the target patches, [`super::Setup::target_patch_range`])
+    /// asked to stay at the black level, their squared errors weighed by `weight`: their
+    /// reference becomes their black level (no luminaire light, whatever the LEDs gave them)
+    /// and their rows are scaled by `√weight`. Weight 0 leaves them out: the model is the one
+    /// over the chart patches alone. A weight that is not finite or is negative is refused.
+    pub fn with_dark(self, dark: std::ops::Range<usize>, weight: f64) -> Result<Self, CalibError> {
+        if !(weight.is_finite() && weight >= 0.0) {
+            return Err(CalibError::Invalid {
+                field: "dark target weight",
+                problem: format!("is {weight}, expected a finite weight >= 0"),
+            });
+        }
+        let keep: Vec<bool> = self
+            .patches
+            .iter()
+            .map(|i| weight > 0.0 || !dark.contains(i))
+            .collect();
+        if keep.iter().all(|k| !k) {
+            return Err(CalibError::Invalid {
+                field: "target",
+                problem: "no chart patch left beside the target patches".into(),
+            });
+        }
+        let s = weight.sqrt();
+        let mut out = Self {
+            patches: Vec::new(),
+            black: Vec::new(),
+            target: Vec::new(),
+            noise: Vec::new(),
+            scale: Vec::new(),
+        };
+        for k in (0..self.patches.len()).filter(|&k| keep[k]) {
+            let i = self.patches[k];
+            let on_target = dark.contains(&i);
+            out.patches.push(i);
+            out.black.push(self.black[k]);
+            out.target.push(if on_target {
+                self.black[k]
+            } else {
+                self.target[k]
+            });
+            out.noise.push(self.noise[k]);
+            out.scale.push(if on_target { s } else { self.scale[k] });
+        }
+        Ok(out)
+    }
+
+    /// Values measured on the model's patches, scaled as the model's rows are.
+    pub fn scaled(&self, values: &[LinearRgb]) -> Vec<LinearRgb> {
+        values
+            .iter()
+            .zip(&self.scale)
+            .map(|(v, s)| *v * *s)
+            .collect()
     }
 
     /// The same from a black capture's samples: patches it did not measure are left out.
@@ -88,7 +150,11 @@ impl Target {
             .map(|c| {
                 let (support, values): (Vec<PatchId>, Vec<LinearRgb>) = c
                     .iter()
-                    .filter_map(|&(i, p)| index.get(&(i as usize)).map(|&k| (k, p)))
+                    .filter_map(|&(i, p)| {
+                        index
+                            .get(&(i as usize))
+                            .map(|&k| (k, p * self.scale[k as usize]))
+                    })
                     .unzip();
                 AttenuationColumn::new(support, values).map_err(invalid)
             })
@@ -99,9 +165,9 @@ impl Target {
     pub fn problem(&self, columns: Vec<AttenuationColumn>) -> Result<Problem, CalibError> {
         Problem::new(
             columns,
-            self.black.clone(),
-            self.target.clone(),
-            self.noise.clone(),
+            self.scaled(&self.black),
+            self.scaled(&self.target),
+            self.scaled(&self.noise),
         )
         .map_err(invalid)
     }

@@ -7,7 +7,7 @@
 use anyhow::{Context, Result, bail};
 use roomlight_calib::attenuation::Attenuation;
 use roomlight_calib::charts::ChartCorners;
-use roomlight_calib::charts::sample_charts;
+use roomlight_calib::charts::PatchSample;
 use roomlight_calib::procedure::Target;
 use roomlight_calib::procedure::{
     BringUp, Event, Layout, Measured, Placed, Procedure, Settings, Setup, Stage, place,
@@ -87,6 +87,16 @@ impl Calibrated {
         Ok(regions)
     }
 
+    /// The room patches on the target (empty unless calibrated with target patches).
+    pub fn target_patch_range(&self) -> std::ops::Range<usize> {
+        self.setup.target_patch_range()
+    }
+
+    /// Every room patch of a capture, as calibration sampled them.
+    pub fn sample_room(&self, capture: &roomlight_sim::Capture) -> Result<Vec<PatchSample>> {
+        Ok(self.setup.sample_room(&image(capture))?)
+    }
+
     /// The procedure's bring-up in the simulator's terms.
     fn new(room: &Room, setup: Setup, settings: Settings, up: BringUp) -> Result<Self> {
         let (regions, node_charts) = regions(room, &up.placed)?;
@@ -141,12 +151,29 @@ fn regions(room: &Room, placed: &[Placed]) -> Result<(Vec<NodeRegion>, Vec<Optio
     Ok(out.into_iter().unzip())
 }
 
-/// The room as configured by hand: the charts' corners, how they are sampled, the target.
-pub fn setup(room: &Room) -> Result<Setup> {
+/// Target patches per side of the grid over the target ([`target_patches`]): the lab's bust
+/// is about 25 camera pixels across, so 2 × 2 patches of some 100 pixels each.
+pub const TARGET_PATCH_GRID: u32 = 2;
+
+/// The room as configured by hand: the charts' corners, how they are sampled, the target;
+/// with `target_patches`, patches on the target measured beside the charts' (so that a dark
+/// target can be weighed in the objective, [`Model::for_weight`]).
+pub fn setup(room: &Room, target_patches: bool) -> Result<Setup> {
+    let target_mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let patches = if target_patches {
+        roomlight_calib::procedure::target_patches(
+            &target_mask,
+            room.scene().camera.resolution[0],
+            TARGET_PATCH_GRID,
+        )
+    } else {
+        Vec::new()
+    };
     Ok(Setup {
         corners: chart_corners(room)?,
         sample: sample_config(room),
-        target_mask: room.pixels().iter().map(|p| p.target).collect(),
+        target_mask,
+        target_patches: patches,
     })
 }
 
@@ -157,9 +184,21 @@ pub fn calibrate(
     room: &Room,
     noise: &mut CameraNoise,
     bar: &indicatif::ProgressBar,
+    say: impl FnMut(String),
+) -> Result<Calibrated> {
+    calibrate_with(room, false, noise, bar, say)
+}
+
+/// [`calibrate`], with `target_patches` measuring patches on the target too (through the same
+/// attenuation captures; the chart patches' values are the same either way).
+pub fn calibrate_with(
+    room: &Room,
+    target_patches: bool,
+    noise: &mut CameraNoise,
+    bar: &indicatif::ProgressBar,
     mut say: impl FnMut(String),
 ) -> Result<Calibrated> {
-    let setup = setup(room)?;
+    let setup = setup(room, target_patches)?;
     let settings = Settings::default();
     let log = StageLog::new(bar.clone());
     let mut rig = SimRig::new(room, noise);
@@ -245,6 +284,7 @@ impl StageLog {
     }
 
     fn chart_count(&self, up: &BringUp) -> usize {
+        // Target patches, if any, come after the charts' and are fewer than a chart's.
         up.columns.attenuation.usable.len() / PATCHES_PER_CHART
     }
 }
@@ -366,18 +406,42 @@ fn attenuation_detail(up: &BringUp) -> String {
 }
 
 /// Captures the LED preset `preset` (projectors dark) and builds the model for it over the
-/// patches measured in every capture ([`Target`]), with its conventional start.
+/// patches measured in every capture ([`Target`]), with its conventional start; the target
+/// patches, if calibration measured any, are left out (weight 0, [`Model::for_weight`]).
 pub fn measure_target(
     room: &Room,
     cal: &Calibrated,
     preset: usize,
     noise: &mut CameraNoise,
 ) -> Result<Model> {
+    Model::for_weight(cal, &measure_lit(room, cal, preset, noise)?, 0.0)
+}
+
+/// The LED preset `preset` (projectors dark), captured once through `noise` and sampled on
+/// every room patch.
+pub fn measure_lit(
+    room: &Room,
+    cal: &Calibrated,
+    preset: usize,
+    noise: &mut CameraNoise,
+) -> Result<Vec<PatchSample>> {
     let frames = vec![Frame::Black; room.projectors().len()];
-    let capture = image(&noise.expose(&room.render(&frames, Some(preset))?));
-    let lit = sample_charts(&capture, &cal.corners, &sample_config(room))?;
-    let att = &cal.attenuation;
-    let target = Target::new(&att.black, &att.usable, &lit)?;
+    cal.sample_room(&noise.expose(&room.render(&frames, Some(preset))?))
+}
+
+impl Model {
+    /// The model for the LED target measured as `lit` ([`measure_lit`]), the target patches
+    /// kept dark with weight `weight` ([`Target::with_dark`]; 0: left out, the model over the
+    /// charts alone).
+    pub fn for_weight(cal: &Calibrated, lit: &[PatchSample], weight: f64) -> Result<Self> {
+        let att = &cal.attenuation;
+        let target = Target::new(&att.black, &att.usable, lit)?
+            .with_dark(cal.target_patch_range(), weight)?;
+        model_of(cal, target)
+    }
+}
+
+fn model_of(cal: &Calibrated, target: Target) -> Result<Model> {
     let problem = target.problem(target.columns(&cal.columns)?)?;
     let charts = target.chart_patches(cal.corners.len(), PATCHES_PER_CHART);
     // A node without a chart gets an empty one, so the conventional start falls back (its

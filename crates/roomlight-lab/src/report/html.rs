@@ -12,6 +12,9 @@ pub(super) fn html(report: &Report) -> String {
     if let Some(pm) = &report.pm {
         pm_section(&mut h, pm);
     }
+    if let Some(d) = &report.dark_target {
+        dark_target_section(&mut h, d);
+    }
     if let Some(s) = &report.shadows {
         shadow_section(&mut h, s);
     }
@@ -256,6 +259,36 @@ on a 200 mm board in place of the bust: dark {:.0}:1, LED {:.0}:1, projector lig
         );
     }
     h.push_str("</div>");
+}
+
+/// The dark-target trade-off: per weight, the room's ΔE00 against the board's contrast.
+fn dark_target_section(h: &mut String, d: &DarkTarget) {
+    let _ = write!(
+        h,
+        "<h2 id=\"dark-target\">A dark target: the trade-off</h2><p>The light the luminaires throw on the \
+projection-mapping target enters the objective with weight w: {} patches on the target, measured through the \
+same attenuation captures as the charts, asked to stay at the black level, their squared errors weighed by w. \
+Per weight, on preset {}: the model's exact optimum (not rounds of the agents) rendered noiselessly, the \
+whole-room ΔE00 against the LEDs, the light left on the target, and the board's ANSI contrast under that \
+projector lighting. The rounds above run at w = 0; {} is the weight suggested for a dark target.</p>\
+<table><tr><th>weight w</th><th>whole-room ΔE00 mean</th><th>95th percentile</th>\
+<th>light on the target (share of the LEDs')</th><th>ANSI contrast, projector lighting</th></tr>",
+        d.patches,
+        escape(&d.preset),
+        crate::dark_target::DEFAULT_WEIGHT
+    );
+    for p in &d.points {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{:.2}</td><td>{:.2}</td><td>{:.0}%</td><td>{:.0}:1</td></tr>",
+            p.weight,
+            p.room_de00_mean,
+            p.room_de00_p95,
+            100.0 * p.target_light_share,
+            p.ansi_contrast
+        );
+    }
+    h.push_str("</table>");
 }
 
 /// The large aperture's penumbra against a standard projector's, and the glare.

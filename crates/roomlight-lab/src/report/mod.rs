@@ -61,11 +61,24 @@ pub struct Report {
     pub wall_seconds: f64,
     /// Projection mapping and contrast on the first preset.
     pub pm: Option<crate::pm::PmResult>,
+    /// The dark-target trade-off curve.
+    pub dark_target: Option<DarkTarget>,
     /// Large aperture against a standard projector (rooms without one: none).
     pub shadows: Option<crate::shadow::ShadowComparison>,
     /// A projector leaving and an unmeasured one joining hot (rooms with one standard
     /// luminaire: none).
     pub hot_join: Option<HotJoin>,
+}
+
+/// The dark-target trade-off (issue 22): the model's optimum at each weight of the target's
+/// light, whole-room ΔE00 against the board's ANSI contrast under projector lighting.
+#[derive(Debug)]
+pub struct DarkTarget {
+    /// The preset it is measured on.
+    pub preset: String,
+    /// Target patches in the model (at a weight above 0).
+    pub patches: usize,
+    pub points: Vec<crate::dark_target::TradeoffPoint>,
 }
 
 /// One projector leaves, another joins that the camera agent has never measured: it is
@@ -199,6 +212,12 @@ pub fn metrics(report: &Report) -> Value {
     }
     if let Some(s) = &report.shadows {
         shadow_metrics(s, &mut m);
+    }
+    if let Some(d) = &report.dark_target {
+        m["dark_target_tradeoff"] = json!(d.points);
+        m["dark_target_tradeoff_preset"] = json!(d.preset);
+        m["dark_target_patches"] = json!(d.patches);
+        m["dark_target_default_weight"] = json!(crate::dark_target::DEFAULT_WEIGHT);
     }
     m
 }
@@ -560,6 +579,7 @@ mod tests {
             }],
             wall_seconds: 1.0,
             pm: None,
+            dark_target: None,
             shadows: None,
             hot_join: None,
         }

@@ -63,7 +63,7 @@ impl Room {
                 let rgb = spec
                     .cct_k
                     .map_or(light.rgb, crate::optics::cct_to_linear_rgb)
-                    * light.intensity;
+                    * (light.intensity * spec.intensity);
                 for (e, set) in out.iter_mut().zip(sets) {
                     add_weighted(e, &set.lights[l], rgb);
                 }

@@ -1,0 +1,89 @@
+//! A dark target (issue 22): patches on the projection-mapping target measured through the
+//! same attenuation captures as the charts, weighed into the objective. At weight 0 the model
+//! is today's to the last bit; a positive weight lowers the light the model's optimum throws
+//! on the target and raises the board's ANSI contrast, both measured on the simulator's
+//! noiseless renders.
+
+#[allow(dead_code)]
+mod support;
+
+use roomlight_lab::dark_target::{curve, target_light};
+use roomlight_lab::pipeline::{self, Model};
+use roomlight_lab::pm::{self, Lighting};
+use roomlight_lab::whole_room::ReachMap;
+use roomlight_sim::{CameraNoise, Frame, Room};
+
+const SEED: u64 = 11;
+
+#[test]
+fn a_weight_darkens_the_target_at_a_cost_and_weight_zero_is_todays_model() {
+    let room = Room::build(support::small_scene()).expect("room");
+    let bar = indicatif::ProgressBar::hidden();
+    let calibrate = |patches: bool| {
+        let mut noise = CameraNoise::with_seed(&room, SEED);
+        let cal = pipeline::calibrate_with(&room, patches, &mut noise, &bar, |_| {})
+            .expect("calibration");
+        (cal, noise)
+    };
+    let (plain, mut plain_noise) = calibrate(false);
+    let (cal, mut noise) = calibrate(true);
+    assert_eq!(plain.target_patch_range().len(), 0);
+    let patches = cal.target_patch_range().len();
+    assert!(patches >= 2, "{patches} target patches");
+    // Weight 0: the model is the one calibrated without target patches, bit for bit.
+    let today = pipeline::measure_target(&room, &plain, 0, &mut plain_noise).expect("model");
+    let lit = pipeline::measure_lit(&room, &cal, 0, &mut noise).expect("lit");
+    let zero = Model::for_weight(&cal, &lit, 0.0).expect("w = 0");
+    assert_eq!(zero.problem, today.problem);
+    assert_eq!(zero.patches, today.patches);
+    assert_eq!(zero.conventional, today.conventional);
+    let heavy = Model::for_weight(&cal, &lit, 10.0).expect("w = 10");
+    assert_eq!(heavy.patches.len(), today.patches.len() + patches);
+    // The optimum at each weight, rendered: less light on the target as the weight grows, a
+    // room further from the LEDs in exchange.
+    let reach = ReachMap::new(&room, &cal.regions).expect("reach");
+    let points = curve(&room, &cal, &reach, 0, &lit, &[0.0, 10.0, 100.0]).expect("curve");
+    let shares: Vec<f64> = points.iter().map(|p| p.target_light_share).collect();
+    assert!(
+        shares[1] < 0.8 * shares[0] && shares[2] < shares[1],
+        "light on the target {shares:?}"
+    );
+    // The share is the simulator's: re-render the heaviest optimum independently.
+    let frames = pipeline::FrameBuilder::new(&room, &cal.regions, cal.responses.clone());
+    let black = vec![Frame::Black; room.projectors().len()];
+    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let dark = room.render(&black, None).expect("ok");
+    let led = target_light(&room.render(&black, Some(0)).expect("ok"), &dark, &mask).expect("ok");
+    let lit_heavy = target_light(
+        &room.render(&frames.frames(&points[2].x), None).expect("ok"),
+        &dark,
+        &mask,
+    )
+    .expect("ok");
+    assert!((lit_heavy / led - shares[2]).abs() < 1e-9);
+    assert!(
+        points[2].room_de00_mean > points[0].room_de00_mean,
+        "darkening the target costs the room: {:?}",
+        points.iter().map(|p| p.room_de00_mean).collect::<Vec<_>>()
+    );
+    // The board's ANSI contrast under projector lighting with each optimum.
+    let name = room.scene().presets[0].name.clone();
+    let lightings: Vec<Lighting<'_>> = points
+        .iter()
+        .map(|p| Lighting {
+            preset: 0,
+            name: &name,
+            x: &p.x,
+        })
+        .collect();
+    let dir = std::env::temp_dir().join(format!("roomlight-dark-target-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let result = pm::run(&room, &cal, &lightings[..1], &lightings, SEED, &dir, |_| {});
+    std::fs::remove_dir_all(&dir).ok();
+    let ansi = result.expect("projection mapping").tradeoff_ansi;
+    assert_eq!(ansi.len(), 3);
+    assert!(
+        ansi[1] > 1.1 * ansi[0] && ansi[2] > ansi[1],
+        "ANSI contrast {ansi:?}"
+    );
+}
