@@ -553,10 +553,10 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         ("small-bright-target", "model-100"),
         ("small/stale-1", "model-100-discard"),
     ] {
-        let r = row(case, rule);
+        let to_1pct = row(case, rule)["captures_to_1pct"].as_u64();
         assert!(
-            r["captures_to_1pct"].as_u64().is_some_and(|c| c <= 3),
-            "{case} {rule}: {r}"
+            to_1pct.is_some_and(|c| c <= 3),
+            "{case} {rule}: {to_1pct:?}"
         );
     }
     let excess =
