@@ -532,10 +532,6 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         );
     };
     for case in [
-        "small-reflective",
-        "small-two-on-one-wall",
-        "small-uncorrected-gamma",
-        "small-bright-target",
         "small/leave-2-join-4",
         "small/leave-2-join-4-hot",
         "synthetic-100",
