@@ -140,6 +140,23 @@ fn inside(q: &[[f64; 2]; 4], p: [f64; 2]) -> bool {
     !(positive && negative)
 }
 
+/// [`trimmed`], its standard error never below the camera's noise model for this many pixels
+/// (with a handful of pixels the sample spread is itself noisy).
+fn trimmed_with_floor(
+    values: &mut [[f32; 3]],
+    config: &SampleConfig,
+) -> (LinearRgb, LinearRgb, usize) {
+    let (mean, sample_se, pixels) = trimmed(values);
+    let std_error = LinearRgb(std::array::from_fn(|c| {
+        let model = ((f64::from(config.read_noise).powi(2)
+            + f64::from(config.shot_noise).powi(2) * mean[c].max(0.0))
+            / pixels.max(1) as f64)
+            .sqrt();
+        sample_se[c].max(model)
+    }));
+    (mean, std_error, pixels)
+}
+
 /// Per-channel trimmed mean (the top and bottom 10% dropped) and its standard error.
 fn trimmed(values: &mut [[f32; 3]]) -> (LinearRgb, LinearRgb, usize) {
     let n = values.len();
@@ -276,16 +293,7 @@ fn sample_patch(
     // still what this patch measures; whether one capture's flag is an edge or noise is for the
     // caller to judge across captures (see `attenuation::solve`).
     if matches!(status, PatchStatus::Ok | PatchStatus::NonUniform) {
-        let (mean, sample_se, pixels) = trimmed(&mut values);
-        // With a handful of pixels the sample spread is itself noisy: never report less than
-        // the camera's noise model gives for this many pixels.
-        let std_error = LinearRgb(std::array::from_fn(|c| {
-            let model = ((f64::from(config.read_noise).powi(2)
-                + f64::from(config.shot_noise).powi(2) * mean[c].max(0.0))
-                / pixels as f64)
-                .sqrt();
-            sample_se[c].max(model)
-        }));
+        let (mean, std_error, pixels) = trimmed_with_floor(&mut values, config);
         PatchSample {
             mean,
             std_error,
@@ -431,14 +439,7 @@ pub fn sample_region(image: &LinearImage, pixels: &[u32], config: &SampleConfig)
     if values.len() < 4 {
         return empty(PatchStatus::TooFewPixels);
     }
-    let (mean, sample_se, pixels) = trimmed(&mut values);
-    let std_error = LinearRgb(std::array::from_fn(|c| {
-        let model = ((f64::from(config.read_noise).powi(2)
-            + f64::from(config.shot_noise).powi(2) * mean[c].max(0.0))
-            / pixels as f64)
-            .sqrt();
-        sample_se[c].max(model)
-    }));
+    let (mean, std_error, pixels) = trimmed_with_floor(&mut values, config);
     PatchSample {
         mean,
         std_error,
