@@ -598,7 +598,7 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
             let text =
                 std::fs::read_to_string(&svg).unwrap_or_else(|e| panic!("{}: {e}", svg.display()));
             assert!(
-                text.contains("<svg") && text.contains("model-20"),
+                text.contains("<svg") && text.contains("model-100"),
                 "{}",
                 svg.display()
             );
