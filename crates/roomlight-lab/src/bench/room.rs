@@ -86,7 +86,8 @@ fn rules(problem: &Problem, quick_subset: bool, latency: usize) -> Vec<RuleSpec>
     // Enough model rounds between two captures for the momentum rule to reach the model's
     // optimum from where the capture left it: on the quick hard cases 100 rounds take the
     // reflective room from 5 captures to 2, the node without a chart from 6 to 1, a single
-    // stale capture from 4 to 2; 400 rounds change nothing more (docs/results.md).
+    // stale capture from 4 to 2; 400 rounds changed only the reflective room's 2 to 1
+    // (docs/results.md).
     let momentum = StepRule::Momentum { theta: 1.0 };
     all.push(("model-100", momentum, MODEL_ROUNDS, false));
     if latency > 0 {

@@ -382,3 +382,52 @@ pub fn captures_cell(median: Option<u64>, range: [Option<u64>; 2], budget: u64) 
         format!("{} ({}…{})", one(median), one(range[0]), one(range[1]))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A run whose model excess falls below 1% at capture 2 and the room's own at capture 4.
+    fn run(settle_from: u64) -> Run {
+        let model = [0.5, 0.05, 0.005, 0.004, 0.003, 0.002];
+        let truth = [0.6, 0.2, 0.05, 0.02, 0.008, 0.006];
+        Run {
+            trace: (0..6)
+                .map(|k| Point {
+                    capture: k as u64,
+                    seconds: k as f64,
+                    excess: model[k],
+                    true_excess: truth[k],
+                    mean_de00: 2.0,
+                    rounds_seconds: 0.0,
+                })
+                .collect(),
+            settle_from,
+            final_excess: model[5],
+            final_true_excess: truth[5],
+            final_excess_rgb: [model[5]; 3],
+            mean_de00: 2.0,
+            max_de00: 4.0,
+            compute_us_per_round: 1.0,
+            message_ms_per_round: 1.0,
+            capture_ms: 1.0,
+            bytes_per_round: 1.0,
+            captures: 5,
+        }
+    }
+
+    #[test]
+    fn the_true_columns_come_from_the_rooms_own_excess() {
+        let (r, curve) = summarise(("c", "r"), &[run(0)], Calibration::default(), None);
+        assert_eq!(r.captures_to_1pct, Some(2));
+        assert_eq!(r.captures_to_1pct_true, Some(4));
+        assert_eq!(r.final_true_excess.to_bits(), 0.006_f64.to_bits());
+        assert_eq!(curve[3].true_excess.to_bits(), 0.02_f64.to_bits());
+        // After a join, both count from the join.
+        let (r, _) = summarise(("c", "r"), &[run(3)], Calibration::default(), None);
+        assert_eq!(
+            (r.captures_to_1pct, r.captures_to_1pct_true),
+            (Some(3), Some(4))
+        );
+    }
+}
