@@ -19,6 +19,6 @@ pub mod scene;
 pub mod scenes;
 
 pub use room::{
-    CameraNoise, Capture, Frame, NodeBasis, NodeRegion, ProjectorImage, Room, SimError,
+    CameraNoise, Capture, Frame, NodeBasis, NodeRegion, PixelSubset, ProjectorImage, Room, SimError,
 };
 pub use scene::Scene;

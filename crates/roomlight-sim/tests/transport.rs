@@ -157,8 +157,21 @@ fn visited_node_captures_equal_the_basis_captures() {
 fn a_render_is_the_same_on_one_thread_and_on_all() {
     let room = Room::build(scenes::small().expect("scene")).expect("room");
     let preset = Some(room.preset("on").expect("preset"));
-    let frames: Vec<Frame> = room
-        .projectors()
+    let frames = textured(&room);
+    let all = room.render(&frames, preset).expect("render");
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool")
+        .install(|| room.render(&frames, preset))
+        .expect("render");
+    assert_eq!(all, one);
+    assert!(all.pixels.iter().any(|p| p[0] > 0.0));
+}
+
+/// A textured image on every projector (its own light table per code).
+fn textured(room: &Room) -> Vec<Frame> {
+    room.projectors()
         .iter()
         .enumerate()
         .map(|(k, p)| {
@@ -174,14 +187,45 @@ fn a_render_is_the_same_on_one_thread_and_on_all() {
                     .collect(),
             })
         })
-        .collect();
-    let all = room.render(&frames, preset).expect("render");
-    let one = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .expect("pool")
-        .install(|| room.render(&frames, preset))
-        .expect("render");
-    assert_eq!(all, one);
-    assert!(all.pixels.iter().any(|p| p[0] > 0.0));
+        .collect()
+}
+
+/// Rendering only the chart pixels (and a scattered few) gives each of them the full render's
+/// value to the bit, and zero elsewhere; a pixel outside the camera is refused.
+#[test]
+fn a_subset_render_equals_the_full_render_on_its_pixels() {
+    let room = Room::build(scenes::small().expect("scene")).expect("room");
+    let preset = Some(room.preset("on").expect("preset"));
+    let frames = textured(&room);
+    let full = room.render(&frames, preset).expect("render");
+    let n = room.pixels().len() as u32;
+    let charts = (0..n).filter(|&i| room.pixels()[i as usize].chart.is_some());
+    // Repeats and any order are accepted.
+    let picked: Vec<u32> = charts.chain((0..n).step_by(97)).chain([5, 5, 0]).collect();
+    let subset = room.pixel_subset(picked.iter().copied()).expect("subset");
+    assert!(subset.pixels().len() < n as usize / 2, "a real subset");
+    let part = room
+        .render_subset(&subset, &frames, preset)
+        .expect("subset render");
+    assert_eq!((part.width, part.height), (full.width, full.height));
+    let mut inside = vec![false; n as usize];
+    for &p in &picked {
+        inside[p as usize] = true;
+    }
+    let mut lit = 0;
+    for (i, (a, b)) in part.pixels.iter().zip(&full.pixels).enumerate() {
+        if inside[i] {
+            assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits), "pixel {i}");
+            lit += usize::from(b[1] > 0.0);
+        } else {
+            assert_eq!(
+                a.map(f32::to_bits),
+                [0; 3],
+                "pixel {i} is not in the subset"
+            );
+        }
+    }
+    assert!(lit > 100, "the charts are lit ({lit} pixels)");
+    let err = room.pixel_subset([n]).expect_err("outside the camera");
+    assert!(err.to_string().contains("camera pixel"), "{err}");
 }

@@ -317,6 +317,7 @@ fn sim_hardware(
         room: room.clone(),
         frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
         corners: transport.corners.clone(),
+        charts: transport.charts.clone(),
         config: transport.config,
         shown: Arc::new(Mutex::new(initial.to_vec())),
         patches: Arc::new(model.patches.clone()),

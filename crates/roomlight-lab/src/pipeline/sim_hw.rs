@@ -21,6 +21,8 @@ pub(super) struct SimHardware {
     pub(super) room: Arc<Room>,
     pub(super) frames: Arc<FrameBuilder>,
     pub(super) corners: Arc<Vec<ChartCorners>>,
+    /// The camera pixels the chart sampling reads, the only ones rendered.
+    pub(super) charts: Arc<roomlight_sim::PixelSubset>,
     pub(super) config: SampleConfig,
     pub(super) shown: Arc<Mutex<Vec<LinearRgb>>>,
     pub(super) patches: Arc<Vec<usize>>,
@@ -53,8 +55,11 @@ impl SimHardware {
         self.patches.iter().map(|&i| all[i]).collect()
     }
 
+    /// The capture of node values `x` on the chart pixels (nothing else is read of it).
     pub(super) fn render(&self, x: &[LinearRgb]) -> Result<roomlight_sim::Capture> {
-        Ok(self.room.render(&self.frames.frames(x), None)?)
+        Ok(self
+            .room
+            .render_subset(&self.charts, &self.frames.frames(x), None)?)
     }
 
     /// What a noiseless camera would measure on the model's patches for node values `x`.

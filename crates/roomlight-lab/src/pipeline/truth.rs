@@ -4,7 +4,7 @@
 use anyhow::Result;
 use roomlight_calib::charts::{ChartCorners, SampleConfig};
 use roomlight_core::{AttenuationColumn, LinearRgb, Problem};
-use roomlight_sim::{Frame, NodeBasis, NodeRegion, Room};
+use roomlight_sim::{Frame, NodeBasis, NodeRegion, PixelSubset, Room};
 use std::sync::Arc;
 
 use super::*;
@@ -17,6 +17,8 @@ pub struct Transport {
     pub(super) config: SampleConfig,
     pub(super) black: Vec<LinearRgb>,
     pub(super) columns: Vec<Vec<LinearRgb>>,
+    /// The camera pixels the chart sampling reads: a run's captures render only these.
+    pub(super) charts: Arc<PixelSubset>,
 }
 
 impl Transport {
@@ -51,12 +53,39 @@ impl Transport {
             return Err(e);
         }
         Ok(Self {
+            charts: Arc::new(room.pixel_subset(chart_pixels(room, corners))?),
             corners: Arc::new(corners.to_vec()),
             config,
             black,
             columns,
         })
     }
+}
+
+/// Every camera pixel within 2 pixels of a chart's bounding box: all that sampling the charts
+/// through these corners reads (patches lie inside the chart's quadrilateral).
+pub(super) fn chart_pixels<'a>(
+    room: &Room,
+    corners: &'a [ChartCorners],
+) -> impl Iterator<Item = u32> + 'a {
+    let [w, h] = room.scene().camera.resolution;
+    corners.iter().flat_map(move |chart| {
+        let span = |axis: usize, size: u32| {
+            let (lo, hi) = chart
+                .corners
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(lo, hi), c| {
+                    (lo.min(c[axis]), hi.max(c[axis]))
+                });
+            // Corners are checked finite and inside the image before sampling; a bad one here
+            // only widens or empties the box (saturating casts).
+            let lo = ((lo.floor() - 2.0).max(0.0) as u32).min(size);
+            let hi = ((hi.ceil() + 3.0).max(0.0) as u32).min(size);
+            lo..hi
+        };
+        let (xs, ys) = (span(0, w), span(1, h));
+        ys.flat_map(move |y| xs.clone().map(move |x| y * w + x))
+    })
 }
 
 /// The truth for one target on the model's patches, as a noiseless camera sees it.
@@ -107,5 +136,51 @@ impl Truth {
             model.problem.noise().to_vec(),
         )?;
         Ok(Self { target, problem })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A run's captures render only the chart pixels: sampled through the charts, with the
+    /// camera's noise, they give the same patch values as the full render, to the bit.
+    #[test]
+    fn the_chart_pixels_hold_everything_the_sampling_reads() {
+        // The quick demo's camera: enough pixels per patch.
+        let mut scene = roomlight_sim::scenes::small().expect("scene");
+        scene.camera.resolution = [640, 480];
+        let room = Room::build(scene).expect("room");
+        let corners = chart_corners(&room).expect("corners");
+        let subset = room
+            .pixel_subset(chart_pixels(&room, &corners))
+            .expect("subset");
+        assert!(
+            subset.pixels().len() < room.pixels().len() / 2,
+            "a real subset"
+        );
+        let frames: Vec<Frame> = (0..room.projectors().len())
+            .map(|k| Frame::Uniform([0.2 + 0.1 * k as f32, 0.3, 0.4 - 0.1 * k as f32]))
+            .collect();
+        let preset = None;
+        let config = sample_config(&room);
+        let noisy = |capture| roomlight_sim::CameraNoise::with_seed(&room, 7).expose(&capture);
+        let full = sample(
+            &noisy(room.render(&frames, preset).expect("render")),
+            &corners,
+            &config,
+        )
+        .expect("sample");
+        let part = room
+            .render_subset(&subset, &frames, preset)
+            .expect("subset render");
+        let part = sample(&noisy(part), &corners, &config).expect("sample");
+        assert_eq!(full.len(), room.patches());
+        let bits = |v: &[LinearRgb]| -> Vec<[u64; 3]> {
+            v.iter().map(|p| p.0.map(f64::to_bits)).collect()
+        };
+        assert_eq!(bits(&full), bits(&part));
+        let lit = full.iter().filter(|p| p[1] > 0.0).count();
+        assert!(4 * lit > 3 * full.len(), "the patches are lit ({lit})");
     }
 }

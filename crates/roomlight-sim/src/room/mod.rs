@@ -14,11 +14,13 @@ mod capture;
 mod direct;
 mod noise;
 mod probes;
+mod subset;
 mod summed_area;
 
 pub use basis::{NodeBasis, NodeRegion};
 pub use capture::{Capture, PngEncoding};
 pub use noise::CameraNoise;
+pub use subset::PixelSubset;
 use summed_area::SummedArea;
 
 /// What a projector shows: code values in `[0, 1]` per channel (not linear light).
@@ -58,6 +60,9 @@ pub enum SimError {
     /// An unknown preset or projector name.
     #[error("no {kind} named {name:?} in this scene")]
     Unknown { kind: &'static str, name: String },
+    /// A camera pixel index beyond the image.
+    #[error("camera pixel {pixel} is outside the camera's {count} pixels")]
+    PixelOutside { pixel: u32, count: usize },
     /// A file could not be written.
     #[error("writing {path}: {message}")]
     Io { path: String, message: String },
