@@ -115,7 +115,7 @@ impl<C: Camera> Rounds<C> {
             match self.calibrate_waiting(&cancel).await {
                 Next::Again => continue,
                 Next::Stop => break,
-                Next::Round => self.measured_cycle().await,
+                Next::Round => self.measured_cycle(&cancel).await,
             }
         }
     }
@@ -172,8 +172,9 @@ impl<C: Camera> Rounds<C> {
     }
 
     /// One capture and the rounds that follow it: the measured round, then the model rounds
-    /// the controller asks for; then the status.
-    async fn measured_cycle(&mut self) {
+    /// the controller asks for, until `cancel` (a stop does not wait for the model rounds left:
+    /// every node shows what its last round gave it); then the status.
+    async fn measured_cycle(&mut self, cancel: &CancellationToken) {
         let shared = self.shared.clone();
         shared
             .registry
@@ -197,7 +198,7 @@ impl<C: Camera> Rounds<C> {
         let mut round = summary.round;
         let measured_objective = summary.objective;
         self.round_trip(&summary).await;
-        while self.controller.next() == NextRound::Model {
+        while self.controller.next() == NextRound::Model && !cancel.is_cancelled() {
             // Acknowledgements follow contributions: wait for them too.
             shared
                 .registry

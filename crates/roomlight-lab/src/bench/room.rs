@@ -73,8 +73,9 @@ pub struct Outcome {
 /// whether the camera agent discards its stale frames.
 type RuleSpec = (&'static str, StepRule, usize, bool);
 
-/// Model rounds per capture of the bench's default rule (`model-100`).
-pub const MODEL_ROUNDS: usize = 100;
+/// Model rounds per capture of the bench's default rule (`model-100`): the camera agent's
+/// default, which the pipeline's default rule uses too.
+pub const MODEL_ROUNDS: usize = roomlight_agent::camera::DEFAULT_MODEL_ROUNDS;
 
 /// Every rule, or the quick subset; with stale errors also the safe step the delay allows.
 fn rules(problem: &Problem, quick_subset: bool, latency: usize) -> Vec<RuleSpec> {

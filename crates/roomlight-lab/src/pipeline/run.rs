@@ -98,14 +98,15 @@ impl Churn {
 }
 
 impl RunOptions {
-    /// The default: FISTA momentum with restarts and twenty model rounds per capture, the
-    /// fastest combination on the demo rooms in captures and in wall time (`roomlight demo`
-    /// prints the comparison). The rounds wait for every node's acknowledgement, so the errors
-    /// are never stale and momentum keeps its guarantee.
+    /// The default: FISTA momentum with restarts and `DEFAULT_MODEL_ROUNDS` (100) model rounds
+    /// per capture, the bench's rule `model-100` and the deployed camera agent's default
+    /// (`roomlight bench room` and `roomlight demo` print the comparisons). The rounds wait for
+    /// every node's acknowledgement, so the errors are never stale and momentum keeps its
+    /// guarantee.
     pub fn default_rule(seed: u64) -> Self {
         Self {
             rule: StepRule::Momentum { theta: 1.0 },
-            model_rounds: 20,
+            model_rounds: camera::DEFAULT_MODEL_ROUNDS,
             max_captures: 60,
             stop_when_settled: true,
             seed,
