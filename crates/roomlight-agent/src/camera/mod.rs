@@ -174,6 +174,9 @@ pub struct RoomStatus {
     pub settled: bool,
     /// Projectors calibrated hot so far.
     pub calibrated_hot: u64,
+    /// Captures taken when the last calibration (hot or over the wire) ended, its own included;
+    /// 0 before any: the rounds after it are those of the room with its new projectors.
+    pub calibrated_at: u64,
     /// Whether the camera works; while it fails, rounds are abandoned and the projectors keep
     /// their light.
     pub camera: CameraState,

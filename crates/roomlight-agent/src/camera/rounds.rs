@@ -41,6 +41,8 @@ pub(super) struct Rounds<C> {
     /// Captures and model rounds, the errors, restarts and settling.
     controller: Controller,
     calibrated_hot: u64,
+    /// Captures taken when the last calibration ended (see `RoomStatus::calibrated_at`).
+    calibrated_at: u64,
     /// When to try a failed calibration again.
     backoff: Backoff,
     /// The round controller's clock: time since the loop started.
@@ -68,6 +70,7 @@ impl<C: Camera> Rounds<C> {
             contributions,
             controller: Controller::new(sigma, model_rounds),
             calibrated_hot: 0,
+            calibrated_at: 0,
             backoff: Backoff::default(),
             epoch: tokio::time::Instant::now(),
             requests,
@@ -138,6 +141,7 @@ impl<C: Camera> Rounds<C> {
                 super::calibration::calibrate(&shared, &mut self.eye, &projector, errors).await;
             if !calibrated.is_empty() {
                 self.calibrated_hot += calibrated.len() as u64;
+                self.calibrated_at = self.eye.count;
                 calibrated.iter().for_each(|p| self.backoff.forget(p));
                 return Next::Again;
             }
@@ -225,6 +229,7 @@ impl<C: Camera> Rounds<C> {
             s.bytes_in = shared.bytes_in.swap(0, Ordering::Relaxed);
             s.settled = settled;
             s.calibrated_hot = self.calibrated_hot;
+            s.calibrated_at = self.calibrated_at;
             s.camera = self.eye.state().clone();
             s.displays_lost = displays_lost;
         });

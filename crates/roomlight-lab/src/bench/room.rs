@@ -431,11 +431,10 @@ impl Bench {
                     options,
                     &bar,
                 )?;
-                let settle_from = variant.churn.map_or(0, |c| c.join_at.max(c.leave_at) + 1);
                 if first.is_none() {
-                    first = Some(self.first_run(&model, &r, variant)?);
+                    first = Some(self.first_run(&model, &truth, &r, variant)?);
                 }
-                runs.push(scene_run(&r, compute_us_per_round, settle_from));
+                runs.push(scene_run(&r, compute_us_per_round));
             }
             let (calibration, floor) = first.unwrap_or_default();
             let (record, curve) = summarise((name, rule_name), &runs, calibration, floor);
@@ -478,6 +477,7 @@ impl Bench {
     fn first_run(
         &self,
         model: &pipeline::Model,
+        truth: &pipeline::Truth,
         d: &RunDetail,
         variant: Variant,
     ) -> Result<(Calibration, Option<Floor>)> {
@@ -490,7 +490,7 @@ impl Bench {
         };
         let floor = match variant.churn {
             Some(_) => None,
-            None => floor::floor(&model.problem, &d.best, &d.noise)?,
+            None => floor::floor(&model.problem, &truth.problem, &d.best, &d.noise)?,
         };
         Ok((calibration, floor))
     }
@@ -498,7 +498,7 @@ impl Bench {
 
 /// A run of the simulated room as the bench counts it: the measured model's excess (the
 /// quantity the rules minimise) against captures and wall time.
-fn scene_run(d: &RunDetail, compute_us_per_round: f64, settle_from: u64) -> Run {
+fn scene_run(d: &RunDetail, compute_us_per_round: f64) -> Run {
     let r = &d.result;
     let rounds = r.rounds.max(1) as f64;
     let compute_s = compute_us_per_round * rounds * 1e-6;
@@ -517,7 +517,7 @@ fn scene_run(d: &RunDetail, compute_us_per_round: f64, settle_from: u64) -> Run 
                 rounds_seconds,
             })
             .collect(),
-        settle_from,
+        joined_after: d.joined_after,
         final_excess: r.trace.last().map_or(f64::NAN, |p| p.model_excess),
         final_true_excess: r.trace.last().map_or(f64::NAN, |p| p.true_excess),
         final_excess_rgb: d.final_excess_rgb,
