@@ -43,7 +43,7 @@ token = "change-me"
 listen = "127.0.0.1:50061"
 hardware = { sim = "http://127.0.0.1:50060" }
 $source_lines
-model_rounds = 20
+model_rounds = 100
 mdns = false
 TOML
 "$bin" camera --config camera.toml > camera.log 2>&1 &

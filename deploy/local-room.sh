@@ -68,7 +68,7 @@ listen = "127.0.0.1:0"
 hardware = { sim = "http://$sim" }
 survey = "survey.json"
 model_out = "model.json"
-model_rounds = 20
+model_rounds = 100
 mdns = false
 console = "127.0.0.1:$port"
 EOF

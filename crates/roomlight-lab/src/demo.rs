@@ -343,8 +343,12 @@ impl Lab<'_> {
             ("safe step", safe, 0),
             ("momentum", momentum, 0),
             ("momentum + 5 model rounds", momentum, 5),
-            ("safe step + 20 model rounds", safe, 20),
-            ("momentum + 20 model rounds (default)", momentum, 20),
+            ("momentum + 20 model rounds", momentum, 20),
+            (
+                "momentum + 100 model rounds (default)",
+                momentum,
+                roomlight_agent::camera::DEFAULT_MODEL_ROUNDS,
+            ),
         ];
         let budget = if self.options.quick { 15 } else { 30 };
         let mut rules = Vec::new();

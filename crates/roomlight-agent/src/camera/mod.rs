@@ -52,6 +52,15 @@ use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
 
+/// Model rounds per capture by default, the same for the deployed camera agent, the lab's
+/// pipeline and the bench's rule `model-100`: momentum needs about this many rounds between two
+/// captures to reach the model's optimum from where a capture left it (on the quick hard cases
+/// 20 rounds left the reflective room, the node without a chart and a stale capture at 4–6
+/// captures to 1%, 100 took them to 1–2, 400 changed one case by one capture: docs/results.md).
+/// A model round is messages and arithmetic, well under a millisecond on a LAN (0.3–0.6 ms per
+/// round measured on loopback), so 100 of them cost tens of milliseconds against a capture.
+pub const DEFAULT_MODEL_ROUNDS: usize = 100;
+
 /// How the camera agent runs. Its `Debug` leaves the token out (`roomlight camera --check`
 /// prints it).
 #[derive(Clone)]
@@ -64,7 +73,7 @@ pub struct CameraConfig {
     pub heartbeat: Duration,
     /// How long a round waits for acknowledgements and contributions.
     pub deadline: Duration,
-    /// Model rounds after each measured round.
+    /// Model rounds after each measured round ([`DEFAULT_MODEL_ROUNDS`] unless configured).
     pub model_rounds: usize,
     /// Calibration epoch (a node's persisted state is accepted only for the same epoch).
     pub calibration_epoch: u64,
@@ -165,6 +174,9 @@ pub struct RoomStatus {
     pub settled: bool,
     /// Projectors calibrated hot so far.
     pub calibrated_hot: u64,
+    /// Captures taken when the last calibration (hot or over the wire) ended, its own included;
+    /// 0 before any: the rounds after it are those of the room with its new projectors.
+    pub calibrated_at: u64,
     /// Whether the camera works; while it fails, rounds are abandoned and the projectors keep
     /// their light.
     pub camera: CameraState,
@@ -490,9 +502,13 @@ pub fn serve_room(
     }
 }
 
+/// Deadlines a stop waits for the round in flight before it gives up on it: the capture, the
+/// acknowledgements and the contributions of one round (model rounds stop at a stop request).
+const STOP_ROUNDS: u32 = 3;
+
 /// The server and the rounds together; on a stop request the current round finishes (bounded:
-/// a round waits at most a deadline for the acknowledgements and one per model round for the
-/// contributions), then every node is told goodbye and the server drains.
+/// a round waits at most a deadline for the acknowledgements and one for the contributions, and
+/// no further model round starts), then every node is told goodbye and the server drains.
 ///
 /// Every connection counts against the limit (`listener`'s second part) and is closed unless a
 /// node is admitted on it within the handshake timeout (as long as a Hello may take, the
@@ -520,7 +536,10 @@ async fn run<C: Camera>(
         .max_concurrent_streams(Some(8))
         .add_service(service)
         .serve_with_incoming_shutdown(incoming, shared.cancel.clone().cancelled_owned());
-    let grace = shared.config.deadline * (shared.config.model_rounds as u32 + 3);
+    // A stop request ends the model rounds at the next one (see `Rounds::run`): what is left
+    // to wait for is one round, whatever `model_rounds` is — a deadline for the
+    // acknowledgements, one for the contributions, one for the capture in flight.
+    let grace = shared.config.deadline * STOP_ROUNDS;
     let stop_waiting = async {
         cancel.cancelled().await;
         tokio::time::sleep(grace).await;

@@ -41,6 +41,8 @@ pub(super) struct Rounds<C> {
     /// Captures and model rounds, the errors, restarts and settling.
     controller: Controller,
     calibrated_hot: u64,
+    /// Captures taken when the last calibration ended (see `RoomStatus::calibrated_at`).
+    calibrated_at: u64,
     /// When to try a failed calibration again.
     backoff: Backoff,
     /// The round controller's clock: time since the loop started.
@@ -68,6 +70,7 @@ impl<C: Camera> Rounds<C> {
             contributions,
             controller: Controller::new(sigma, model_rounds),
             calibrated_hot: 0,
+            calibrated_at: 0,
             backoff: Backoff::default(),
             epoch: tokio::time::Instant::now(),
             requests,
@@ -115,7 +118,7 @@ impl<C: Camera> Rounds<C> {
             match self.calibrate_waiting(&cancel).await {
                 Next::Again => continue,
                 Next::Stop => break,
-                Next::Round => self.measured_cycle().await,
+                Next::Round => self.measured_cycle(&cancel).await,
             }
         }
     }
@@ -138,6 +141,7 @@ impl<C: Camera> Rounds<C> {
                 super::calibration::calibrate(&shared, &mut self.eye, &projector, errors).await;
             if !calibrated.is_empty() {
                 self.calibrated_hot += calibrated.len() as u64;
+                self.calibrated_at = self.eye.count;
                 calibrated.iter().for_each(|p| self.backoff.forget(p));
                 return Next::Again;
             }
@@ -172,8 +176,9 @@ impl<C: Camera> Rounds<C> {
     }
 
     /// One capture and the rounds that follow it: the measured round, then the model rounds
-    /// the controller asks for; then the status.
-    async fn measured_cycle(&mut self) {
+    /// the controller asks for, until `cancel` (a stop does not wait for the model rounds left:
+    /// every node shows what its last round gave it); then the status.
+    async fn measured_cycle(&mut self, cancel: &CancellationToken) {
         let shared = self.shared.clone();
         shared
             .registry
@@ -197,7 +202,7 @@ impl<C: Camera> Rounds<C> {
         let mut round = summary.round;
         let measured_objective = summary.objective;
         self.round_trip(&summary).await;
-        while self.controller.next() == NextRound::Model {
+        while self.controller.next() == NextRound::Model && !cancel.is_cancelled() {
             // Acknowledgements follow contributions: wait for them too.
             shared
                 .registry
@@ -224,6 +229,7 @@ impl<C: Camera> Rounds<C> {
             s.bytes_in = shared.bytes_in.swap(0, Ordering::Relaxed);
             s.settled = settled;
             s.calibrated_hot = self.calibrated_hot;
+            s.calibrated_at = self.calibrated_at;
             s.camera = self.eye.state().clone();
             s.displays_lost = displays_lost;
         });

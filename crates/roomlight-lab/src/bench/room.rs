@@ -73,8 +73,9 @@ pub struct Outcome {
 /// whether the camera agent discards its stale frames.
 type RuleSpec = (&'static str, StepRule, usize, bool);
 
-/// Model rounds per capture of the bench's default rule (`model-100`).
-pub const MODEL_ROUNDS: usize = 100;
+/// Model rounds per capture of the bench's default rule (`model-100`): the camera agent's
+/// default, which the pipeline's default rule uses too.
+pub const MODEL_ROUNDS: usize = roomlight_agent::camera::DEFAULT_MODEL_ROUNDS;
 
 /// Every rule, or the quick subset; with stale errors also the safe step the delay allows.
 fn rules(problem: &Problem, quick_subset: bool, latency: usize) -> Vec<RuleSpec> {
@@ -430,11 +431,10 @@ impl Bench {
                     options,
                     &bar,
                 )?;
-                let settle_from = variant.churn.map_or(0, |c| c.join_at.max(c.leave_at) + 1);
                 if first.is_none() {
-                    first = Some(self.first_run(&model, &r, variant)?);
+                    first = Some(self.first_run(&model, &truth, &r, variant)?);
                 }
-                runs.push(scene_run(&r, compute_us_per_round, settle_from));
+                runs.push(scene_run(&r, compute_us_per_round));
             }
             let (calibration, floor) = first.unwrap_or_default();
             let (record, curve) = summarise((name, rule_name), &runs, calibration, floor);
@@ -477,6 +477,7 @@ impl Bench {
     fn first_run(
         &self,
         model: &pipeline::Model,
+        truth: &pipeline::Truth,
         d: &RunDetail,
         variant: Variant,
     ) -> Result<(Calibration, Option<Floor>)> {
@@ -489,7 +490,7 @@ impl Bench {
         };
         let floor = match variant.churn {
             Some(_) => None,
-            None => floor::floor(&model.problem, &d.best, &d.noise)?,
+            None => floor::floor(&model.problem, &truth.problem, &d.best, &d.noise)?,
         };
         Ok((calibration, floor))
     }
@@ -497,7 +498,7 @@ impl Bench {
 
 /// A run of the simulated room as the bench counts it: the measured model's excess (the
 /// quantity the rules minimise) against captures and wall time.
-fn scene_run(d: &RunDetail, compute_us_per_round: f64, settle_from: u64) -> Run {
+fn scene_run(d: &RunDetail, compute_us_per_round: f64) -> Run {
     let r = &d.result;
     let rounds = r.rounds.max(1) as f64;
     let compute_s = compute_us_per_round * rounds * 1e-6;
@@ -516,7 +517,7 @@ fn scene_run(d: &RunDetail, compute_us_per_round: f64, settle_from: u64) -> Run 
                 rounds_seconds,
             })
             .collect(),
-        settle_from,
+        joined_after: d.joined_after,
         final_excess: r.trace.last().map_or(f64::NAN, |p| p.model_excess),
         final_true_excess: r.trace.last().map_or(f64::NAN, |p| p.true_excess),
         final_excess_rgb: d.final_excess_rgb,

@@ -98,14 +98,15 @@ impl Churn {
 }
 
 impl RunOptions {
-    /// The default: FISTA momentum with restarts and twenty model rounds per capture, the
-    /// fastest combination on the demo rooms in captures and in wall time (`roomlight demo`
-    /// prints the comparison). The rounds wait for every node's acknowledgement, so the errors
-    /// are never stale and momentum keeps its guarantee.
+    /// The default: FISTA momentum with restarts and `DEFAULT_MODEL_ROUNDS` (100) model rounds
+    /// per capture, the bench's rule `model-100` and the deployed camera agent's default
+    /// (`roomlight bench room` and `roomlight demo` print the comparisons). The rounds wait for
+    /// every node's acknowledgement, so the errors are never stale and momentum keeps its
+    /// guarantee.
     pub fn default_rule(seed: u64) -> Self {
         Self {
             rule: StepRule::Momentum { theta: 1.0 },
-            model_rounds: 20,
+            model_rounds: camera::DEFAULT_MODEL_ROUNDS,
             max_captures: 60,
             stop_when_settled: true,
             seed,
@@ -189,6 +190,9 @@ pub struct RunDetail {
     pub noise: Vec<Vec<LinearRgb>>,
     /// The measured model's optimum (of the room left behind after a leave).
     pub best: Optimum,
+    /// With a leave and a join: the captures taken when the room was whole again, the joining
+    /// projector in the rounds (after its join, or after its hot calibration).
+    pub joined_after: Option<u64>,
 }
 
 /// Runs the camera agent and one node agent per projector over loopback gRPC on `model`, from
@@ -240,7 +244,13 @@ pub fn run_detailed(
         bar,
     };
     let end = runtime.block_on(session.drive(&owners, &mut steady))?;
-    report(model, truth, &hw, &reference, &end, t0, &steady)
+    let mut detail = report(model, truth, &hw, &reference, &end, t0, &steady)?;
+    // The room is whole again once the joining projector is in the rounds: from its join, or
+    // from the end of its hot calibration (the camera agent's count of captures then).
+    detail.joined_after = options
+        .churn
+        .map(|c| c.join_at.max(c.leave_at).max(end.status.calibrated_at));
+    Ok(detail)
 }
 
 /// The nodes and agent names a churn moves, checked against the budget and the calibration
@@ -712,6 +722,7 @@ fn report(
         final_excess_rgb,
         noise,
         best: best.clone(),
+        joined_after: None,
     })
 }
 

@@ -53,7 +53,8 @@ struct CameraFile {
     heartbeat_ms: u64,
     #[serde(default = "deadline_default")]
     deadline_ms: u64,
-    #[serde(default)]
+    /// Model rounds between two captures (default `DEFAULT_MODEL_ROUNDS`, the bench's rule).
+    #[serde(default = "model_rounds_default")]
     model_rounds: usize,
     #[serde(default = "epoch_default")]
     calibration_epoch: u64,
@@ -99,6 +100,9 @@ fn heartbeat_default() -> u64 {
 }
 fn deadline_default() -> u64 {
     2000
+}
+fn model_rounds_default() -> usize {
+    roomlight_agent::camera::DEFAULT_MODEL_ROUNDS
 }
 fn epoch_default() -> u64 {
     1
@@ -297,5 +301,37 @@ impl CameraFile {
                 loopback_only: self.mdns_loopback_only,
             }),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A camera.toml that does not set `model_rounds` runs the bench's default rule, as the
+    /// lab's pipeline does.
+    #[test]
+    fn model_rounds_default_to_the_benchs_rule() {
+        let file: CameraFile = toml::from_str(
+            "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\n\
+             hardware = { sim = \"http://127.0.0.1:1\" }\nmodel = \"m.json\"\n",
+        )
+        .expect("a minimal camera.toml");
+        assert_eq!(file.model_rounds, 100);
+        assert_eq!(
+            file.model_rounds,
+            roomlight_lab::bench::room::MODEL_ROUNDS,
+            "the deployed default is the bench's rule"
+        );
+        assert_eq!(
+            roomlight_lab::pipeline::RunOptions::default_rule(1).model_rounds,
+            file.model_rounds
+        );
+        let set: CameraFile = toml::from_str(
+            "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\n\
+             hardware = { sim = \"http://127.0.0.1:1\" }\nmodel = \"m.json\"\nmodel_rounds = 0\n",
+        )
+        .expect("model_rounds = 0");
+        assert_eq!(set.model_rounds, 0);
     }
 }

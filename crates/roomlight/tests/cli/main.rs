@@ -524,30 +524,21 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
             assert_eq!(r["diverged"], false, "{r}");
         }
     }
-    let reaches = |case: &str, rule: &str| {
-        let r = row(case, rule);
-        assert!(
-            r["captures_to_1pct"].as_u64().is_some(),
-            "{case} {rule}: {r}"
-        );
-    };
-    for case in [
-        "small/leave-2-join-4",
-        "small/leave-2-join-4-hot",
-        "synthetic-100",
-    ] {
-        reaches(case, "model-100");
-    }
-    reaches("small/stale-2", "model-100-discard");
-    // Enough model rounds between captures: 1% within three captures where the room allows it
-    // (2 or fewer at 2026-11-27 16:37 UTC; the bench is deterministic at a seed).
+    // Enough model rounds between captures: 1% within three captures where the room allows it,
+    // after a join counted from the join (a hot one: from its calibration's end); 3 or fewer at
+    // 2026-11-27 19:22 UTC, and the bench is deterministic at a seed.
     for (case, rule) in [
+        ("small/leave-2-join-4", "model-100"),
+        ("small/leave-2-join-4-hot", "model-100"),
+        ("synthetic-100", "model-100"),
         ("small-reflective", "model-100"),
         ("small-two-on-one-wall", "model-100"),
+        ("small-dim-projector", "model-100"),
         ("small-node-without-chart", "model-100"),
         ("small-uncorrected-gamma", "model-100"),
         ("small-bright-target", "model-100"),
         ("small/stale-1", "model-100-discard"),
+        ("small/stale-2", "model-100-discard"),
     ] {
         let to_1pct = row(case, rule)["captures_to_1pct"].as_u64();
         assert!(
@@ -555,6 +546,10 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
             "{case} {rule}: {to_1pct:?}"
         );
     }
+    // Heavy noise: 1% is below its floor (where the rounds stop in the room); the floor's
+    // level within three captures (2 at 19:22 UTC).
+    let heavy = row("small-heavy-noise", "model-100")["captures_to_floor"].as_u64();
+    assert!(heavy.is_some_and(|c| c <= 3), "{heavy:?}");
     let excess =
         |case: &str, rule: &str| row(case, rule)["final_excess"].as_f64().unwrap_or(f64::NAN);
     for case in [

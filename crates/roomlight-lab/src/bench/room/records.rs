@@ -81,8 +81,10 @@ pub type Curve = (String, Vec<Point>);
 #[derive(Debug, Clone)]
 pub(super) struct Run {
     pub(super) trace: Vec<Point>,
-    /// Captures to a level are counted from here on (the last join or leave).
-    pub(super) settle_from: u64,
+    /// After a leave and a join: the captures taken when the room was whole again (the joining
+    /// projector in the rounds: its join, or for a hot join the end of its calibration).
+    /// Captures to a level are then the captures after it; otherwise from the start.
+    pub(super) joined_after: Option<u64>,
     pub(super) final_excess: f64,
     pub(super) final_true_excess: f64,
     pub(super) final_excess_rgb: [f64; 3],
@@ -96,21 +98,31 @@ pub(super) struct Run {
 }
 
 impl Run {
+    /// The points that count: all, or after a join those after the room was whole again.
+    fn counted(&self) -> impl Iterator<Item = &Point> {
+        let after = self.joined_after;
+        self.trace
+            .iter()
+            .filter(move |p| after.is_none_or(|j| p.capture > j))
+    }
+
+    /// Captures to `point`: from the start, or after the room was whole again.
+    fn captures_to(&self, point: &Point) -> u64 {
+        point.capture - self.joined_after.unwrap_or(0)
+    }
+
     fn first_below(&self, level: f64) -> Option<u64> {
-        self.point_below(level).map(|p| p.capture)
+        self.point_below(level).map(|p| self.captures_to(p))
     }
 
     fn first_true_below(&self, level: f64) -> Option<u64> {
-        self.trace
-            .iter()
-            .find(|p| p.capture >= self.settle_from && p.true_excess <= level)
-            .map(|p| p.capture)
+        self.counted()
+            .find(|p| p.true_excess <= level)
+            .map(|p| self.captures_to(p))
     }
 
     fn point_below(&self, level: f64) -> Option<&Point> {
-        self.trace
-            .iter()
-            .find(|p| p.capture >= self.settle_from && p.excess <= level)
+        self.counted().find(|p| p.excess <= level)
     }
 
     /// A non-finite value anywhere, an end above the start, or an end far above the best the
@@ -119,9 +131,7 @@ impl Run {
     fn diverged(&self) -> bool {
         let start = self.trace.first().map_or(f64::INFINITY, |p| p.excess);
         let best = self
-            .trace
-            .iter()
-            .filter(|p| p.capture >= self.settle_from)
+            .counted()
             .map(|p| p.excess)
             .fold(f64::INFINITY, f64::min);
         !self.final_excess.is_finite()
@@ -283,13 +293,13 @@ pub(super) fn summarise(
 }
 
 /// What the table of records shows, printed above it.
-pub const CAPTION: &str = "medians over the repeats (range in brackets; repeats differ by their camera noise seed, and at one seed every figure but the timings is the same on every run); captures to 1% / 0.1% excess over the model's G*, from the conventional start (capture 0), through the agents on loopback; after a leave and a join they count from the join. \"true\": the same for the room as it is (the simulator's noiseless camera on the same patches) over the room's own optimum (the true transport's); the rounds correct the model with every capture, so they head for the room's optimum, which differs from the model's where the model is off (reflections cut off, noise)";
+pub const CAPTION: &str = "medians over the repeats (range in brackets; repeats differ by their camera noise seed, and at one seed every figure but the timings is the same on every run); captures to 1% / 0.1% excess over the model's G*, from the conventional start (capture 0), through the agents on loopback; after a leave and a join they count the captures after the join (after a hot join, those after its calibration: the room whole again). \"true\": the same for the room as it is (the simulator's noiseless camera on the same patches) over the room's own optimum (the true transport's); the rounds correct the model with every capture, so they head for the room's optimum, which differs from the model's where the model is off (reflections cut off, noise)";
 
 /// How the wall-clock columns are computed, printed under the table.
 pub const TIME_NOTE: &str = "time to 1% (video: 30 fps, DSLR: 9 s per shot) = (calibration captures + captures to 1%) x seconds per shot + the calibration's computation (its wall time in the simulator less its captures at the simulated camera's mean capture time) + the rounds' measured wall time up to that capture (agents' computation and loopback messages, without the simulated camera); the synthetic room has no calibration (its transport is written down).";
 
 /// How the floor column is computed, printed under the table.
-pub const FLOOR_NOTE: &str = "floor: the excess over G* of the exact optimum of a noisy capture's objective (the measured model with its target less one capture's camera noise, noisy minus noiseless sampling of the same frame), median over the last 5 captures of the case's first run; † marks a floor above 1%, where 1% cannot be reached and the captures in brackets are those to the largest of the 5 floors. worst ch.: the largest of the three channels' final excess, each over its own optimum (R, G and B in --json).";
+pub const FLOOR_NOTE: &str = "floor: the excess over G* of where the rounds stop on one capture's noise: the fixed point of the safe step with the model's columns on the errors the camera measures in the room itself (its true transport; the model's target less one capture's camera noise, noisy minus noiseless sampling of the same frame), median over the last 5 captures of the case's first run (the exact optimum of the noisy model alone, which takes the model for the room, is noise_only in --json); † marks a floor above 1%, where 1% cannot be reached and the captures in brackets are those to the largest of the 5 floors. worst ch.: the largest of the three channels' final excess, each over its own optimum (R, G and B in --json).";
 
 /// The records as a table (a terminal's preset; the caller may load another).
 pub fn table(records: &[Record]) -> Table {
@@ -388,7 +398,7 @@ mod tests {
     use super::*;
 
     /// A run whose model excess falls below 1% at capture 2 and the room's own at capture 4.
-    fn run(settle_from: u64) -> Run {
+    fn run(joined_after: Option<u64>) -> Run {
         let model = [0.5, 0.05, 0.005, 0.004, 0.003, 0.002];
         let truth = [0.6, 0.2, 0.05, 0.02, 0.008, 0.006];
         Run {
@@ -402,7 +412,7 @@ mod tests {
                     rounds_seconds: 0.0,
                 })
                 .collect(),
-            settle_from,
+            joined_after,
             final_excess: model[5],
             final_true_excess: truth[5],
             final_excess_rgb: [model[5]; 3],
@@ -418,16 +428,16 @@ mod tests {
 
     #[test]
     fn the_true_columns_come_from_the_rooms_own_excess() {
-        let (r, curve) = summarise(("c", "r"), &[run(0)], Calibration::default(), None);
+        let (r, curve) = summarise(("c", "r"), &[run(None)], Calibration::default(), None);
         assert_eq!(r.captures_to_1pct, Some(2));
         assert_eq!(r.captures_to_1pct_true, Some(4));
         assert_eq!(r.final_true_excess.to_bits(), 0.006_f64.to_bits());
         assert_eq!(curve[3].true_excess.to_bits(), 0.02_f64.to_bits());
-        // After a join, both count from the join.
-        let (r, _) = summarise(("c", "r"), &[run(3)], Calibration::default(), None);
+        // After a join, both count the captures after it (the model's capture 2 is before).
+        let (r, _) = summarise(("c", "r"), &[run(Some(2))], Calibration::default(), None);
         assert_eq!(
             (r.captures_to_1pct, r.captures_to_1pct_true),
-            (Some(3), Some(4))
+            (Some(1), Some(2))
         );
     }
 }

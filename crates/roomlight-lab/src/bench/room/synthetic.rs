@@ -216,7 +216,7 @@ async fn synthetic_run(
     let seconds = end.saturating_duration_since(t0).as_secs_f64();
     let run = Run {
         trace,
-        settle_from: 0,
+        joined_after: None,
         final_excess: f64::NAN,
         final_true_excess: f64::NAN,
         final_excess_rgb: [f64::NAN; 3],
