@@ -248,7 +248,8 @@ async fn projectors_with_disjoint_footprints_joining_together_are_coded_at_the_s
         "calibrated over the wire: together at capture {}, alone at {} and {}",
         together.captures, left.captures, right.captures
     );
-    // Together saves at least one set of structured light: the smaller projector's patterns.
+    // Together saves at least one set of structured light: the smaller projector's bit
+    // patterns (white and black are the footprint captures, one per projector either way).
     let patterns = apart_scene()
         .projectors
         .iter()
@@ -256,7 +257,9 @@ async fn projectors_with_disjoint_footprints_joining_together_are_coded_at_the_s
             Manifest::with_coding(p.resolution[0], p.resolution[1], Coding::Xor04)
                 .expect("manifest")
                 .patterns
-                .len() as u64
+                .iter()
+                .filter(|f| matches!(f.pattern, roomlight_calib::graycode::Pattern::Bit { .. }))
+                .count() as u64
         })
         .min()
         .expect("projectors");

@@ -45,7 +45,9 @@ pub struct Settings {
     /// lab grouped floor-right with the large aperture, and 0.32% of floor-right's decoded
     /// pixels came out off by more than 2 (none coded alone).
     pub footprint_share_large: f32,
-    /// Levels of the response ramp (DESIGN §4.3: at least 9).
+    /// Levels of the response ramp, its ends (the dark and white captures) included: a power
+    /// law per channel has one parameter, so two levels between the ends fit it and check the
+    /// fit. Each projector shows its levels alone (inter-reflection is its own light).
     pub ramp_levels: usize,
     /// How the attenuation of a room brought up is multiplexed.
     pub scheme: Scheme,
@@ -65,7 +67,7 @@ impl Default for Settings {
             decode_large: DecodeConfig::strict(),
             footprint_share: 0.1,
             footprint_share_large: 0.01,
-            ramp_levels: 9,
+            ramp_levels: 4,
             scheme: Scheme::Hadamard,
             nodes: NodeConfig::default(),
             fine_stripes: true,

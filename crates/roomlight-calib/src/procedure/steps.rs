@@ -147,7 +147,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
             .iter()
             .map(|g| {
                 g.iter()
-                    .map(|&k| manifests[k].patterns.len())
+                    .map(|&k| bit_count(&manifests[k]))
                     .max()
                     .unwrap_or(0)
             })
@@ -166,8 +166,9 @@ impl<'a, R: Rig> Procedure<'a, R> {
         let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
         let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
         for group in &groups {
+            let white = group_white(dark, &group.iter().map(|&k| &whites[k]).collect::<Vec<_>>());
             let decoded = self
-                .code_group(projectors, &manifests, group, &gains)
+                .code_group(projectors, &manifests, group, &gains, (dark, &white))
                 .await?;
             for (&k, c) in group.iter().zip(decoded) {
                 corrs[k] = Some(c);
@@ -186,28 +187,28 @@ impl<'a, R: Rig> Procedure<'a, R> {
             .collect())
     }
 
-    /// Shows one group's patterns slot by slot (member `k` its own pattern `j`, black once it
-    /// has no more), captures each, leaves the members black and decodes each.
+    /// Shows one group's bit patterns slot by slot (member `k` its own bit pattern `j`, black
+    /// once it has no more), captures each, leaves the members black and decodes each. The
+    /// manifests' white and black are not shown again: they are `dark` and the group's white
+    /// ([`group_white`]), captured before in the same state of the room.
     async fn code_group(
         &mut self,
         projectors: &[Projector],
         manifests: &[Manifest],
         group: &[usize],
         gains: &[Vec<f32>],
+        (dark, white): (&LinearImage, &LinearImage),
     ) -> Result<Vec<Correspondence>, ProcedureError> {
-        let longest = group
-            .iter()
-            .map(|&k| manifests[k].patterns.len())
-            .max()
-            .unwrap_or(0);
+        let bits: Vec<Vec<Pattern>> = manifests.iter().map(bit_patterns).collect();
+        let longest = group.iter().map(|&k| bits[k].len()).max().unwrap_or(0);
         let mut captures = Vec::with_capacity(longest);
         for j in 0..longest {
             let frames: Vec<(&str, Frame)> = group
                 .iter()
                 .map(|&k| {
-                    let frame = match manifests[k].patterns.get(j) {
-                        Some(f) => Frame::Structured {
-                            pattern: f.pattern,
+                    let frame = match bits[k].get(j) {
+                        Some(&pattern) => Frame::Structured {
+                            pattern,
                             coding: manifests[k].coding,
                         },
                         None => Frame::BLACK,
@@ -235,18 +236,24 @@ impl<'a, R: Rig> Procedure<'a, R> {
                 (p.clone(), manifests[k].clone(), config, ours)
             })
             .collect();
+        let (dark, white) = (dark.clone(), white.clone());
         let corrs = self
             .rig
             .offload(move || {
                 jobs.iter()
                     .map(|(p, m, config, ours)| {
                         let mut corr = decode_where(m, config, ours.as_deref(), |f| {
-                            let j = m
-                                .patterns
-                                .iter()
-                                .position(|q| q.file == f.file)
-                                .unwrap_or(0);
-                            Ok(&captures[j])
+                            Ok(match f.pattern {
+                                Pattern::White => &white,
+                                Pattern::Black => &dark,
+                                Pattern::Bit { .. } => {
+                                    let j = bit_patterns(m)
+                                        .iter()
+                                        .position(|q| *q == f.pattern)
+                                        .unwrap_or(0);
+                                    &captures[j]
+                                }
+                            })
                         })
                         .map_err(|source| ProcedureError::Projector {
                             projector: p.id.clone(),
@@ -558,6 +565,41 @@ fn disown(corr: &mut Correspondence, ours: Option<&[bool]>) {
     for (direct, &mine) in corr.direct.iter_mut().zip(ours) {
         if !mine {
             *direct = 0.0;
+        }
+    }
+}
+
+/// A manifest's bit patterns (pattern and inverse), in order: what structured light shows,
+/// white and black being the dark and white captures taken before.
+fn bit_patterns(m: &Manifest) -> Vec<Pattern> {
+    m.patterns
+        .iter()
+        .map(|f| f.pattern)
+        .filter(|p| matches!(p, Pattern::Bit { .. }))
+        .collect()
+}
+
+fn bit_count(m: &Manifest) -> usize {
+    bit_patterns(m).len()
+}
+
+/// A group's white as one capture of all its members at white would show it: `dark` plus
+/// each member's white's rise above it (light adds; their footprints are disjoint).
+fn group_white(dark: &LinearImage, whites: &[&LinearImage]) -> LinearImage {
+    match whites {
+        [one] => (*one).clone(),
+        _ => {
+            let mut white = dark.clone();
+            for w in whites {
+                for (o, (p, d)) in white
+                    .pixels
+                    .iter_mut()
+                    .zip(w.pixels.iter().zip(&dark.pixels))
+                {
+                    *o = std::array::from_fn(|c| o[c] + p[c] - d[c]);
+                }
+            }
+            white
         }
     }
 }

@@ -3,7 +3,9 @@
 //! Structured light runs through the one calibration procedure ([`roomlight_calib::procedure`])
 //! on the simulated room as a rig; this module only measures what it decoded.
 
-use crate::pipeline::SimRig;
+mod bringup;
+
+use crate::pipeline::{self, SimRig};
 use anyhow::{Context, Result};
 use roomlight_calib::centroid::{block_centres, spots};
 use roomlight_calib::charts::{ChartCorners, PatchStatus, sample_charts};
@@ -111,13 +113,15 @@ pub fn run(quick: bool) -> Result<()> {
         room.scene().name,
         t0.elapsed().as_secs_f64()
     );
+    bringup::cold_start(&room)?;
+    bringup::hot_join(&room)?;
     let (decoded_all, decode_secs) = structured_light(&room)?;
     for k in 0..room.projectors().len() {
         if room.projectors()[k].kind == ProjectorKind::LargeAperture {
             area_centroids(&room, k)?;
         }
     }
-    let charts = crate::pipeline::chart_corners(&room)?;
+    let charts = pipeline::chart_corners(&room)?;
     chart_sampling(&room, &charts)?;
     let n = room.projectors().len();
     let luminaires: Vec<usize> = (0..n)
@@ -258,7 +262,7 @@ fn chart_sampling(room: &Room, charts: &[ChartCorners]) -> Result<()> {
         .transpose()?;
     let lit = shoot_preset(room, preset)?;
     let t = Instant::now();
-    let samples = sample_charts(&lit, charts, &crate::pipeline::sample_config(room))?;
+    let samples = sample_charts(&lit, charts, &pipeline::sample_config(room))?;
     let elapsed = t.elapsed();
     let count = |status: PatchStatus| samples.iter().filter(|s| s.status == status).count();
     println!(
@@ -427,7 +431,8 @@ fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64
     let mut decoded = block_on(procedure.code(&live, &dark, &whites))?;
     let grouped = procedure.captures();
     println!(
-        "structured light: {alone} captures one projector at a time; {grouped} with simultaneous coding of non-overlapping projectors ({} groups: {:?}, including {before} footprint captures)",
+        "structured light: {alone} captures one projector at a time with its own white and black; {} with non-overlapping projectors coded together, white and black being the footprint captures ({} groups: {:?}), after {before} footprint captures",
+        grouped - before,
         groups.len(),
         groups
             .iter()
