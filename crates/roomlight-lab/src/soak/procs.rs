@@ -13,6 +13,10 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+/// Readings an incarnation's last one is chosen from (taken [`super::room`]'s sampling period
+/// apart, 250 ms: about a second).
+pub const RECENT: usize = 4;
+
 /// One reading of a process.
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct Sample {
@@ -33,8 +37,12 @@ pub struct Incarnation {
     pub started_at_round: u64,
     /// The first reading once the room had run the warm-up past this incarnation's start.
     pub warm: Option<Sample>,
-    /// The last reading.
+    /// The last reading: of the last [`RECENT`] readings, the one holding the fewest descriptors
+    /// beyond its peers (the latest of equals). A descriptor held for a moment (a reconnection
+    /// in flight, a state file being written) is in one reading; a leak is in all of them.
     pub last: Option<Sample>,
+    #[serde(skip)]
+    recent: std::collections::VecDeque<Sample>,
     pub max_rss_kb: u64,
     /// How it ended: `killed` (SIGKILL by the soak), `stopped` (exited 0 after SIGTERM), or
     /// what went wrong.
@@ -108,6 +116,7 @@ impl Agent {
             started_at_round: at_round,
             warm: None,
             last: None,
+            recent: std::collections::VecDeque::new(),
             max_rss_kb: 0,
             end: None,
         });
@@ -218,7 +227,11 @@ impl Agent {
             if i.warm.is_none() && at_round >= i.started_at_round + warm_up {
                 i.warm = Some(sample);
             }
-            i.last = Some(sample);
+            i.recent.push_back(sample);
+            if i.recent.len() > RECENT {
+                i.recent.pop_front();
+            }
+            i.last = least_held(&i.recent);
         }
     }
 
@@ -234,6 +247,16 @@ impl Drop for Agent {
     fn drop(&mut self) {
         self.kill();
     }
+}
+
+/// Of `recent` readings, the one holding the fewest descriptors beyond its peers, the latest of
+/// equals.
+fn least_held(recent: &std::collections::VecDeque<Sample>) -> Option<Sample> {
+    recent
+        .iter()
+        .rev()
+        .min_by_key(|s| s.fds.saturating_sub(s.peers))
+        .copied()
 }
 
 /// Entries of `/proc/PID/fd`; `None` once the process has gone (or off Linux).
@@ -293,5 +316,36 @@ mod tests {
             })
         );
         assert_eq!(Status::parse("camera listening on 127.0.0.1:5"), None);
+    }
+
+    fn reading(at_round: u64, fds: u64, peers: u64) -> Sample {
+        Sample {
+            at_round,
+            rss_kb: 0,
+            fds,
+            peers,
+        }
+    }
+
+    /// A descriptor in one reading (held for a moment) is not in the last reading; one in every
+    /// recent reading (a leak) is; a new peer's socket is explained by the peer.
+    #[test]
+    fn the_last_reading_is_the_least_held_of_the_recent_ones() {
+        use std::collections::VecDeque;
+        let spike: VecDeque<Sample> =
+            [reading(1, 12, 0), reading(2, 13, 0), reading(3, 12, 0)].into();
+        assert_eq!(
+            least_held(&spike).map(|s| (s.at_round, s.fds)),
+            Some((3, 12))
+        );
+        let leak: VecDeque<Sample> =
+            [reading(1, 13, 0), reading(2, 13, 0), reading(3, 14, 0)].into();
+        assert_eq!(
+            least_held(&leak).map(|s| (s.at_round, s.fds)),
+            Some((2, 13))
+        );
+        let peer: VecDeque<Sample> = [reading(1, 16, 4), reading(2, 17, 5)].into();
+        assert_eq!(least_held(&peer).map(|s| s.at_round), Some(2));
+        assert!(least_held(&VecDeque::new()).is_none());
     }
 }

@@ -16,7 +16,7 @@ pub const TOKEN: &str = "soak-token";
 pub const ROOM: &str = "soak";
 
 /// How often the processes are measured while the driver waits.
-const SAMPLE_EVERY: Duration = Duration::from_millis(250);
+pub(super) const SAMPLE_EVERY: Duration = Duration::from_millis(250);
 
 /// What the room is.
 #[derive(Debug, Clone)]
