@@ -60,12 +60,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     })?;
     phases.done("calibration", t);
     let t = Instant::now();
-    let transport = pipeline::Transport::new(
-        &room,
-        &cal.regions,
-        &cal.corners,
-        pipeline::sample_config(&room),
-    )?;
+    let transport = pipeline::Transport::new(&room, &cal.regions, cal.setup())?;
     println!(
         "simulated hardware: each node's light rendered once in {:.1} s",
         t.elapsed().as_secs_f64()
@@ -228,7 +223,7 @@ impl Lab<'_> {
             let lit = pipeline::measure_lit(self.room, self.cal, preset, noise)?;
             let model = pipeline::Model::for_weight(self.cal, &lit, 0.0)?;
             if Some(preset) == tradeoff {
-                kept = Some((preset, lit));
+                kept = Some((preset, lit.clone()));
             }
             let truth = pipeline::Truth::new(self.room, self.transport, &model, preset)?;
             let result = self.agents(
@@ -243,6 +238,18 @@ impl Lab<'_> {
                 self.room, self.cal, &model, &result, self.reach, preset, &spec.name, dir,
             )?;
             print_whole_room(&spec.name, &pictures.whole_room);
+            let model_best =
+                crate::whole_room_best::pair(self.room, self.cal, self.reach, preset, &lit)?;
+            for b in &model_best {
+                println!(
+                    "{}: the model's optimum with walls weighed {}: whole room ΔE00 mean {:.2}, p95 {:.2}; charts {:.2}",
+                    spec.name,
+                    b.wall_weight,
+                    b.whole_room_de00_mean,
+                    b.whole_room_de00_p95,
+                    b.chart_de00_mean
+                );
+            }
             self.phases.borrow_mut().done("pictures and whole room", t);
             if preset == 0 {
                 let t = Instant::now();
@@ -259,6 +266,7 @@ impl Lab<'_> {
                 model,
                 result,
                 pictures,
+                model_best: model_best.to_vec(),
             });
         }
         Ok((presets, rules, kept))

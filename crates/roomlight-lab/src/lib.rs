@@ -19,3 +19,4 @@ pub mod report;
 pub mod shadow;
 pub mod soak;
 pub mod whole_room;
+pub mod whole_room_best;

@@ -29,6 +29,7 @@ fn setup(room: &Room) -> Setup {
         sample: SampleConfig::default(),
         target_mask: room.pixels().iter().map(|p| p.target).collect(),
         target_patches: Vec::new(),
+        wall_patches: Vec::new(),
     }
 }
 

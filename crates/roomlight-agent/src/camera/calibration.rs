@@ -157,6 +157,7 @@ fn setup(survey: &Survey) -> Setup {
         sample: survey.sample,
         target_mask: survey.target_mask.clone(),
         target_patches: Vec::new(),
+        wall_patches: Vec::new(),
     }
 }
 

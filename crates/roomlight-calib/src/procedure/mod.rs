@@ -26,9 +26,11 @@ use roomlight_core::LinearRgb;
 
 mod steps;
 mod target;
+mod walls;
 
 pub use steps::Procedure;
 pub use target::Target;
+pub use walls::{WallTiling, wall_exclusion, wall_patches};
 
 /// How the procedure measures; [`Settings::default`] is what the benches measured best.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -107,19 +109,41 @@ pub struct Setup {
     /// patches, after them: room patches `24 · charts ..`, so that the light the nodes throw on
     /// the target can enter the objective ([`Target::with_dark`]). Empty: none (as before).
     pub target_patches: Vec<Vec<u32>>,
+    /// Camera tiles of the room beyond the charts and the target ([`wall_patches`]), measured
+    /// like chart patches after the target patches, so that the objective can ask for the
+    /// target lighting everywhere the camera sees a lit surface ([`Target::with_walls`]).
+    /// Empty: none (the model over the charts, as before).
+    pub wall_patches: Vec<Vec<u32>>,
 }
 
 impl Setup {
     /// Every room patch of a capture: the charts' patches, chart by chart, then the target
-    /// patches.
+    /// patches, then the wall patches.
     pub fn sample_room(&self, image: &LinearImage) -> Result<Vec<PatchSample>, CalibError> {
         let mut all = sample_charts(image, &self.corners, &self.sample)?;
         all.extend(
             self.target_patches
                 .iter()
+                .chain(&self.wall_patches)
                 .map(|r| sample_region(image, r, &self.sample)),
         );
         Ok(all)
+    }
+
+    /// The room patches that are wall patches.
+    pub fn wall_patch_range(&self) -> std::ops::Range<usize> {
+        let first = self.target_patch_range().end;
+        first..first + self.wall_patches.len()
+    }
+
+    /// Every camera pixel a room patch's sampling may read beside the charts' (the target and
+    /// wall patches' pixels).
+    pub fn region_pixels(&self) -> impl Iterator<Item = u32> + '_ {
+        self.target_patches
+            .iter()
+            .chain(&self.wall_patches)
+            .flatten()
+            .copied()
     }
 
     /// The room patches that are target patches.

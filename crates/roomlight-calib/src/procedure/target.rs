@@ -72,45 +72,101 @@ impl Target {
     /// and their rows are scaled by `√weight`. Weight 0 leaves them out: the model is the one
     /// over the chart patches alone. A weight that is not finite or is negative is refused.
     pub fn with_dark(self, dark: std::ops::Range<usize>, weight: f64) -> Result<Self, CalibError> {
+        self.reweigh(dark, weight, true, "dark target weight")
+    }
+
+    /// The room patches in `walls` (the wall patches, [`super::Setup::wall_patch_range`]) kept
+    /// with their target lighting, their squared errors weighed by `weight` (rows scaled by
+    /// `√weight`); weight 0 leaves them out. A weight that is not finite or is negative is
+    /// refused.
+    pub fn with_walls(
+        self,
+        walls: std::ops::Range<usize>,
+        weight: f64,
+    ) -> Result<Self, CalibError> {
+        self.reweigh(walls, weight, false, "wall weight")
+    }
+
+    /// The patches in `range` weighed by `weight` (0: left out), their reference the black
+    /// level when `to_black`.
+    fn reweigh(
+        self,
+        range: std::ops::Range<usize>,
+        weight: f64,
+        to_black: bool,
+        field: &'static str,
+    ) -> Result<Self, CalibError> {
         if !(weight.is_finite() && weight >= 0.0) {
             return Err(CalibError::Invalid {
-                field: "dark target weight",
+                field,
                 problem: format!("is {weight}, expected a finite weight >= 0"),
             });
         }
         let keep: Vec<bool> = self
             .patches
             .iter()
-            .map(|i| weight > 0.0 || !dark.contains(i))
+            .map(|i| weight > 0.0 || !range.contains(i))
             .collect();
         if keep.iter().all(|k| !k) {
             return Err(CalibError::Invalid {
                 field: "target",
-                problem: "no chart patch left beside the target patches".into(),
+                problem: "no chart patch left beside the weighed patches".into(),
             });
         }
         let s = weight.sqrt();
-        let mut out = Self {
-            patches: Vec::new(),
-            black: Vec::new(),
-            target: Vec::new(),
-            noise: Vec::new(),
-            scale: Vec::new(),
-        };
+        let mut out = Self::empty();
         for k in (0..self.patches.len()).filter(|&k| keep[k]) {
             let i = self.patches[k];
-            let on_target = dark.contains(&i);
+            let inside = range.contains(&i);
             out.patches.push(i);
             out.black.push(self.black[k]);
-            out.target.push(if on_target {
+            out.target.push(if inside && to_black {
                 self.black[k]
             } else {
                 self.target[k]
             });
             out.noise.push(self.noise[k]);
-            out.scale.push(if on_target { s } else { self.scale[k] });
+            out.scale.push(if inside { s } else { self.scale[k] });
         }
         Ok(out)
+    }
+
+    fn empty() -> Self {
+        Self {
+            patches: Vec::new(),
+            black: Vec::new(),
+            target: Vec::new(),
+            noise: Vec::new(),
+            scale: Vec::new(),
+        }
+    }
+
+    /// Without the patches in `range` that no column reaches (`columns` over room patches,
+    /// [`Target::columns`]' input): no node changes their light, so they would only add a
+    /// constant to `G` and hide the excess. Wall tiles in a shadow or outside every footprint
+    /// go this way; the chart patches are never in `range`.
+    pub fn without_unreached(
+        self,
+        range: std::ops::Range<usize>,
+        columns: &[Vec<(u32, LinearRgb)>],
+    ) -> Self {
+        let mut reached = std::collections::HashSet::new();
+        for c in columns {
+            reached.extend(c.iter().map(|(i, _)| *i as usize));
+        }
+        let mut out = Self::empty();
+        for k in 0..self.patches.len() {
+            let i = self.patches[k];
+            if range.contains(&i) && !reached.contains(&i) {
+                continue;
+            }
+            out.patches.push(i);
+            out.black.push(self.black[k]);
+            out.target.push(self.target[k]);
+            out.noise.push(self.noise[k]);
+            out.scale.push(self.scale[k]);
+        }
+        out
     }
 
     /// Values measured on the model's patches, scaled as the model's rows are.
@@ -189,5 +245,68 @@ fn invalid(e: ModelError) -> CalibError {
     CalibError::Invalid {
         field: "model",
         problem: e.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(v: f64) -> PatchSample {
+        PatchSample {
+            mean: LinearRgb::splat(v),
+            std_error: LinearRgb::splat(0.01),
+            pixels: 36,
+            status: PatchStatus::Ok,
+        }
+    }
+
+    /// Two chart patches, then two wall patches (room patches 2 and 3).
+    fn four() -> Target {
+        let lit: Vec<PatchSample> = [0.5, 0.6, 0.7, 0.8].map(sample).to_vec();
+        Target::new(&[LinearRgb::splat(0.1); 4], &[true; 4], &lit).expect("target")
+    }
+
+    #[test]
+    fn walls_keep_their_lighting_and_are_weighed() {
+        let t = four().with_walls(2..4, 0.25).expect("walls");
+        assert_eq!(t.patches, vec![0, 1, 2, 3]);
+        assert_eq!(t.scale, vec![1.0, 1.0, 0.5, 0.5]);
+        assert_eq!(t.target[3], LinearRgb::splat(0.8), "not sent to black");
+        let dark = four().with_dark(2..4, 0.25).expect("dark");
+        assert_eq!(
+            dark.target[3],
+            LinearRgb::splat(0.1),
+            "a dark patch's reference is black"
+        );
+        let none = four().with_walls(2..4, 0.0).expect("weight 0");
+        assert_eq!(none.patches, vec![0, 1]);
+        assert!(four().with_walls(2..4, f64::NAN).is_err());
+        assert!(four().with_walls(2..4, -1.0).is_err());
+        assert!(four().with_walls(0..4, 0.0).is_err(), "nothing left");
+    }
+
+    #[test]
+    fn walls_no_node_reaches_are_left_out_and_charts_never() {
+        let columns = vec![
+            vec![(0, LinearRgb::splat(0.2)), (3, LinearRgb::splat(0.1))],
+            vec![(1, LinearRgb::splat(0.3))],
+        ];
+        let t = four()
+            .with_walls(2..4, 1.0)
+            .expect("walls")
+            .without_unreached(2..4, &columns);
+        assert_eq!(t.patches, vec![0, 1, 3], "wall 2 is lit by no node");
+        assert_eq!(t.target.len(), 3);
+        assert_eq!(t.scale.len(), 3);
+        // A chart patch no node reaches stays (its error is the model's to report).
+        let t = four().without_unreached(0..0, &[vec![(0, LinearRgb::splat(0.2))]]);
+        assert_eq!(t.patches, vec![0, 1, 2, 3]);
+        let problem = four()
+            .with_walls(2..4, 1.0)
+            .expect("walls")
+            .without_unreached(2..4, &columns);
+        let cols = problem.columns(&columns).expect("columns");
+        assert_eq!(cols[0].support(), &[0, 2], "room patch 3 is model patch 2");
     }
 }

@@ -367,12 +367,7 @@ impl Bench {
         let t0 = Instant::now();
         let cal = pipeline::calibrate(&room, &mut noise, &bar, |line| println!("  {line}"))?;
         let calibration_seconds = t0.elapsed().as_secs_f64();
-        let transport = pipeline::Transport::new(
-            &room,
-            &cal.regions,
-            &cal.corners,
-            pipeline::sample_config(&room),
-        )?;
+        let transport = pipeline::Transport::new(&room, &cal.regions, cal.setup())?;
         Ok(Self {
             room,
             cal,

@@ -10,7 +10,8 @@ use roomlight_calib::charts::ChartCorners;
 use roomlight_calib::charts::PatchSample;
 use roomlight_calib::procedure::Target;
 use roomlight_calib::procedure::{
-    BringUp, Event, Layout, Measured, Placed, Procedure, Settings, Setup, Stage, place,
+    BringUp, Event, Layout, Measured, Placed, Procedure, Settings, Setup, Stage, WallTiling, place,
+    wall_exclusion, wall_patches,
 };
 use roomlight_calib::response::Response;
 use roomlight_calib::rig::block_on;
@@ -42,6 +43,9 @@ pub struct Calibrated {
     pub responses: Vec<Response>,
     /// The luminaires as the procedure measured them (decoded, response fitted), in room order.
     pub measured: Vec<Measured>,
+    /// Weight of each wall patch's squared error in the models built from this calibration
+    /// ([`Target::with_walls`]; a chart patch weighs 1, 0 leaves the walls out).
+    pub wall_weight: f64,
     /// The room as configured by hand, and how the procedure measured it.
     setup: Setup,
     settings: Settings,
@@ -92,6 +96,16 @@ impl Calibrated {
         self.setup.target_patch_range()
     }
 
+    /// The room patches on the walls, beyond the charts and the target.
+    pub fn wall_patch_range(&self) -> std::ops::Range<usize> {
+        self.setup.wall_patch_range()
+    }
+
+    /// The room as configured, with the patches calibration measured.
+    pub fn setup(&self) -> &Setup {
+        &self.setup
+    }
+
     /// Every room patch of a capture, as calibration sampled them.
     pub fn sample_room(&self, capture: &roomlight_sim::Capture) -> Result<Vec<PatchSample>> {
         Ok(self.setup.sample_room(&image(capture))?)
@@ -119,6 +133,7 @@ impl Calibrated {
             captures: up.captures,
             responses,
             measured: up.measured,
+            wall_weight: 0.0,
             setup,
             settings,
         })
@@ -155,22 +170,30 @@ fn regions(room: &Room, placed: &[Placed]) -> Result<(Vec<NodeRegion>, Vec<Optio
 /// is about 25 camera pixels across, so 2 × 2 patches of some 100 pixels each.
 pub const TARGET_PATCH_GRID: u32 = 2;
 
+/// Weight of a wall patch's squared error against a chart patch's when the walls are asked
+/// for (issue 22 item 2; the lab has some 770 wall tiles its nodes reach, against 312 chart
+/// patches). [`Calibrated::wall_weight`] starts at 0: the model over the charts, as before.
+pub const WALL_WEIGHT: f64 = 0.25;
+
 /// The room as configured by hand: the charts' corners, how they are sampled, the target;
 /// with `target_patches`, patches on the target measured beside the charts' (so that a dark
-/// target can be weighed in the objective, [`Model::for_weight`]).
+/// target can be weighed in the objective, [`Model::for_weight`]); and tiles of the walls
+/// beyond them ([`WallTiling::default`]), so that the model can ask for the LEDs' light over
+/// the whole room.
 pub fn setup(room: &Room, target_patches: bool) -> Result<Setup> {
     let target_mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let [width, height] = room.scene().camera.resolution;
     let patches = if target_patches {
-        roomlight_calib::procedure::target_patches(
-            &target_mask,
-            room.scene().camera.resolution[0],
-            TARGET_PATCH_GRID,
-        )
+        roomlight_calib::procedure::target_patches(&target_mask, width, TARGET_PATCH_GRID)
     } else {
         Vec::new()
     };
+    let corners = chart_corners(room)?;
+    let tiling = WallTiling::default();
+    let exclude = wall_exclusion(&corners, &target_mask, width, tiling.margin);
     Ok(Setup {
-        corners: chart_corners(room)?,
+        wall_patches: wall_patches(width, height, &exclude, &tiling),
+        corners,
         sample: sample_config(room),
         target_mask,
         target_patches: patches,
@@ -196,15 +219,26 @@ pub fn calibrate_with(
     target_patches: bool,
     noise: &mut CameraNoise,
     bar: &indicatif::ProgressBar,
+    say: impl FnMut(String),
+) -> Result<Calibrated> {
+    calibrate_configured(room, target_patches, Settings::default(), noise, bar, say)
+}
+
+/// [`calibrate_with`] with the procedure's `settings`.
+pub fn calibrate_configured(
+    room: &Room,
+    target_patches: bool,
+    settings: Settings,
+    noise: &mut CameraNoise,
+    bar: &indicatif::ProgressBar,
     mut say: impl FnMut(String),
 ) -> Result<Calibrated> {
     let setup = setup(room, target_patches)?;
-    let settings = Settings::default();
     let log = StageLog::new(bar.clone());
     let mut rig = SimRig::new(room, noise);
     let up = block_on(Procedure::new(&mut rig, settings, log.sink()).bring_up(&setup))
         .context("calibrating the room")?;
-    for line in log.lines(&up) {
+    for line in log.lines(&up, setup.corners.len()) {
         say(line);
     }
     Calibrated::new(room, setup, settings, up)
@@ -246,7 +280,7 @@ impl StageLog {
     }
 
     /// One line per stage: captures, seconds, and what it found.
-    fn lines(&self, up: &BringUp) -> Vec<String> {
+    fn lines(&self, up: &BringUp, charts: usize) -> Vec<String> {
         let events = self.events.lock().unwrap_or_else(PoisonError::into_inner);
         let mut lines = Vec::new();
         for (stage, captures, seconds) in stages(&events) {
@@ -278,14 +312,9 @@ impl StageLog {
             "nodes: {} ({} in projectors split by chart) over {} charts",
             up.columns.ids.len(),
             charted.map(|p| p.nodes.len()).sum::<usize>(),
-            self.chart_count(up)
+            charts
         ));
         lines
-    }
-
-    fn chart_count(&self, up: &BringUp) -> usize {
-        // Target patches, if any, come after the charts' and are fewer than a chart's.
-        up.columns.attenuation.usable.len() / PATCHES_PER_CHART
     }
 }
 
@@ -434,9 +463,23 @@ impl Model {
     /// kept dark with weight `weight` ([`Target::with_dark`]; 0: left out, the model over the
     /// charts alone).
     pub fn for_weight(cal: &Calibrated, lit: &[PatchSample], weight: f64) -> Result<Self> {
+        Self::for_weights(cal, lit, weight, cal.wall_weight)
+    }
+
+    /// [`Model::for_weight`] with the wall patches weighed `wall_weight` ([`Target::with_walls`];
+    /// 0 leaves them out), the walls no node reaches left out.
+    pub fn for_weights(
+        cal: &Calibrated,
+        lit: &[PatchSample],
+        weight: f64,
+        wall_weight: f64,
+    ) -> Result<Self> {
         let att = &cal.attenuation;
+        let walls = cal.wall_patch_range();
         let target = Target::new(&att.black, &att.usable, lit)?
-            .with_dark(cal.target_patch_range(), weight)?;
+            .with_dark(cal.target_patch_range(), weight)?
+            .with_walls(walls.clone(), wall_weight)?
+            .without_unreached(walls, &cal.columns);
         model_of(cal, target)
     }
 }

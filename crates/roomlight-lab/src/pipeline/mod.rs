@@ -24,8 +24,9 @@ use sim_hw::*;
 pub use truth::*;
 
 use anyhow::{Context, Result};
-use roomlight_calib::charts::{ChartCorners, SampleConfig, sample_charts};
+use roomlight_calib::charts::{ChartCorners, SampleConfig};
 use roomlight_calib::image_io::LinearImage;
+use roomlight_calib::procedure::Setup;
 use roomlight_core::LinearRgb;
 use roomlight_sim::Room;
 
@@ -67,13 +68,11 @@ pub fn sample_config(room: &Room) -> SampleConfig {
     }
 }
 
-/// The chart patches of a capture, every room patch.
-fn sample(
-    capture: &roomlight_sim::Capture,
-    corners: &[ChartCorners],
-    config: &SampleConfig,
-) -> Result<Vec<LinearRgb>> {
-    Ok(sample_charts(&image(capture), corners, config)?
+/// Every room patch of a capture (the charts', then the target's and the walls'), as
+/// calibration samples them.
+fn sample(capture: &roomlight_sim::Capture, setup: &Setup) -> Result<Vec<LinearRgb>> {
+    Ok(setup
+        .sample_room(&image(capture))?
         .iter()
         .map(|p| p.mean)
         .collect())

@@ -326,9 +326,17 @@ fn sim_hardware(
     SimHardware {
         room: room.clone(),
         frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
-        corners: transport.corners.clone(),
-        charts: transport.charts.clone(),
-        config: transport.config,
+        setup: transport.setup.clone(),
+        // A model without wall patches reads nothing of the walls: their pixels are not rendered.
+        pixels: if model
+            .patches
+            .iter()
+            .any(|i| cal.wall_patch_range().contains(i))
+        {
+            transport.pixels.clone()
+        } else {
+            transport.charts.clone()
+        },
         shown: Arc::new(Mutex::new(initial.to_vec())),
         patches: Arc::new(model.patches.clone()),
         noise: Arc::new(Mutex::new(CameraNoise::with_seed(room, options.seed))),

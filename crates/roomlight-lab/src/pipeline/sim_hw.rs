@@ -3,7 +3,6 @@
 
 use anyhow::Result;
 use roomlight_agent::hardware::{Camera, Display};
-use roomlight_calib::charts::{ChartCorners, SampleConfig};
 use roomlight_core::LinearRgb;
 use roomlight_sim::{CameraNoise, Room};
 use std::collections::VecDeque;
@@ -20,10 +19,10 @@ use super::*;
 pub(super) struct SimHardware {
     pub(super) room: Arc<Room>,
     pub(super) frames: Arc<FrameBuilder>,
-    pub(super) corners: Arc<Vec<ChartCorners>>,
-    /// The camera pixels the chart sampling reads, the only ones rendered.
-    pub(super) charts: Arc<roomlight_sim::PixelSubset>,
-    pub(super) config: SampleConfig,
+    /// How calibration sampled the room patches.
+    pub(super) setup: Arc<Setup>,
+    /// The camera pixels the room patches' sampling reads, the only ones rendered.
+    pub(super) pixels: Arc<roomlight_sim::PixelSubset>,
     pub(super) shown: Arc<Mutex<Vec<LinearRgb>>>,
     pub(super) patches: Arc<Vec<usize>>,
     pub(super) noise: Arc<Mutex<CameraNoise>>,
@@ -59,12 +58,12 @@ impl SimHardware {
     pub(super) fn render(&self, x: &[LinearRgb]) -> Result<roomlight_sim::Capture> {
         Ok(self
             .room
-            .render_subset(&self.charts, &self.frames.frames(x), None)?)
+            .render_subset(&self.pixels, &self.frames.frames(x), None)?)
     }
 
     /// What a noiseless camera would measure on the model's patches for node values `x`.
     pub(super) fn noiseless(&self, x: &[LinearRgb]) -> Result<Vec<LinearRgb>> {
-        Ok(self.pick(&sample(&self.render(x)?, &self.corners, &self.config)?))
+        Ok(self.pick(&sample(&self.render(x)?, &self.setup)?))
     }
 
     pub(super) fn shown(&self) -> Vec<LinearRgb> {
@@ -78,13 +77,13 @@ impl SimHardware {
         let started = Instant::now();
         let shown = self.shown();
         let capture = self.render(&shown)?;
-        let noiseless = self.pick(&sample(&capture, &self.corners, &self.config)?);
+        let noiseless = self.pick(&sample(&capture, &self.setup)?);
         let noisy = self
             .noise
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .expose(&capture);
-        let measured = self.pick(&sample(&noisy, &self.corners, &self.config)?);
+        let measured = self.pick(&sample(&noisy, &self.setup)?);
         let handed = {
             let mut delayed = self.delayed.lock().unwrap_or_else(PoisonError::into_inner);
             delayed.push_back(measured.clone());

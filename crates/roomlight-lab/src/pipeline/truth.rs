@@ -2,39 +2,39 @@
 //! problem the metrics are measured against. Only the metrics read it, never the agents.
 
 use anyhow::Result;
-use roomlight_calib::charts::{ChartCorners, SampleConfig};
+use roomlight_calib::charts::ChartCorners;
+use roomlight_calib::procedure::Setup;
 use roomlight_core::{AttenuationColumn, LinearRgb, Problem};
 use roomlight_sim::{Frame, NodeBasis, NodeRegion, PixelSubset, Room};
 use std::sync::Arc;
 
 use super::*;
 
-/// The room as a noiseless camera sees it through the charts: every node's light at full
-/// white and the black level, on every room patch. Measured once per calibration.
+/// The room as a noiseless camera sees it through the room patches (charts, target, walls):
+/// every node's light at full white and the black level, on every room patch. Measured once
+/// per calibration.
 #[derive(Debug)]
 pub struct Transport {
-    pub(super) corners: Arc<Vec<ChartCorners>>,
-    pub(super) config: SampleConfig,
+    /// How calibration sampled the room patches.
+    pub(super) setup: Arc<Setup>,
     pub(super) black: Vec<LinearRgb>,
     pub(super) columns: Vec<Vec<LinearRgb>>,
-    /// The camera pixels the chart sampling reads: a run's captures render only these.
+    /// The camera pixels the room patches' sampling reads: a run's captures render only these.
+    pub(super) pixels: Arc<PixelSubset>,
+    /// The same without the walls' (charts and target): a run whose model leaves the walls out
+    /// renders only these.
     pub(super) charts: Arc<PixelSubset>,
 }
 
 impl Transport {
     /// Renders each node alone at full white (and all black), noiselessly, and samples the
-    /// charts: the captures of a [`NodeBasis`], one at a time.
-    pub fn new(
-        room: &Room,
-        regions: &[NodeRegion],
-        corners: &[ChartCorners],
-        config: SampleConfig,
-    ) -> Result<Self> {
+    /// room patches as `setup` does: the captures of a [`NodeBasis`], one at a time.
+    pub fn new(room: &Room, regions: &[NodeRegion], setup: &Setup) -> Result<Self> {
         let mut black: Vec<LinearRgb> = Vec::new();
         let mut columns: Vec<Vec<LinearRgb>> = Vec::with_capacity(regions.len());
         let mut failed = None;
         NodeBasis::visit_node_captures(room, regions, None, |node, capture| {
-            match sample(&capture, corners, &config) {
+            match sample(&capture, setup) {
                 Ok(values) => match node {
                     None => black = values,
                     Some(_) => columns.push(
@@ -53,13 +53,24 @@ impl Transport {
             return Err(e);
         }
         Ok(Self {
-            charts: Arc::new(room.pixel_subset(chart_pixels(room, corners))?),
-            corners: Arc::new(corners.to_vec()),
-            config,
+            pixels: Arc::new(room.pixel_subset(patch_pixels(room, setup))?),
+            charts: Arc::new(
+                room.pixel_subset(
+                    chart_pixels(room, &setup.corners)
+                        .chain(setup.target_patches.iter().flatten().copied()),
+                )?,
+            ),
+            setup: Arc::new(setup.clone()),
             black,
             columns,
         })
     }
+}
+
+/// Every camera pixel sampling `setup`'s room patches reads: the charts' ([`chart_pixels`]),
+/// and the target's and walls' own pixel lists.
+pub(super) fn patch_pixels<'a>(room: &Room, setup: &'a Setup) -> impl Iterator<Item = u32> + 'a {
+    chart_pixels(room, &setup.corners).chain(setup.region_pixels())
 }
 
 /// Every camera pixel within 2 pixels of a chart's bounding box: all that sampling the charts
@@ -115,8 +126,7 @@ impl Truth {
         let pick = |v: &[LinearRgb]| model.patches.iter().map(|&i| v[i]).collect::<Vec<_>>();
         let target = pick(&sample(
             &room.render(&vec![Frame::Black; room.projectors().len()], Some(preset))?,
-            &transport.corners,
-            &transport.config,
+            &transport.setup,
         )?);
         let columns = transport
             .columns
@@ -143,17 +153,19 @@ impl Truth {
 mod tests {
     use super::*;
 
-    /// A run's captures render only the chart pixels: sampled through the charts, with the
-    /// camera's noise, they give the same patch values as the full render, to the bit.
+    /// A run's captures render only the room patches' pixels: sampled as calibration samples
+    /// them (charts, target, walls), with the camera's noise, they give the same patch values
+    /// as the full render, to the bit.
     #[test]
-    fn the_chart_pixels_hold_everything_the_sampling_reads() {
+    fn the_patch_pixels_hold_everything_the_sampling_reads() {
         // The quick demo's camera: enough pixels per patch.
         let mut scene = roomlight_sim::scenes::small().expect("scene");
         scene.camera.resolution = [640, 480];
         let room = Room::build(scene).expect("room");
-        let corners = chart_corners(&room).expect("corners");
+        let setup = setup(&room, true).expect("setup");
+        assert!(!setup.target_patches.is_empty() && setup.wall_patches.len() > 50);
         let subset = room
-            .pixel_subset(chart_pixels(&room, &corners))
+            .pixel_subset(patch_pixels(&room, &setup))
             .expect("subset");
         assert!(
             subset.pixels().len() < room.pixels().len() / 2,
@@ -163,19 +175,20 @@ mod tests {
             .map(|k| Frame::Uniform([0.2 + 0.1 * k as f32, 0.3, 0.4 - 0.1 * k as f32]))
             .collect();
         let preset = None;
-        let config = sample_config(&room);
         let noisy = |capture| roomlight_sim::CameraNoise::with_seed(&room, 7).expose(&capture);
         let full = sample(
             &noisy(room.render(&frames, preset).expect("render")),
-            &corners,
-            &config,
+            &setup,
         )
         .expect("sample");
         let part = room
             .render_subset(&subset, &frames, preset)
             .expect("subset render");
-        let part = sample(&noisy(part), &corners, &config).expect("sample");
-        assert_eq!(full.len(), room.patches());
+        let part = sample(&noisy(part), &setup).expect("sample");
+        assert_eq!(
+            full.len(),
+            room.patches() + setup.target_patches.len() + setup.wall_patches.len()
+        );
         let bits = |v: &[LinearRgb]| -> Vec<[u64; 3]> {
             v.iter().map(|p| p.0.map(f64::to_bits)).collect()
         };

@@ -161,6 +161,35 @@ where the set of projectors lighting the room changes, against the other reached
         );
     }
     h.push_str("</table>");
+    h.push_str(
+        "<p>The best the measured model could reach, beside what the rounds reached: the model's \
+exact optimum rendered the same way, over the charts alone (what the rounds minimise) and with \
+tiles of the walls beyond the charts weighed in (each tile's squared error at the weight given, a \
+chart patch's at 1; tiles no node reaches left out). ΔE00 at the charts is the model's own \
+prediction at its optimum.</p><table><tr><th>preset</th><th>model</th><th>patches</th>\
+<th>whole room mean ΔE00</th><th>p95</th><th>seam − elsewhere</th><th>charts ΔE00</th></tr>",
+    );
+    for p in &report.presets {
+        for b in &p.model_best {
+            let what = if b.wall_weight > 0.0 {
+                format!("charts + walls (weight {})", b.wall_weight)
+            } else {
+                "charts".to_string()
+            };
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{what}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td><td>{}</td><td>{:.2}</td></tr>",
+                escape(&p.name),
+                b.patches,
+                b.whole_room_de00_mean,
+                b.whole_room_de00_p95,
+                b.seam_excess_de00
+                    .map_or("no overlap".into(), |s| format!("{s:+.2}")),
+                b.chart_de00_mean
+            );
+        }
+    }
+    h.push_str("</table>");
 }
 
 /// One preset's ΔE00 map and its crops where it is worst, at the camera's full resolution.

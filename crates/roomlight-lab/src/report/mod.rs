@@ -29,6 +29,9 @@ pub struct PresetOutcome {
     /// Its pictures (under the LEDs, at the conventional start, with the result; the
     /// whole-room ΔE00 map and crops) and the whole-room figures.
     pub pictures: pictures::PresetPictures,
+    /// What the measured model could reach over the whole room: its optimum over the charts
+    /// alone, and with the walls weighed in ([`crate::whole_room_best::pair`]).
+    pub model_best: Vec<crate::whole_room_best::Best>,
 }
 
 /// One update rule run on the first preset, for the convergence plots.
@@ -262,6 +265,7 @@ fn preset_metrics(report: &Report, index: usize, p: &PresetOutcome) -> Value {
         "whole_room_reached_share": w.reached_share,
         "whole_room_seam": w.seam,
         "whole_room": w,
+        "whole_room_model_best": p.model_best,
         "ansi_contrast": ansi,
         "linear_png_scale": p.pictures.linear.iter().map(|(f, s)| (f.clone(), json!(s))).collect::<serde_json::Map<_, _>>(),
         "settled": r.settled,

@@ -68,12 +68,7 @@ fn converge(
         .first()
         .map_or("no preset".to_string(), |p| p.name.clone());
     let model = pipeline::measure_target(room, cal, 0, noise)?;
-    let transport = pipeline::Transport::new(
-        room,
-        &cal.regions,
-        &cal.corners,
-        pipeline::sample_config(room),
-    )?;
+    let transport = pipeline::Transport::new(room, &cal.regions, cal.setup())?;
     let truth = pipeline::Truth::new(room, &transport, &model, 0)?;
     let best = optimum(&truth.problem)?;
     let measured_best = optimum(&model.problem)?;
