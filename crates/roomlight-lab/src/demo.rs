@@ -257,6 +257,7 @@ impl Lab<'_> {
                     .map(|&i| i / PATCHES_PER_CHART)
                     .collect(),
                 model,
+                truth: truth.problem,
                 result,
                 pictures,
             });
