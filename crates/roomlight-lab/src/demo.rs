@@ -264,6 +264,7 @@ impl Lab<'_> {
                     .map(|&i| i / PATCHES_PER_CHART)
                     .collect(),
                 model,
+                truth: truth.problem,
                 result,
                 pictures,
                 model_best: model_best.to_vec(),

@@ -10,7 +10,7 @@ pub mod png;
 use crate::pipeline::{Model, RunResult, TracePoint};
 use anyhow::{Context, Result};
 use plot::{Figure, Marker, YScale, plot};
-use roomlight_core::LinearRgb;
+use roomlight_core::{LinearRgb, Problem};
 use serde_json::{Value, json};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -22,6 +22,9 @@ pub struct PresetOutcome {
     pub name: String,
     /// The measured model the agents ran on.
     pub model: Model,
+    /// The true problem on the model's patches (the noiseless truth's transport, black and
+    /// target): what the room could reach, for `problem.json`.
+    pub truth: Problem,
     /// What they reached.
     pub result: RunResult,
     /// Room chart of each model patch.
@@ -345,8 +348,34 @@ fn channel(v: &[LinearRgb], c: usize) -> Vec<f64> {
     v.iter().map(|x| x[c]).collect()
 }
 
+/// One channel `c` of `problem` at `x`: the attenuation (sparse), `d`, `r`, `G` of `x` and `G*`
+/// (`best`, the optimum's `G` per channel, when it was found).
+fn channel_problem(problem: &Problem, x: &[LinearRgb], best: Option<[f64; 3]>, c: usize) -> Value {
+    let columns: Vec<Value> = problem
+        .columns()
+        .iter()
+        .enumerate()
+        .map(|(n, col)| {
+            let (patches, values): (Vec<u32>, Vec<f64>) =
+                col.iter().map(|(i, v)| (i, v[c])).unzip();
+            json!({ "node": n, "patches": patches, "values": values })
+        })
+        .collect();
+    let errors = problem.errors(x);
+    json!({
+        "attenuation": columns,
+        "d": channel(problem.black(), c),
+        "r": channel(problem.target(), c),
+        "G": 0.5 * errors.iter().map(|e| e[c] * e[c]).sum::<f64>(),
+        "G_star": best.map(|b| b[c]),
+    })
+}
+
 /// `problem.json`: per preset and channel the measured attenuation (sparse), `d`, `r`, `s`,
-/// the final `x`, `G` and `G*` (`G = ½ Σ_i e_i²` on that channel).
+/// the final `x`, `G` and `G*` (`G = ½ Σ_i e_i²` on that channel), and under `truth` the same
+/// for the true problem on the same patches (the noiseless truth's columns, black and target;
+/// `G` of the same final `x` and the true `G*`): the rounds measure the room, so where they
+/// stop is judged against both.
 pub fn problem(report: &Report) -> Value {
     let presets: serde_json::Map<String, Value> = report
         .presets
@@ -354,32 +383,24 @@ pub fn problem(report: &Report) -> Value {
         .map(|p| {
             let problem = &p.model.problem;
             let s = problem.white_response();
-            let errors = problem.errors(&p.result.x);
-            let best = roomlight_core::optimum::optimum(problem).ok();
+            let x = &p.result.x;
+            let best = roomlight_core::optimum::optimum(problem)
+                .ok()
+                .map(|b| b.objective_per_channel);
+            let true_best = roomlight_core::optimum::optimum(&p.truth)
+                .ok()
+                .map(|b| b.objective_per_channel);
             let channels: Vec<Value> = ["r", "g", "b"]
                 .iter()
                 .enumerate()
                 .map(|(c, name)| {
-                    let columns: Vec<Value> = problem
-                        .columns()
-                        .iter()
-                        .enumerate()
-                        .map(|(n, col)| {
-                            let (patches, values): (Vec<u32>, Vec<f64>) =
-                                col.iter().map(|(i, v)| (i, v[c])).unzip();
-                            json!({ "node": n, "patches": patches, "values": values })
-                        })
-                        .collect();
-                    json!({
-                        "channel": name,
-                        "attenuation": columns,
-                        "d": channel(problem.black(), c),
-                        "r": channel(problem.target(), c),
-                        "s": channel(&s, c),
-                        "x": channel(&p.result.x, c),
-                        "G": 0.5 * errors.iter().map(|e| e[c] * e[c]).sum::<f64>(),
-                        "G_star": best.as_ref().map(|b| b.objective_per_channel[c]),
-                    })
+                    let mut v = channel_problem(problem, x, best, c);
+                    let o = v.as_object_mut().expect("an object");
+                    o.insert("channel".into(), json!(name));
+                    o.insert("s".into(), json!(channel(&s, c)));
+                    o.insert("x".into(), json!(channel(x, c)));
+                    o.insert("truth".into(), channel_problem(&p.truth, x, true_best, c));
+                    v
                 })
                 .collect();
             (
@@ -587,6 +608,43 @@ mod tests {
             shadows: None,
             hot_join: None,
         }
+    }
+
+    /// One channel of a problem as `problem.json` writes it: the column's entries of that
+    /// channel at their patches, `d` and `r` of that channel, `G = ½ Σ_i e_i²` of `x` on it and
+    /// `G*` of that channel (or null when no optimum was found).
+    #[test]
+    fn a_channel_of_the_problem_is_its_columns_and_its_objective() {
+        let rgb = |r, g, b| LinearRgb([r, g, b]);
+        let problem = Problem::new(
+            vec![
+                roomlight_core::AttenuationColumn::new(
+                    vec![0, 2],
+                    vec![rgb(0.5, 0.25, 0.125), rgb(0.1, 0.2, 0.3)],
+                )
+                .expect("column"),
+                roomlight_core::AttenuationColumn::new(vec![1], vec![rgb(0.4, 0.6, 0.8)])
+                    .expect("column"),
+            ],
+            vec![rgb(0.01, 0.02, 0.03); 3],
+            vec![rgb(0.3, 0.2, 0.1), rgb(0.5, 0.5, 0.5), rgb(0.2, 0.4, 0.6)],
+            vec![LinearRgb::ZERO; 3],
+        )
+        .expect("problem");
+        let x = vec![rgb(0.5, 1.0, 0.0), rgb(0.25, 0.5, 1.0)];
+        let v = channel_problem(&problem, &x, Some([1.0, 2.0, 3.0]), 1);
+        assert_eq!(v["attenuation"][0]["patches"], json!([0, 2]));
+        assert_eq!(v["attenuation"][0]["values"], json!([0.25, 0.2]));
+        assert_eq!(v["attenuation"][1]["node"], json!(1));
+        assert_eq!(v["attenuation"][1]["values"], json!([0.6]));
+        assert_eq!(v["d"], json!([0.02, 0.02, 0.02]));
+        assert_eq!(v["r"], json!([0.2, 0.5, 0.4]));
+        // Green: e = r − d − A x with x = (1.0, 0.5).
+        let e = [0.2 - 0.02 - 0.25, 0.5 - 0.02 - 0.6 * 0.5, 0.4 - 0.02 - 0.2];
+        let g = 0.5 * e.iter().map(|e| e * e).sum::<f64>();
+        assert!((v["G"].as_f64().expect("G") - g).abs() < 1e-15);
+        assert_eq!(v["G_star"], json!(2.0));
+        assert!(channel_problem(&problem, &x, None, 1)["G_star"].is_null());
     }
 
     #[test]
