@@ -52,7 +52,7 @@ pub fn decode_file(path: &Path, max_pixels: u64) -> Result<Frame, CameraError> {
 }
 
 /// Decodes an image file's bytes as [`decode_file`] does (`path` only names it in errors): the
-/// one entry for whatever a camera delivered, fuzzed in tests/fuzz.rs.
+/// one entry for whatever a camera delivered, fuzzed in tests/integration/raw/fuzz.rs.
 pub fn decode_bytes(path: &Path, data: Vec<u8>, max_pixels: u64) -> Result<Frame, CameraError> {
     let bad = |reason: String| CameraError::Decode {
         path: path.to_path_buf(),

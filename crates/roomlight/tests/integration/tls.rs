@@ -1,7 +1,7 @@
 //! `roomlight certs` and the configs' TLS keys through the binary (issue 19): the files `certs
 //! init|issue` write are what the agents' configs load (keys 0600); a config without tls on a
 //! non-loopback address is refused at load, naming the file and the field, and accepted with
-//! `insecure = true`. The link itself is tested in crates/roomlight-agent/tests/tls.rs.
+//! `insecure = true`. The link itself is tested in crates/roomlight-agent/tests/integration/tls.rs.
 
 use std::path::Path;
 use std::process::Command;

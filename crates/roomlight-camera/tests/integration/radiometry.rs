@@ -1,8 +1,6 @@
 //! Radiometry round trips: codes through a known curve and back, masks, dark frames, the
 //! camera adapter over a fake backend, and a response recovered from synthetic exposures.
 
-mod raw;
-
 use roomlight_calib::image_io::LinearImage;
 use roomlight_camera::radiometry::calibrate_response;
 use roomlight_camera::{Backend, CameraError, Frame, HwCamera, Radiometry, Response, Samples};

@@ -1,6 +1,7 @@
-//! Discovery over mDNS on loopback, on a port of this test's own (a test binary of its own, so
-//! nothing else in the suite uses mDNS at the same time): a node agent finds the camera agent
-//! of its room, skips another room's, and attaches; a room nobody advertises is not found.
+//! Discovery over mDNS on loopback, on a port of this test's own (derived from the process id;
+//! the only test of this binary, and of the suite's in-process tests, that uses mDNS): a node
+//! agent finds the camera agent of its room, skips another room's, and attaches; a room nobody
+//! advertises is not found.
 
 use roomlight_agent::camera::{self, CameraConfig, RoomModel};
 use roomlight_agent::discovery::{self, DiscoveryError, MdnsConfig};

@@ -10,7 +10,7 @@ use std::time::Duration;
 use tokio_stream::StreamExt;
 use tokio_util::sync::CancellationToken;
 
-mod common;
+use crate::common;
 use common::{TOKEN, wait};
 
 fn message(body: v1::node_message::Body) -> v1::NodeMessage {

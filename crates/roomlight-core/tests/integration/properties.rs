@@ -1,6 +1,6 @@
 //! Property tests: the mathematics of DESIGN §3 on random nonnegative problems.
 
-mod common;
+use crate::common;
 
 use common::{brute_force_objective, problem_strategy};
 use proptest::prelude::*;

@@ -1,6 +1,6 @@
 //! Chart sampling against the simulator's true patch values.
 
-mod common;
+use crate::common;
 
 use common::{chart_corners, small_scene, to_image};
 use roomlight_calib::charts::{ChartCorners, PatchStatus, SampleConfig, sample_charts};

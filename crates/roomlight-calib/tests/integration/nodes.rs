@@ -1,6 +1,6 @@
 //! Nodes and feathering on the small simulated room, decoded from its own structured light.
 
-mod common;
+use crate::common;
 
 use common::{chart_corners, decode_projector, small_scene};
 use roomlight_calib::graycode::{Coding, Correspondence, DecodeConfig};

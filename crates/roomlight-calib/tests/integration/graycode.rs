@@ -1,6 +1,6 @@
 //! Gray-code decoding against the simulator's true correspondence.
 
-mod common;
+use crate::common;
 
 use common::pattern_captures;
 

@@ -8,9 +8,9 @@ use fantoccini::Locator;
 use fantoccini::actions::{InputSource, MOUSE_BUTTON_LEFT, MouseActions, PointerAction};
 use serde_json::Value;
 
-use crate::Api;
-use crate::browser::Browser;
-use crate::room::Room;
+use super::Api;
+use super::browser::Browser;
+use super::room::Room;
 
 /// A capture is taken and shown; a target polygon clicked on the overlay is saved, and the API
 /// and the file on disk have it, in full camera pixels.

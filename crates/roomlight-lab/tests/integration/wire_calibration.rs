@@ -20,7 +20,7 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tokio_util::sync::{CancellationToken, DropGuard};
 
-mod support;
+use crate::support;
 use support::apart_scene;
 
 /// The camera agent's model before any projector: the room's black (lights off) and target

@@ -2,7 +2,7 @@
 //! evenly among projectors `p0`, `p1`, …, a listener on `127.0.0.1:0`, the configs of a camera
 //! agent and a node agent over it, and a wait on the camera agent's status with a deadline.
 
-// Each test binary uses its own part of this module.
+// Each test module uses its own part of this module.
 #![allow(dead_code)]
 
 use roomlight_agent::camera::{CameraConfig, RoomModel, RoomStatus};

@@ -14,7 +14,7 @@ use roomlight_sim::{CameraNoise, Room, scenes};
 use std::sync::{Arc, Mutex};
 use support::{apart_scene, small_scene};
 
-mod support;
+use crate::support;
 
 /// The simulated room as a rig with only `live` projectors, captures exposed through `noise`.
 fn rig<'a>(room: &'a Room, noise: &'a mut CameraNoise, live: &[&str]) -> SimRig<'a> {

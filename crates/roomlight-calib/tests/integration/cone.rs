@@ -1,7 +1,7 @@
 //! The large aperture's cone mask keeps the target dark; the ring it darkens is handed to the
 //! texture projector.
 
-mod common;
+use crate::common;
 
 use common::{decode_projector, small_scene};
 use roomlight_calib::cone::{Sphere, ThinLens, cone_mask, ring_node, shape_ring};

@@ -20,7 +20,7 @@ use std::time::Duration;
 use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 
-mod common;
+use crate::common;
 use common::wait;
 const LONG: Duration = Duration::from_secs(30);
 

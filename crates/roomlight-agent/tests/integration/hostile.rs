@@ -18,7 +18,7 @@ use tokio_stream::StreamExt;
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::sync::CancellationToken;
 
-mod common;
+use crate::common;
 use common::{TOKEN, wait};
 
 /// A camera agent over a synthetic room of `nodes` nodes split among `projectors` projectors

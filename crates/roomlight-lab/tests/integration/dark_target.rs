@@ -5,7 +5,7 @@
 //! noiseless renders.
 
 #[allow(dead_code)]
-mod support;
+use crate::support;
 
 use roomlight_lab::dark_target::{curve, target_light};
 use roomlight_lab::pipeline::{self, Model};

@@ -19,7 +19,7 @@ use tokio::sync::watch;
 use tokio_stream::StreamExt;
 use tokio_util::sync::CancellationToken;
 
-mod common;
+use crate::common;
 use common::TOKEN;
 
 /// A room CA with the camera agent's certificate (`camera`, for 127.0.0.1) and `p0`'s and `p1`'s.

@@ -1,6 +1,6 @@
 //! Responses and attenuation measured from simulated captures against the true transport.
 
-mod common;
+use crate::common;
 
 use common::{chart_corners, small_scene, to_image};
 use roomlight_calib::attenuation::{Scheme, differential, plan, s_order, solve, white_response};

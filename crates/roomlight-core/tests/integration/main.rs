@@ -1,0 +1,9 @@
+//! roomlight-core's integration tests in one binary (a binary per file linked the whole dependency
+//! graph each, the most of CI's build): each former `tests/*.rs` is a module here.
+
+mod common;
+mod hard_cases;
+mod metrics;
+mod properties;
+mod round;
+mod validation;

@@ -1,0 +1,5 @@
+//! roomlight-hw's integration tests in one binary (a binary per file linked the whole dependency
+//! graph each, the most of CI's build): each former `tests/*.rs` is a module here.
+
+mod cli;
+mod window_display;

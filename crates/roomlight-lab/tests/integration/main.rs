@@ -1,0 +1,9 @@
+//! roomlight-lab's integration tests in one binary (a binary per file linked the whole dependency
+//! graph each, the most of CI's build): each former `tests/*.rs` is a module here.
+
+mod dark_target;
+mod determinism;
+mod fuzz_files;
+mod procedure;
+mod support;
+mod wire_calibration;

@@ -1,0 +1,6 @@
+//! roomlight-sim's integration tests in one binary (a binary per file linked the whole dependency
+//! graph each, the most of CI's build): each former `tests/*.rs` is a module here.
+
+mod physics;
+mod scenes;
+mod transport;
