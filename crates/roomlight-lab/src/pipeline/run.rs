@@ -339,6 +339,7 @@ fn sim_hardware(
         },
         shown: Arc::new(Mutex::new(initial.to_vec())),
         patches: Arc::new(model.patches.clone()),
+        scale: Arc::new(model.target.scale.clone()),
         noise: Arc::new(Mutex::new(CameraNoise::with_seed(room, options.seed))),
         log: Arc::new(Mutex::new(Vec::new())),
         latency: options.latency,

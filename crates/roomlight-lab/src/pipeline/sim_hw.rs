@@ -25,6 +25,8 @@ pub(super) struct SimHardware {
     pub(super) pixels: Arc<roomlight_sim::PixelSubset>,
     pub(super) shown: Arc<Mutex<Vec<LinearRgb>>>,
     pub(super) patches: Arc<Vec<usize>>,
+    /// Each model patch's row scale: a weighed patch's measurement is scaled as its row is.
+    pub(super) scale: Arc<Vec<f64>>,
     pub(super) noise: Arc<Mutex<CameraNoise>>,
     /// Every capture: when, the noisy patch values returned and the noiseless ones.
     pub(super) log: Arc<Mutex<Vec<CaptureLog>>>,
@@ -50,8 +52,14 @@ pub(super) struct CaptureLog {
 }
 
 impl SimHardware {
+    /// The model's patches of every room patch's values, scaled as the model's rows are (the
+    /// camera measures the room; the model weighs some patches).
     pub(super) fn pick(&self, all: &[LinearRgb]) -> Vec<LinearRgb> {
-        self.patches.iter().map(|&i| all[i]).collect()
+        self.patches
+            .iter()
+            .zip(self.scale.iter())
+            .map(|(&i, s)| all[i] * *s)
+            .collect()
     }
 
     /// The capture of node values `x` on the chart pixels (nothing else is read of it).

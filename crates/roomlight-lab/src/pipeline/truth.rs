@@ -121,13 +121,31 @@ impl Truth {
         roomlight_core::metrics::objective(&errors)
     }
 
-    /// The truth for `model`'s patches under `preset`.
+    /// The truth for `model`'s patches under `preset`, in the model's terms: each patch's row
+    /// scaled as the model's is ([`roomlight_calib::procedure::Target::scale`]), and the target
+    /// patches kept dark asking for the black level, as the model asks.
     pub fn new(room: &Room, transport: &Transport, model: &Model, preset: usize) -> Result<Self> {
-        let pick = |v: &[LinearRgb]| model.patches.iter().map(|&i| v[i]).collect::<Vec<_>>();
-        let target = pick(&sample(
+        let scale = &model.target.scale;
+        let pick = |v: &[LinearRgb]| {
+            model
+                .patches
+                .iter()
+                .zip(scale)
+                .map(|(&i, s)| v[i] * *s)
+                .collect::<Vec<_>>()
+        };
+        let led = pick(&sample(
             &room.render(&vec![Frame::Black; room.projectors().len()], Some(preset))?,
             &transport.setup,
         )?);
+        let black = pick(&transport.black);
+        let dark = transport.setup.target_patch_range();
+        let target: Vec<LinearRgb> = model
+            .patches
+            .iter()
+            .enumerate()
+            .map(|(k, i)| if dark.contains(i) { black[k] } else { led[k] })
+            .collect();
         let columns = transport
             .columns
             .iter()
@@ -141,7 +159,7 @@ impl Truth {
             .collect::<Result<Vec<_>, _>>()?;
         let problem = Problem::new(
             columns,
-            pick(&transport.black),
+            black,
             target.clone(),
             model.problem.noise().to_vec(),
         )?;

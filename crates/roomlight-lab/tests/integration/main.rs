@@ -6,4 +6,5 @@ mod determinism;
 mod fuzz_files;
 mod procedure;
 mod support;
+mod walls;
 mod wire_calibration;
