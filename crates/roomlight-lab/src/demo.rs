@@ -25,6 +25,9 @@ pub struct DemoOptions {
     pub seed: u64,
     /// Where the report goes.
     pub out: std::path::PathBuf,
+    /// Weight of each wall tile in the rounds' model ([`pipeline::Calibrated::wall_weight`];
+    /// 0: the charts alone).
+    pub wall_weight: f64,
 }
 
 pub fn run(args: &DemoOptions) -> Result<()> {
@@ -51,7 +54,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     let t = Instant::now();
     // With patches on the target measured too, for the dark-target trade-off (the chart
     // patches' values, and so every model at weight 0, are the same as without).
-    let cal = pipeline::calibrate_with(&room, true, &mut noise, &bar, |line| {
+    let mut cal = pipeline::calibrate_with(&room, true, &mut noise, &bar, |line| {
         bar.println(&line);
         if bar.is_hidden() {
             println!("{line}");
@@ -59,6 +62,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
         calibration.push(line);
     })?;
     phases.done("calibration", t);
+    cal.wall_weight = args.wall_weight;
     let t = Instant::now();
     let transport = pipeline::Transport::new(&room, &cal.regions, cal.setup())?;
     println!(

@@ -185,6 +185,19 @@ struct DemoArgs {
     /// Where the report goes.
     #[arg(long, default_value = "roomlight-report")]
     out: PathBuf,
+    /// Weigh the walls beyond the charts into the rounds' model: each wall tile's squared error
+    /// at this weight, a chart patch's at 1 (0: the charts alone; 0.25 is what docs/results.md
+    /// measured).
+    #[arg(long, default_value_t = 0.0, value_parser = weight)]
+    wall_weight: f64,
+}
+
+/// A weight: finite and at least 0.
+fn weight(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(w) if w.is_finite() && w >= 0.0 => Ok(w),
+        _ => Err(format!("{s:?}: expected a finite weight >= 0")),
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -338,6 +351,7 @@ fn main() -> Result<()> {
             synthetic: args.synthetic,
             seed: args.seed,
             out: args.out,
+            wall_weight: args.wall_weight,
         }),
         Command::Sim(args) => procs::sim(&args),
         Command::Calibrate(args) => procs::calibrate(&args),
@@ -479,4 +493,19 @@ fn typed_command() -> String {
         }))
         .collect::<Vec<_>>()
         .join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::weight;
+
+    #[test]
+    fn a_weight_is_finite_and_not_negative() {
+        assert_eq!(weight("0.25"), Ok(0.25));
+        assert_eq!(weight("0"), Ok(0.0));
+        for bad in ["-1", "NaN", "inf", "a lot"] {
+            let e = weight(bad).expect_err(bad);
+            assert!(e.contains("expected a finite weight >= 0"), "{e}");
+        }
+    }
 }
