@@ -262,10 +262,14 @@ impl Lab<'_> {
             }
             presets.push(PresetOutcome {
                 name: spec.name.clone(),
+                // Target and wall patches (after the charts') belong to no chart.
                 chart_of_patch: model
                     .patches
                     .iter()
-                    .map(|&i| i / PATCHES_PER_CHART)
+                    .map(|&i| {
+                        (i < self.cal.corners.len() * PATCHES_PER_CHART)
+                            .then_some(i / PATCHES_PER_CHART)
+                    })
                     .collect(),
                 model,
                 truth: truth.problem,

@@ -28,7 +28,7 @@ pub struct PresetOutcome {
     /// What they reached.
     pub result: RunResult,
     /// Room chart of each model patch.
-    pub chart_of_patch: Vec<usize>,
+    pub chart_of_patch: Vec<Option<usize>>,
     /// Its pictures (under the LEDs, at the conventional start, with the result; the
     /// whole-room ΔE00 map and crops) and the whole-room figures.
     pub pictures: pictures::PresetPictures,
@@ -149,6 +149,7 @@ impl PresetOutcome {
         let charts = self
             .chart_of_patch
             .iter()
+            .flatten()
             .copied()
             .max()
             .map_or(0, |m| m + 1);
@@ -157,7 +158,7 @@ impl PresetOutcome {
                 let pick = |v: &[f64]| -> Vec<f64> {
                     v.iter()
                         .zip(&self.chart_of_patch)
-                        .filter(|(_, k)| **k == c)
+                        .filter(|(_, k)| **k == Some(c))
                         .map(|(d, _)| *d)
                         .collect()
                 };
