@@ -10,25 +10,23 @@ use crate::whole_room::{Reach, ReachMap, WholeRoom, delta_e_map, white_luminance
 use anyhow::{Context, Result};
 use roomlight_calib::charts::PatchSample;
 use roomlight_core::LinearRgb;
-use roomlight_sim::{Frame, Room};
+use roomlight_sim::{Capture, Frame, Room};
 
-/// The whole-room figures of node values `x` under LED preset `preset`: the room rendered
-/// noiselessly under the LEDs and with `x` (through the measured responses), compared pixel by
-/// pixel as the report's maps are.
+/// The whole-room figures of node values `x` against `reference` (the room rendered
+/// noiselessly under the LEDs): the room rendered with `x` (through the measured responses),
+/// compared pixel by pixel as the report's maps are.
 pub fn of_values(
     room: &Room,
     cal: &Calibrated,
     reach: &ReachMap,
-    preset: usize,
+    reference: &Capture,
     x: &[LinearRgb],
 ) -> Result<WholeRoom> {
-    let dark = vec![Frame::Black; room.projectors().len()];
     let frames = FrameBuilder::new(room, &cal.regions, cal.responses.clone());
-    let reference = room.render(&dark, Some(preset))?;
     let lit = room.render(&frames.frames(x), None)?;
     let surface: Vec<bool> = reach.reach.iter().map(|r| *r != Reach::NoSurface).collect();
-    let white = white_luminance(&reference, &surface)?;
-    WholeRoom::measure(&delta_e_map(&reference, &lit, white)?, reach, white)
+    let white = white_luminance(reference, &surface)?;
+    WholeRoom::measure(&delta_e_map(reference, &lit, white)?, reach, white)
 }
 
 /// One model's optimum, seen over the whole room and at the charts.
@@ -46,20 +44,20 @@ pub struct Best {
     pub chart_de00_mean: f64,
 }
 
-/// The measured model's optimum for the LED capture `lit` of preset `preset`, with the walls
-/// weighed `wall_weight`.
+/// The measured model's optimum for the LED capture `lit`, with the walls weighed
+/// `wall_weight`, against `reference` (the LEDs' noiseless render).
 pub fn best(
     room: &Room,
     cal: &Calibrated,
     reach: &ReachMap,
-    preset: usize,
+    reference: &Capture,
     lit: &[PatchSample],
     wall_weight: f64,
 ) -> Result<Best> {
     let model = Model::for_weights(cal, lit, 0.0, wall_weight)?;
     let optimum = roomlight_core::optimum::optimum(&model.problem)
         .with_context(|| format!("the model's optimum with walls weighed {wall_weight}"))?;
-    let whole = of_values(room, cal, reach, preset, &optimum.x)?;
+    let whole = of_values(room, cal, reach, reference, &optimum.x)?;
     // Chart patches carry scale 1: their modelled values are r − e.
     let charts =
         cal.corners.len() * roomlight_calib::charts::COLUMNS * roomlight_calib::charts::ROWS;
@@ -96,8 +94,17 @@ pub fn pair(
     preset: usize,
     lit: &[PatchSample],
 ) -> Result<[Best; 2]> {
+    let dark = vec![Frame::Black; room.projectors().len()];
+    let reference = room.render(&dark, Some(preset))?;
     Ok([
-        best(room, cal, reach, preset, lit, 0.0)?,
-        best(room, cal, reach, preset, lit, crate::pipeline::WALL_WEIGHT)?,
+        best(room, cal, reach, &reference, lit, 0.0)?,
+        best(
+            room,
+            cal,
+            reach,
+            &reference,
+            lit,
+            crate::pipeline::WALL_WEIGHT,
+        )?,
     ])
 }
