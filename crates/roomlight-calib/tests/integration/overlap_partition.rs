@@ -117,3 +117,31 @@ fn decoding_a_neighbour_of_the_centre_pixel_misses_inside_the_ramps() {
     assert!(p.worst_single < 1e-6, "{p}");
     assert!(p.worst_overlap < 0.17, "{p}");
 }
+
+#[test]
+fn pixels_left_unknown_inside_a_footprint_are_bridged_for_the_blend() {
+    // B's decode leaves two columns inside both ramps unknown (a row of unknown pixels, as a
+    // weak stripe edge leaves), a row across the overlap, and a 3×3 hole. The surface points
+    // there are still B's: its projector pixels take the blend of the camera pixels their
+    // decoded neighbours on both sides place them at, not of the nearest decoded camera pixel
+    // a ramp step away. Measured without bridging (2026-11-28): 93.88% of the overlap
+    // within 1e-3, worst 0.038 (a ramp step is 1/12 over two projectors).
+    let mut b = projector(60, |_, _| (0, 0));
+    for y in 0..CH {
+        for x in 0..CW {
+            if x == 66
+                || x == 67
+                || x == 92
+                || y == 40
+                || ((80..83).contains(&x) && (20..23).contains(&y))
+            {
+                b.map[(y * CW + x) as usize] = None;
+            }
+        }
+    }
+    let p = measure(projector(0, |_, _| (0, 0)), b);
+    println!("{p}");
+    assert_eq!(p.overlap, 40 * 80);
+    assert!(p.overlap_within_1e3 > 1.0 - 1e-12, "{p}");
+    assert!(p.within_1e3 > 1.0 - 1e-12, "{p}");
+}

@@ -8,6 +8,8 @@ use crate::charts::{COLUMNS, ChartCorners, Homography, ROWS};
 use crate::graycode::Correspondence;
 use std::collections::VecDeque;
 
+mod bridge;
+
 /// How to split and feather.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NodeConfig {
@@ -59,9 +61,15 @@ pub struct Segmentation {
     pub claims: Vec<Vec<f32>>,
 }
 
-/// Projector pixel → the camera pixel that sees it, filled outwards from decoded pixels so that
-/// every projector pixel has one (nearest decoded neighbour in projector space, 4-connected).
-fn inverse_map(c: &Correspondence) -> Vec<Option<u32>> {
+/// Projector pixel → the camera pixel that sees it: the most confident decoded one; else a
+/// bridged one (`map` is `c`'s map with its gaps bridged, `bridged` marks those,
+/// [`bridge::bridged`]); else filled outwards from those so that every projector pixel has one
+/// (nearest neighbour in projector space, 4-connected).
+fn inverse_map(
+    c: &Correspondence,
+    map: &[Option<(u32, u32)>],
+    bridged: &[bool],
+) -> Vec<Option<u32>> {
     let (pw, ph) = (c.projector_width as usize, c.projector_height as usize);
     let mut inv: Vec<Option<u32>> = vec![None; pw * ph];
     let mut best = vec![f32::NEG_INFINITY; pw * ph];
@@ -70,6 +78,14 @@ fn inverse_map(c: &Correspondence) -> Vec<Option<u32>> {
             let k = *y as usize * pw + *x as usize;
             if *conf > best[k] {
                 best[k] = *conf;
+                inv[k] = Some(i as u32);
+            }
+        }
+    }
+    for (i, m) in map.iter().enumerate() {
+        if let (true, Some((x, y))) = (bridged[i], m) {
+            let k = *y as usize * pw + *x as usize;
+            if inv[k].is_none() {
                 inv[k] = Some(i as u32);
             }
         }
@@ -356,7 +372,8 @@ fn blend_in_order(
                 0.0
             }
         };
-        let inv = inverse_map(c);
+        let (map, bridged) = bridge::bridged(c);
+        let inv = inverse_map(c, &map, &bridged);
         // Blend of each projector pixel: at the surface point it lights (all that is left
         // there where no footprint has a share: unseen).
         let blend: Vec<f32> = (0..pw * ph)
@@ -367,10 +384,11 @@ fn blend_in_order(
             })
             .collect();
         let black = target_black(c, &inv, target_mask, config.target_margin_px);
-        // The light it gives each camera pixel: the blend of the projector pixel decoded there
-        // (0 where it is kept black); in its footprint's gaps, the camera-space blend.
+        // The light it gives each camera pixel: the blend of the projector pixel decoded (or
+        // bridged) there (0 where it is kept black); in its footprint's other gaps, the
+        // camera-space blend.
         let claim: Vec<f32> = (0..cw * ch)
-            .map(|i| match c.map[i] {
+            .map(|i| match map[i] {
                 Some((x, y)) => {
                     let p = y as usize * pw + x as usize;
                     if p < pw * ph && !black[p] {
