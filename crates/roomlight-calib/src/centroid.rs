@@ -30,30 +30,44 @@ pub fn spots(
     floor: f32,
     min_pixels: usize,
 ) -> Result<Vec<Spot>, CalibError> {
-    if width == 0 || !light.len().is_multiple_of(width) {
-        return Err(CalibError::Invalid {
-            field: "spot image",
-            problem: format!("{} pixels do not make rows of {width}", light.len()),
-        });
-    }
     if !floor.is_finite() {
         return Err(CalibError::Invalid {
             field: "spot floor",
             problem: format!("{floor} is not finite"),
         });
     }
-    if let Some(i) = light.iter().position(|v| !v.is_finite()) {
+    spots_over(light, width, &vec![floor; light.len()], min_pixels)
+}
+
+/// [`spots`] with a floor per pixel (e.g. [`local_floor`]): a region holds the pixels above
+/// their own floor, each weighted by its light above it. A floor of another size than the
+/// light, or not finite anywhere, is refused.
+pub fn spots_over(
+    light: &[f32],
+    width: usize,
+    floor: &[f32],
+    min_pixels: usize,
+) -> Result<Vec<Spot>, CalibError> {
+    check_image(light, width)?;
+    if floor.len() != light.len() {
         return Err(CalibError::Invalid {
-            field: "spot image",
-            problem: format!("light {} at pixel ({}, {})", light[i], i % width, i / width),
+            field: "spot floor",
+            problem: format!("{} values for {} pixels", floor.len(), light.len()),
+        });
+    }
+    if let Some(i) = floor.iter().position(|v| !v.is_finite()) {
+        return Err(CalibError::Invalid {
+            field: "spot floor",
+            problem: format!("{} at pixel ({}, {})", floor[i], i % width, i / width),
         });
     }
     let height = light.len() / width;
+    let above = |i: usize| light[i] > floor[i];
     let mut seen = vec![false; light.len()];
     let mut out = Vec::new();
     let mut queue = VecDeque::new();
     for start in 0..light.len() {
-        if seen[start] || light[start] <= floor {
+        if seen[start] || !above(start) {
             continue;
         }
         seen[start] = true;
@@ -61,7 +75,7 @@ pub fn spots(
         let (mut sum, mut sx, mut sy, mut n) = (0.0f64, 0.0f64, 0.0f64, 0usize);
         while let Some(i) = queue.pop_front() {
             let (x, y) = (i % width, i / width);
-            let w = f64::from(light[i] - floor);
+            let w = f64::from(light[i] - floor[i]);
             sum += w;
             sx += w * (x as f64 + 0.5);
             sy += w * (y as f64 + 0.5);
@@ -69,13 +83,14 @@ pub fn spots(
             for ny in y.saturating_sub(1)..(y + 2).min(height) {
                 for nx in x.saturating_sub(1)..(x + 2).min(width) {
                     let j = ny * width + nx;
-                    if !seen[j] && light[j] > floor {
+                    if !seen[j] && above(j) {
                         seen[j] = true;
                         queue.push_back(j);
                     }
                 }
             }
         }
+        // sum > 0: every pixel in the region is above its floor.
         if n >= min_pixels && sum > 0.0 {
             out.push(Spot {
                 centroid: [sx / sum, sy / sum],
@@ -85,6 +100,124 @@ pub fn spots(
         }
     }
     Ok(out)
+}
+
+/// Light of `width`-wide rows, finite everywhere.
+fn check_image(light: &[f32], width: usize) -> Result<(), CalibError> {
+    if width == 0 || !light.len().is_multiple_of(width) {
+        return Err(CalibError::Invalid {
+            field: "spot image",
+            problem: format!("{} pixels do not make rows of {width}", light.len()),
+        });
+    }
+    if let Some(i) = light.iter().position(|v| !v.is_finite()) {
+        return Err(CalibError::Invalid {
+            field: "spot image",
+            problem: format!("light {} at pixel ({}, {})", light[i], i % width, i / width),
+        });
+    }
+    Ok(())
+}
+
+/// A floor per pixel for [`spots_over`] that follows each spot's own brightness: `share` of
+/// the brightest light within `radius` pixels (a square window), never under `least` (the
+/// noise). A spot far dimmer than the brightest in the image (a defocused projector's light
+/// spread over a wide blur disc) then keeps its own core above its own floor, where one floor
+/// for the whole image drops it; spots further apart than `radius` do not raise each other's
+/// floor. `share` outside `[0, 1]` or a `least` that is not finite is refused.
+///
+/// The window maximum is the van Herk–Gil-Werman filter, one pass per axis: hand-written
+/// because the image crates' grey-scale dilations work on integer pixels, not on light.
+pub fn local_floor(
+    light: &[f32],
+    width: usize,
+    radius: usize,
+    share: f32,
+    least: f32,
+) -> Result<Vec<f32>, CalibError> {
+    check_image(light, width)?;
+    if !(0.0..=1.0).contains(&share) {
+        return Err(CalibError::Invalid {
+            field: "spot floor share",
+            problem: format!("{share}; expected a share in [0, 1]"),
+        });
+    }
+    if !least.is_finite() {
+        return Err(CalibError::Invalid {
+            field: "spot floor",
+            problem: format!("least {least} is not finite"),
+        });
+    }
+    let height = light.len() / width;
+    let mut rows = vec![0.0f32; light.len()];
+    for (src, dst) in light.chunks(width).zip(rows.chunks_mut(width)) {
+        dst.copy_from_slice(&window_max(src, radius));
+    }
+    let mut out = vec![0.0f32; light.len()];
+    let mut column = vec![0.0f32; height];
+    for x in 0..width {
+        for (y, c) in column.iter_mut().enumerate() {
+            *c = rows[y * width + x];
+        }
+        for (y, m) in window_max(&column, radius).into_iter().enumerate() {
+            out[y * width + x] = (share * m).max(least);
+        }
+    }
+    Ok(out)
+}
+
+/// The maximum of `values` over `[i − radius, i + radius]` (clipped to the slice) for every
+/// `i`, in three passes whatever the radius (van Herk–Gil-Werman).
+fn window_max(values: &[f32], radius: usize) -> Vec<f32> {
+    let n = values.len();
+    let k = 2 * radius + 1;
+    // Padded by `radius` on each side with −∞, up to whole blocks of `k`.
+    let len = (n + 2 * radius).div_ceil(k) * k;
+    let padded = |j: usize| {
+        j.checked_sub(radius)
+            .and_then(|i| values.get(i))
+            .copied()
+            .unwrap_or(f32::NEG_INFINITY)
+    };
+    let mut from_start = vec![f32::NEG_INFINITY; len];
+    let mut to_end = vec![f32::NEG_INFINITY; len];
+    for j in 0..len {
+        from_start[j] = if j % k == 0 {
+            padded(j)
+        } else {
+            from_start[j - 1].max(padded(j))
+        };
+    }
+    for j in (0..len).rev() {
+        to_end[j] = if j % k == k - 1 {
+            padded(j)
+        } else {
+            to_end[j + 1].max(padded(j))
+        };
+    }
+    // The window of `i` is padded `i..=i + 2·radius`: it spans at most two blocks.
+    (0..n)
+        .map(|i| to_end[i].max(from_start[i + 2 * radius]))
+        .collect()
+}
+
+/// The camera noise in `light` (a difference of two captures, mostly dark): 1.4826 × the median
+/// absolute deviation from the median, the standard deviation of Gaussian noise, which the few
+/// lit pixels do not move. 0 for no light.
+pub fn noise_sigma(light: &[f32]) -> f32 {
+    if light.is_empty() {
+        return 0.0;
+    }
+    let mut v: Vec<f32> = light.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    let median = *v.select_nth_unstable_by(mid, f32::total_cmp).1;
+    for x in &mut v {
+        *x = (*x - median).abs();
+    }
+    1.4826 * *v.select_nth_unstable_by(mid, f32::total_cmp).1
 }
 
 /// Where each block of `block`×`block` projector pixels lands in the camera image according to
@@ -192,7 +325,67 @@ mod tests {
     }
 
     #[test]
+    fn a_local_floor_finds_a_dim_blurred_spot_beside_a_bright_sharp_one() {
+        // A sharp spot (disc of radius 4, σ 1) and, 60 px away, one spread over a wide blur
+        // (σ 8) whose core is 1% of the sharp one's peak.
+        // Gaussian-like noise of σ 2e-4 of the sharp peak (a deterministic hash).
+        let (w, h) = (140usize, 80usize);
+        let (sharp, dim) = ((35.3, 40.6), (95.8, 38.2));
+        let mut img = blurred_disc(w, h, sharp, 4.0, 1.0);
+        let wide = blurred_disc(w, h, dim, 4.0, 8.0);
+        let scale = 0.01 * img.iter().copied().fold(0.0f32, f32::max)
+            / wide.iter().copied().fold(0.0f32, f32::max);
+        for (v, s) in img.iter_mut().zip(wide) {
+            *v += scale * s;
+        }
+        let peak = img.iter().copied().fold(0.0f32, f32::max);
+        for (i, v) in img.iter_mut().enumerate() {
+            let u =
+                ((i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as f32 / (1 << 24) as f32;
+            let u2 = ((i as u64 + 7).wrapping_mul(0xC2B2_AE3D_27D4_EB4F) >> 40) as f32
+                / (1 << 24) as f32;
+            *v += 2e-4 * peak * (u + u2 - 1.0) * 2.45;
+        }
+        // One floor for the image at 5% of the peak: the dim spot is lost.
+        let global = spots(&img, w, 0.05 * peak, 16).expect("spots");
+        assert_eq!(global.len(), 1, "{global:?}");
+        let sigma = noise_sigma(&img);
+        assert!(
+            sigma > 1e-4 * peak && sigma < 4e-4 * peak,
+            "noise {sigma} against {peak}"
+        );
+        let floor = local_floor(&img, w, 25, 0.2, 8.0 * sigma).expect("floor");
+        let found = spots_over(&img, w, &floor, 16).expect("spots");
+        assert_eq!(found.len(), 2, "{found:?}");
+        for (spot, (cx, cy)) in found.iter().zip([dim, sharp]) {
+            let err = ((spot.centroid[0] - cx).powi(2) + (spot.centroid[1] - cy).powi(2)).sqrt();
+            assert!(err < 0.3, "{spot:?} against ({cx}, {cy}): {err:.3} px");
+        }
+    }
+
+    #[test]
+    fn the_window_maximum_matches_a_direct_scan() {
+        let values: Vec<f32> = (0..37u32).map(|i| ((i * 7919) % 23) as f32).collect();
+        for r in [0usize, 1, 2, 5, 40] {
+            let fast = window_max(&values, r);
+            for (i, m) in fast.iter().enumerate() {
+                let direct = values[i.saturating_sub(r)..(i + r + 1).min(values.len())]
+                    .iter()
+                    .copied()
+                    .fold(f32::NEG_INFINITY, f32::max);
+                assert_eq!(m.to_bits(), direct.to_bits(), "radius {r} at {i}");
+            }
+        }
+        assert!(window_max(&[], 3).is_empty());
+    }
+
+    #[test]
     fn bad_input_is_refused() {
+        assert!(local_floor(&[0.0; 4], 2, 1, 1.5, 0.0).is_err());
+        assert!(local_floor(&[0.0; 4], 2, 1, 0.5, f32::NAN).is_err());
+        assert!(local_floor(&[0.0; 4], 3, 1, 0.5, 0.0).is_err());
+        assert!(spots_over(&[0.0; 4], 2, &[0.0; 3], 1).is_err());
+        assert!(spots_over(&[0.0; 4], 2, &[0.0, 0.0, f32::INFINITY, 0.0], 1).is_err());
         assert!(spots(&[0.0; 10], 3, 0.1, 1).is_err());
         assert!(spots(&[0.0, f32::NAN, 0.0], 3, 0.1, 1).is_err());
         assert!(spots(&[0.0; 3], 3, f32::INFINITY, 1).is_err());

@@ -218,7 +218,7 @@ mod tests {
                 *px += 60;
             }
         }
-        assert_eq!(step(&c), 2.0);
+        assert_eq!(step(&c).to_bits(), 2.0f64.to_bits());
         let (bridged, marked) = bridged(&c);
         for y in 0..10 {
             assert!(
