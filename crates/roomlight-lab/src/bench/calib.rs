@@ -208,25 +208,6 @@ fn partition(
         "  partition of unity, segmented together: {}",
         partition_of_unity(&truth, &weights, &seg.excluded, &away)
     );
-    // The same points, with a contributor counted only where its direct light is at least
-    // 2% of its typical (as the accuracy table's last column): at a grazing surface a
-    // projector's pixel lights a point with a few thousandths of its light, its decode there
-    // is left unknown, and its weight moves that point's light by as little.
-    let lit_truth: Vec<Vec<Option<u32>>> = luminaires
-        .iter()
-        .zip(&truth)
-        .map(|(&k, t)| {
-            let (factor, typical) = direct_signal(room, k);
-            t.iter()
-                .zip(&factor)
-                .map(|(p, f)| p.filter(|_| *f >= 0.02 * typical))
-                .collect()
-        })
-        .collect();
-    println!(
-        "    counting a contributor where its direct light is ≥ 2% of its typical: {}",
-        partition_of_unity(&lit_truth, &weights, &seg.excluded, &away)
-    );
     if std::env::var_os("ROOMLIGHT_DIAG").is_some() {
         partition_misses(&truth, corr, &weights, &seg.excluded, &away, cw);
     }
@@ -253,10 +234,6 @@ fn partition(
     println!(
         "  partition of unity, one after the other: {}",
         partition_of_unity(&truth, &weights, &dark, &away)
-    );
-    println!(
-        "    counting a contributor where its direct light is ≥ 2% of its typical: {}",
-        partition_of_unity(&lit_truth, &weights, &dark, &away)
     );
 }
 
