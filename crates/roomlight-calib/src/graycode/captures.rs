@@ -1,7 +1,7 @@
 //! One projector's structured-light captures as the decoder reads them ([`Captures`]): the
 //! intensity (the sum of the three channels) of white and black, white's brightest channel (for
 //! the saturation check), and each pattern and its inverse less black. A capture of the lab's
-//! 1280×960 camera is 14.7 MB as linear RGB and 4.9 MB reduced; a projector has some 44, so
+//! 1024×768 camera is 9.4 MB as linear RGB and 3.1 MB reduced; a projector has some 44, so
 //! the calibration reduces each as it arrives ([`Reduced`], or [`less_black`] for captures
 //! shared by a group) and never holds the images. It owns that reduction; it must not know how
 //! frames are shown or captured.
