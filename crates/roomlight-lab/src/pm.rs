@@ -313,11 +313,21 @@ pub fn run<'a>(
         tradeoff_ansi: Vec::new(),
     };
     let lights = Lights { cal, texture_k };
+    // The board's nodes weigh every projector pixel (3 MB a node in the lab): they go once
+    // its view has its sparse frames, before the texture projector is decoded on it.
+    let mut board_regions: Option<Vec<NodeRegion>> = Some(board_regions);
     for board in [true, false] {
         let eval = Room::build(evaluation_scene(base, board, false)?)
             .context("building the evaluation view")?;
-        let regions = if board { &board_regions } else { &cal.regions };
-        let mut view = View::new(&eval, &lights, regions, first, seed)?;
+        let luminaires = if board {
+            let regions = board_regions
+                .take()
+                .context("the board's evaluation view is built once")?;
+            FrameBuilder::new(&eval, &regions, lights.cal.responses.clone())
+        } else {
+            FrameBuilder::new(&eval, &lights.cal.regions, lights.cal.responses.clone())
+        };
+        let mut view = View::new(&eval, &lights, luminaires, first, seed)?;
         if board {
             board_contrast(&mut view, lightings, dir, &mut result, &mut say)?;
             for lighting in tradeoff {
@@ -358,10 +368,12 @@ struct View<'a> {
 }
 
 impl<'a> View<'a> {
+    /// The view of `eval` lit through `luminaires` (their frames, texture projector black),
+    /// with the texture projector decoded onto it.
     fn new(
         eval: &'a Room,
         lights: &'a Lights<'a>,
-        regions: &[NodeRegion],
+        luminaires: FrameBuilder,
         lighting: Lighting<'a>,
         seed: u64,
     ) -> Result<Self> {
@@ -375,8 +387,6 @@ impl<'a> View<'a> {
             .filter(|(m, c)| **m && c.is_some())
             .count();
         let share = reached as f64 / mask.iter().filter(|m| **m).count().max(1) as f64;
-        // The lightings, texture projector black.
-        let luminaires = FrameBuilder::new(eval, regions, lights.cal.responses.clone());
         Ok(Self {
             eval,
             lights,

@@ -6,7 +6,6 @@
 
 use super::Correspondence;
 use crate::CalibError;
-use crate::image_io::LinearImage;
 
 /// Refused as saturated when more than this share of the lit pixels is clipped in the white
 /// capture *and* left undecoded. Binary patterns still decode where white clips (pattern and
@@ -20,15 +19,15 @@ pub const MIN_SEEN_PIXELS: usize = 16;
 /// pixels of a 1024×768 projector is not one to calibrate from).
 pub const MIN_SEEN_SHARE: f64 = 0.002;
 
-/// The pixels of `white` at the camera's ceiling `saturation` in some channel (within one part
-/// in a thousand: an 8-bit file's top code is 1 and the next 0.991). A ceiling that is not a
-/// positive number clips nothing.
-pub(super) fn clipped(white: &LinearImage, saturation: f32) -> Vec<bool> {
+/// The pixels of white at the camera's ceiling `saturation` in some channel (within one part
+/// in a thousand: an 8-bit file's top code is 1 and the next 0.991), from white's brightest
+/// channel per pixel (`white_top`, [`super::brightest`]). A ceiling that is not a positive
+/// number clips nothing.
+pub(super) fn clipped(white_top: &[f32], saturation: f32) -> Vec<bool> {
     let ceiling = saturation * (1.0 - 1e-3);
-    white
-        .pixels
+    white_top
         .iter()
-        .map(|p| saturation > 0.0 && p.iter().any(|&v| v >= ceiling))
+        .map(|&top| saturation > 0.0 && top >= ceiling)
         .collect()
 }
 

@@ -13,13 +13,18 @@ use crate::nodes::dilate;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
+mod captures;
 mod checks;
 mod code;
 mod fill;
 mod groups;
 mod resolve;
 mod second_pass;
+#[cfg(test)]
+pub(crate) mod synthetic;
 
+use captures::Pair;
+pub use captures::{Captures, Reduced, brightest, less_black};
 pub use code::{bits_for, gray, gray_inverse};
 use fill::fill_from_neighbours;
 pub use groups::group_disjoint;
@@ -469,6 +474,25 @@ pub(crate) fn decode_checked<'a>(
     checked: bool,
     mut capture: impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
 ) -> Result<Correspondence, CalibError> {
+    let reduced = Reduced::read(manifest, &mut capture)?;
+    decode_captures(
+        manifest,
+        config,
+        ours,
+        checked,
+        &reduced.captures(manifest)?,
+    )
+}
+
+/// [`decode_checked`] of captures already reduced to what the decoder reads ([`Captures`]):
+/// the calibration's path, which never holds the images ([`Reduced`], [`less_black`]).
+pub(crate) fn decode_captures(
+    manifest: &Manifest,
+    config: &DecodeConfig,
+    ours: Option<&[bool]>,
+    checked: bool,
+    captures: &Captures<'_>,
+) -> Result<Correspondence, CalibError> {
     // Over 80 lines: the decode's steps in their order (captures, light, noise, reach, the
     // saturation check, both passes, the unseen check), each a call, read best in one place.
     let Captures {
@@ -476,9 +500,9 @@ pub(crate) fn decode_checked<'a>(
         h,
         white,
         black,
-        clipped,
-        pairs,
-    } = read_captures(manifest, config, &mut capture)?;
+        white_top,
+        ref pairs,
+    } = *captures;
     let n = (w * h) as usize;
     if let Some(mask) = ours
         && mask.len() != n
@@ -489,22 +513,14 @@ pub(crate) fn decode_checked<'a>(
         });
     }
     let xor = manifest.coding == Coding::Xor04;
-    let (direct, global) = direct_and_global(manifest, &pairs, n);
-    let noise = resolve::measured_noise(w as usize, h as usize, &white, &black, &pairs);
+    let (direct, global) = direct_and_global(manifest, pairs, n);
+    let noise = resolve::measured_noise(w as usize, h as usize, white, black, pairs);
     let mut sorted: Vec<f32> = direct.iter().copied().filter(|v| v.is_finite()).collect();
     sorted.sort_by(f32::total_cmp);
     let p99 = sorted.get(sorted.len() * 99 / 100).copied().unwrap_or(0.0);
     let reach = (config.min_direct_share * p99).max(6.0 * config.noise_floor);
     let reading = |i: usize, out: &mut Vec<Reading>| {
-        read_pixel(
-            config,
-            xor,
-            &pairs,
-            i,
-            (direct[i], global[i]),
-            noise[i],
-            out,
-        );
+        read_pixel(config, xor, pairs, i, (direct[i], global[i]), noise[i], out);
     };
     let reached = |i: usize| {
         // NaN (a corrupt capture) counts as not reached; so does a pixel whose largest
@@ -515,7 +531,7 @@ pub(crate) fn decode_checked<'a>(
                 || white[i] - black[i] < reach
                 || direct[i] < REACH_SIGMAS * noise[i])
     };
-    let lit = checked.then(|| checks::lit(&white, &black, reach, ours));
+    let lit = checked.then(|| checks::lit(white, black, reach, ours));
     let mut map = vec![None; n];
     let mut confidence = vec![0.0f32; n];
     let mut readings = Vec::with_capacity(pairs.len());
@@ -550,6 +566,7 @@ pub(crate) fn decode_checked<'a>(
         );
     }
     if let Some(lit) = lit.as_ref().filter(|_| config.refuse_saturated) {
+        let clipped = checks::clipped(white_top, config.saturation);
         checks::refuse_saturated(&clipped, lit, &map)?;
     }
     let corr = Correspondence {
@@ -573,87 +590,6 @@ pub(crate) fn decode_checked<'a>(
 /// difference, [`resolve::measured_noise`]) above zero: the largest of some twenty differences
 /// of pure noise is about 2.5 of them.
 const REACH_SIGMAS: f32 = 6.0;
-
-/// A pattern and its inverse, each less the black capture: `(axis, bit, pattern, inverse)`.
-type Pair = (Axis, u32, Vec<f32>, Vec<f32>);
-
-/// One projector's captures as the decoder reads them: intensities, the pairs less black.
-struct Captures {
-    w: u32,
-    h: u32,
-    white: Vec<f32>,
-    black: Vec<f32>,
-    /// Pixels of the white capture at its largest value in some channel (clipped).
-    clipped: Vec<bool>,
-    pairs: Vec<Pair>,
-}
-
-/// The manifest's entry for `pattern`.
-fn find(manifest: &Manifest, pattern: Pattern) -> Result<&PatternFile, CalibError> {
-    manifest
-        .patterns
-        .iter()
-        .find(|p| p.pattern == pattern)
-        .ok_or(CalibError::Invalid {
-            field: "manifest",
-            problem: format!("has no {pattern:?} pattern"),
-        })
-}
-
-/// Reads white (its size is the camera's), black, then every pair, column bits first, in the
-/// order a rig that shows them one by one expects; every capture must have white's size.
-fn read_captures<'a>(
-    manifest: &Manifest,
-    config: &DecodeConfig,
-    capture: &mut impl FnMut(&PatternFile) -> Result<&'a LinearImage, CalibError>,
-) -> Result<Captures, CalibError> {
-    let white_file = find(manifest, Pattern::White)?;
-    let white = capture(white_file)?;
-    let (w, h) = (white.width, white.height);
-    let clipped = checks::clipped(white, config.saturation);
-    let mut intensity = |p: &PatternFile| -> Result<Vec<f32>, CalibError> {
-        let img = capture(p)?;
-        img.expect_size(w, h, &p.file)?;
-        Ok(img.intensity())
-    };
-    let white = intensity(white_file)?;
-    let black = intensity(find(manifest, Pattern::Black)?)?;
-    let mut pairs: Vec<Pair> = Vec::new();
-    for (axis, bits) in [
-        (Axis::Column, manifest.column_bits),
-        (Axis::Row, manifest.row_bits),
-    ] {
-        for bit in 0..bits {
-            let p = intensity(find(
-                manifest,
-                Pattern::Bit {
-                    axis,
-                    bit,
-                    inverse: false,
-                },
-            )?)?;
-            let q = intensity(find(
-                manifest,
-                Pattern::Bit {
-                    axis,
-                    bit,
-                    inverse: true,
-                },
-            )?)?;
-            let p: Vec<f32> = p.iter().zip(&black).map(|(a, b)| a - b).collect();
-            let q: Vec<f32> = q.iter().zip(&black).map(|(a, b)| a - b).collect();
-            pairs.push((axis, bit, p, q));
-        }
-    }
-    Ok(Captures {
-        w,
-        h,
-        white,
-        black,
-        clipped,
-        pairs,
-    })
-}
 
 /// Direct and global light per pixel from the two finest patterns of each axis (Nayar et al.):
 /// with half the pixels on, max = Ld + Lg/2 and min = Lg/2. With XOR coding every pattern is

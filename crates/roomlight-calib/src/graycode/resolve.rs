@@ -6,7 +6,7 @@
 //! away explains them nearly as well. It owns that per-axis decision and the noise estimate it
 //! needs; it must not know where the captures came from.
 
-use super::{Axis, Manifest, Reading, gray_inverse};
+use super::{Axis, Manifest, Pair, Reading, gray_inverse};
 
 /// At most this many untrusted bits per axis are enumerated (2⁸ codes); a pixel with more is
 /// left to its neighbours.
@@ -273,7 +273,7 @@ pub(super) fn measured_noise(
     h: usize,
     white: &[f32],
     black: &[f32],
-    pairs: &[(Axis, u32, Vec<f32>, Vec<f32>)],
+    pairs: &[Pair],
 ) -> Vec<f32> {
     let m = pairs.len();
     let variance: Vec<f32> = (0..w * h)
@@ -282,7 +282,7 @@ pub(super) fn measured_noise(
                 return 0.0;
             }
             let lit = white[i] - black[i];
-            let r = |(_, _, p, q): &(Axis, u32, Vec<f32>, Vec<f32>)| p[i] + q[i] - lit;
+            let r = |(_, _, p, q): &Pair| p[i] + q[i] - lit;
             let mean = pairs.iter().map(r).sum::<f32>() / m as f32;
             pairs.iter().map(|pq| (r(pq) - mean).powi(2)).sum::<f32>() / (m - 1) as f32
         })
@@ -370,10 +370,11 @@ mod tests {
         // One pixel, white 1, black 0; pairs whose sum strays by ±e from white: the sum's
         // spread is e (about twice a difference's variance), so a difference's σ is e/√2.
         let e = 0.02f32;
-        let pairs: Vec<(Axis, u32, Vec<f32>, Vec<f32>)> = (0..8)
+        let (high, low, inverse) = ([0.7 + e], [0.7 - e], [0.3]);
+        let pairs: Vec<Pair> = (0..8)
             .map(|k| {
-                let stray = if k % 2 == 0 { e } else { -e };
-                (Axis::Column, k, vec![0.7 + stray], vec![0.3])
+                let p: &[f32] = if k % 2 == 0 { &high } else { &low };
+                (Axis::Column, k, p, &inverse[..])
             })
             .collect();
         let sigma = measured_noise(1, 1, &[1.0], &[0.0], &pairs)[0];

@@ -297,9 +297,9 @@ pub fn second_pass<E: From<CalibError>>(
     };
     let white = shoot(&plan.white(manifest)?, 1.0)?;
     let exposure = plan.exposure(first, &white, saturation, longest)?;
-    let mut captures = Vec::with_capacity(manifest.patterns.len());
+    let mut captures = Reduced::new();
     for p in &manifest.patterns {
-        captures.push(shoot(&plan.pattern(manifest, p.pattern)?, exposure)?);
+        captures.add(p, &shoot(&plan.pattern(manifest, p.pattern)?, exposure)?)?;
     }
     Ok(Some(
         plan.finish(manifest, config, first, exposure, &captures)?,
@@ -378,33 +378,23 @@ impl SecondPassPlan {
         Ok(second_pass_exposure(white, &self.todo, saturation, longest))
     }
 
-    /// Decodes the pattern captures (in manifest order, taken at `exposure`) over the pixels
-    /// the first pass left unknown and merges them into `first`
-    /// ([`Correspondence::merge_second_pass`]).
+    /// Decodes the pattern captures (every pattern of `manifest`, taken at `exposure`, reduced
+    /// as they arrived) over the pixels the first pass left unknown and merges them into
+    /// `first` ([`Correspondence::merge_second_pass`]).
     pub fn finish(
         &self,
         manifest: &Manifest,
         config: &DecodeConfig,
         first: &mut Correspondence,
         exposure: f32,
-        captures: &[LinearImage],
+        captures: &Reduced,
     ) -> Result<SecondPass, CalibError> {
-        let second = decode_checked(
+        let second = decode_captures(
             manifest,
             &config.exposed_longer(exposure),
             Some(&self.todo),
             false,
-            |f| {
-                manifest
-                    .patterns
-                    .iter()
-                    .position(|p| p.file == f.file)
-                    .and_then(|j| captures.get(j))
-                    .ok_or_else(|| CalibError::File {
-                        file: f.file.clone(),
-                        problem: "not captured in the second pass".into(),
-                    })
-            },
+            &captures.captures(manifest)?,
         )?;
         let taken = first.merge_second_pass(&second, &self.shown)?;
         Ok(SecondPass {

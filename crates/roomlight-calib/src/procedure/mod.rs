@@ -15,8 +15,7 @@ use crate::charts::{
     ChartCorners, PatchSample, PatchStatus, SampleConfig, sample_charts, sample_region,
 };
 use crate::graycode::{
-    Coding, Correspondence, DecodeConfig, Manifest, SecondPass, SecondPassPlan, decode_where,
-    group_disjoint,
+    Coding, Correspondence, DecodeConfig, Manifest, SecondPass, SecondPassPlan, group_disjoint,
 };
 use crate::image_io::LinearImage;
 use crate::nodes::{NodeConfig, charts_lit, segment_beside, whole_frame};
