@@ -55,37 +55,170 @@ pub fn curve(
     lit: &[PatchSample],
     weights: &[f64],
 ) -> Result<Vec<TradeoffPoint>> {
-    let dark_frames = vec![Frame::Black; room.projectors().len()];
-    let dark = room.render(&dark_frames, None)?;
-    let led = room.render(&dark_frames, Some(preset))?;
-    let surface: Vec<bool> = reach.reach.iter().map(|r| *r != Reach::NoSurface).collect();
-    let white = white_luminance(&led, &surface)?;
-    let target: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let led_light = target_light(&led, &dark, &target)?;
-    anyhow::ensure!(
-        led_light > 0.0,
-        "the LED preset puts no light on the target"
-    );
-    let frames = FrameBuilder::new(room, &cal.regions, cal.responses.clone());
+    let yardstick = Yardstick::new(room, cal, reach, preset)?;
     weights
         .iter()
         .map(|&weight| {
             let model = Model::for_weight(cal, lit, weight)?;
             let best = optimum(&model.problem)
                 .with_context(|| format!("the model's optimum at dark-target weight {weight}"))?;
-            let result = room.render(&frames.frames(&best.x), None)?;
-            let de = delta_e_map(&led, &result, white)?;
-            let whole = WholeRoom::measure(&de, reach, white)?;
-            Ok(TradeoffPoint {
-                weight,
-                room_de00_mean: whole.de00_mean,
-                room_de00_p95: whole.de00_p95,
-                target_light_share: target_light(&result, &dark, &target)? / led_light,
-                ansi_contrast: 0.0,
-                x: best.x,
-            })
+            yardstick.point(weight, best.x)
         })
         .collect()
+}
+
+/// What the agents' rounds reached on the trade-off's preset at the weight they ran with,
+/// measured as the curve's points are (noiseless render against the LEDs), with the charts'
+/// ΔE00 of the rounds beside it.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RoundsPoint {
+    #[serde(flatten)]
+    pub point: TradeoffPoint,
+    /// Mean over the chart patches of the rounds' ΔE00 (target and wall patches left out).
+    pub charts_de00_mean: f64,
+    /// Captures the rounds took.
+    pub captures: u64,
+}
+
+/// The rounds' result `x` on preset `preset`, run at dark-target weight `weight`, measured as
+/// [`curve`]'s points are; `charts_de00_mean` and `captures` are the run's.
+#[allow(clippy::too_many_arguments)]
+pub fn rounds_point(
+    room: &Room,
+    cal: &Calibrated,
+    reach: &ReachMap,
+    preset: usize,
+    weight: f64,
+    x: &[LinearRgb],
+    charts_de00_mean: f64,
+    captures: u64,
+) -> Result<RoundsPoint> {
+    let point = Yardstick::new(room, cal, reach, preset)?.point(weight, x.to_vec())?;
+    Ok(RoundsPoint {
+        point,
+        charts_de00_mean,
+        captures,
+    })
+}
+
+/// [`rounds_point`] for a preset's outcome in the demo: its rounds' result, the weight its model
+/// ran with, the mean of its charts' ΔE00.
+pub fn rounds_of(
+    room: &Room,
+    cal: &Calibrated,
+    reach: &ReachMap,
+    preset: usize,
+    outcome: &crate::report::PresetOutcome,
+) -> Result<RoundsPoint> {
+    let charts: Vec<f64> = outcome
+        .result
+        .de00
+        .iter()
+        .zip(&outcome.chart_of_patch)
+        .filter(|(_, c)| c.is_some())
+        .map(|(d, _)| *d)
+        .collect();
+    rounds_point(
+        room,
+        cal,
+        reach,
+        preset,
+        outcome.dark_weight,
+        &outcome.result.x,
+        crate::report::mean(&charts),
+        outcome.result.captures,
+    )
+}
+
+/// Fills in the board's ANSI contrast under projector lighting from projection mapping's
+/// measurements (the curve's optima, and the rounds' from the preset's own row), and prints
+/// the curve and the rounds beside it.
+pub fn with_ansi(d: &mut crate::report::DarkTarget, pm: &crate::pm::PmResult) {
+    for (p, a) in d.points.iter_mut().zip(&pm.tradeoff_ansi) {
+        p.ansi_contrast = *a;
+    }
+    let row = pm.ansi_by_preset.iter().find(|(n, _)| *n == d.preset);
+    if let (Some(r), Some((_, a))) = (d.rounds.as_mut(), row) {
+        r.point.ansi_contrast = a[2];
+    }
+    println!(
+        "dark target on {}: ANSI contrast under the optimum's projector lighting {}",
+        d.preset,
+        d.points
+            .iter()
+            .map(|p| format!("w {}: {:.1}:1", p.weight, p.ansi_contrast))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    if let (Some(r), Some((_, a))) = (&d.rounds, row) {
+        println!(
+            "dark target on {}: the rounds at w {}: ANSI contrast dark {:.1} : LED {:.1} : projector lighting {:.1}; \
+             whole-room ΔE00 mean {:.2}, p95 {:.2}; charts ΔE00 {:.2}; light on the target {:.0}% of the LEDs'; {} captures",
+            d.preset,
+            r.point.weight,
+            a[0],
+            a[1],
+            a[2],
+            r.point.room_de00_mean,
+            r.point.room_de00_p95,
+            r.charts_de00_mean,
+            100.0 * r.point.target_light_share,
+            r.captures
+        );
+    }
+}
+
+/// What a lighting is measured against: the dark room, the LED preset, and the target's pixels.
+struct Yardstick<'a> {
+    room: &'a Room,
+    reach: &'a ReachMap,
+    frames: FrameBuilder,
+    dark: Capture,
+    led: Capture,
+    white: f64,
+    target: Vec<bool>,
+    led_light: f64,
+}
+
+impl<'a> Yardstick<'a> {
+    fn new(room: &'a Room, cal: &Calibrated, reach: &'a ReachMap, preset: usize) -> Result<Self> {
+        let dark_frames = vec![Frame::Black; room.projectors().len()];
+        let dark = room.render(&dark_frames, None)?;
+        let led = room.render(&dark_frames, Some(preset))?;
+        let surface: Vec<bool> = reach.reach.iter().map(|r| *r != Reach::NoSurface).collect();
+        let white = white_luminance(&led, &surface)?;
+        let target: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+        let led_light = target_light(&led, &dark, &target)?;
+        anyhow::ensure!(
+            led_light > 0.0,
+            "the LED preset puts no light on the target"
+        );
+        Ok(Self {
+            room,
+            reach,
+            frames: FrameBuilder::new(room, &cal.regions, cal.responses.clone()),
+            dark,
+            led,
+            white,
+            target,
+            led_light,
+        })
+    }
+
+    /// The luminaires at `x` (one value per node), rendered noiselessly.
+    fn point(&self, weight: f64, x: Vec<LinearRgb>) -> Result<TradeoffPoint> {
+        let result = self.room.render(&self.frames.frames(&x), None)?;
+        let de = delta_e_map(&self.led, &result, self.white)?;
+        let whole = WholeRoom::measure(&de, self.reach, self.white)?;
+        Ok(TradeoffPoint {
+            weight,
+            room_de00_mean: whole.de00_mean,
+            room_de00_p95: whole.de00_p95,
+            target_light_share: target_light(&result, &self.dark, &self.target)? / self.led_light,
+            ansi_contrast: 0.0,
+            x,
+        })
+    }
 }
 
 /// Mean luminance over the `mask` pixels of `c` above the dark room's.

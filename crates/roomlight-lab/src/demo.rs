@@ -28,6 +28,9 @@ pub struct DemoOptions {
     /// Weight of each wall tile in the rounds' model ([`pipeline::Calibrated::wall_weight`];
     /// 0: the charts alone).
     pub wall_weight: f64,
+    /// Weight of the light on the target in every preset's rounds, instead of the weight each
+    /// preset asks for in the scene (`dark_weight`, 0 when left out).
+    pub dark_weight: Option<f64>,
 }
 
 pub fn run(args: &DemoOptions) -> Result<()> {
@@ -84,7 +87,7 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     // One capture per preset measures its target.
     let captures = cal.captures + presets.len();
     let mut dark_target = match &lit {
-        Some((preset, lit)) => Some(lab.dark_target(*preset, lit)?),
+        Some((preset, lit)) => Some(lab.dark_target(*preset, lit, &presets)?),
         None => None,
     };
     let (hot_join, pm) = match presets.first() {
@@ -225,7 +228,8 @@ impl Lab<'_> {
         for (preset, spec) in self.room.scene().presets.iter().enumerate() {
             let t = Instant::now();
             let lit = pipeline::measure_lit(self.room, self.cal, preset, noise)?;
-            let model = pipeline::Model::for_weight(self.cal, &lit, 0.0)?;
+            let weight = self.options.dark_weight.unwrap_or(spec.dark_weight);
+            let model = pipeline::Model::for_weight(self.cal, &lit, weight)?;
             if Some(preset) == tradeoff {
                 kept = Some((preset, lit.clone()));
             }
@@ -272,6 +276,7 @@ impl Lab<'_> {
                     })
                     .collect(),
                 model,
+                dark_weight: weight,
                 truth: truth.problem,
                 result,
                 pictures,
@@ -282,12 +287,13 @@ impl Lab<'_> {
     }
 
     /// The dark-target trade-off curve on `preset` (its LED capture sampled as `lit`): the
-    /// model's optimum at each weight, the whole room under it (the board's ANSI contrast is
-    /// added by [`Self::pm`]).
+    /// model's optimum at each weight, the whole room under it, and the same for the rounds'
+    /// result on it (the board's ANSI contrast is added by [`Self::pm`]).
     fn dark_target(
         &self,
         preset: usize,
         lit: &[roomlight_calib::charts::PatchSample],
+        presets: &[PresetOutcome],
     ) -> Result<report::DarkTarget> {
         let t = Instant::now();
         let points = crate::dark_target::curve(
@@ -313,10 +319,15 @@ impl Lab<'_> {
                 .join("; "),
             t.elapsed().as_secs_f64()
         );
+        let rounds = presets
+            .get(preset)
+            .map(|p| crate::dark_target::rounds_of(self.room, self.cal, self.reach, preset, p))
+            .transpose()?;
         Ok(report::DarkTarget {
             preset: self.room.scene().presets[preset].name.clone(),
             patches: self.cal.target_patch_range().len(),
             points,
+            rounds,
         })
     }
 
@@ -492,18 +503,7 @@ impl Lab<'_> {
                 .join(", ")
         );
         if let Some(d) = dark_target {
-            for (p, a) in d.points.iter_mut().zip(&pm.tradeoff_ansi) {
-                p.ansi_contrast = *a;
-            }
-            println!(
-                "dark target on {}: ANSI contrast under the optimum's projector lighting {}",
-                d.preset,
-                d.points
-                    .iter()
-                    .map(|p| format!("w {}: {:.0}:1", p.weight, p.ansi_contrast))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
+            crate::dark_target::with_ansi(d, &pm);
         }
         println!(
             "projection mapping and contrast: {:.1} s",

@@ -216,6 +216,11 @@ pub struct PresetSpec {
     /// Scales every listed light's intensity (finite, > 0; 1 when left out): a dimmer.
     #[serde(default = "unit_intensity")]
     pub intensity: f64,
+    /// Weight of the light on the projection-mapping target in the luminaires' objective under
+    /// this preset (issue 22: each target patch's squared light against a chart patch's 1;
+    /// finite, >= 0; 0 when left out: the charts alone).
+    #[serde(default)]
+    pub dark_weight: f64,
 }
 
 fn unit_intensity() -> f64 {
@@ -579,6 +584,13 @@ impl Scene {
                 format!("is {}, expected a finite scale > 0", p.intensity),
             ));
         }
+        if !(p.dark_weight.is_finite() && p.dark_weight >= 0.0) {
+            return Err(self.invalid(
+                format!("preset {}", p.name),
+                "dark_weight",
+                format!("is {}, expected a finite weight >= 0", p.dark_weight),
+            ));
+        }
         Ok(())
     }
 
@@ -649,4 +661,35 @@ pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 pub(crate) fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A preset's dark-target weight: 0 when left out, else finite and at least 0, or the scene
+    /// is refused naming the preset and the field.
+    #[test]
+    fn a_presets_dark_weight_defaults_to_zero_and_is_checked() {
+        let text = crate::scenes::SMALL_TOML;
+        let plain = Scene::from_toml(text, "small.toml").expect("small");
+        assert!(plain.presets.iter().all(|p| p.dark_weight <= 0.0));
+        let with = |w: &str| {
+            let from = "lights = [\"ceiling\"]";
+            assert!(text.contains(from));
+            Scene::from_toml(
+                &text.replacen(from, &format!("{from}\ndark_weight = {w}"), 1),
+                "t.toml",
+            )
+        };
+        let weighed = with("2.5").expect("a weight of 2.5");
+        assert!((weighed.presets[0].dark_weight - 2.5).abs() < 1e-12);
+        for bad in ["-1.0", "nan", "inf"] {
+            let e = with(bad).expect_err(bad).to_string();
+            assert!(
+                e.contains("preset on") && e.contains("dark_weight") && e.contains(">= 0"),
+                "{bad}: {e}"
+            );
+        }
+    }
 }

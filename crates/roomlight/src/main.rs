@@ -190,6 +190,11 @@ struct DemoArgs {
     /// measured).
     #[arg(long, default_value_t = 0.0, value_parser = weight)]
     wall_weight: f64,
+    /// Weigh the light on the projection-mapping target into every preset's rounds at this
+    /// weight (each target patch's squared light against a chart patch's 1), instead of the
+    /// weight each preset asks for in the scene (`dark_weight`; 0 when left out).
+    #[arg(long, value_parser = weight)]
+    dark_weight: Option<f64>,
 }
 
 /// A weight: finite and at least 0.
@@ -352,6 +357,7 @@ fn main() -> Result<()> {
             seed: args.seed,
             out: args.out,
             wall_weight: args.wall_weight,
+            dark_weight: args.dark_weight,
         }),
         Command::Sim(args) => procs::sim(&args),
         Command::Calibrate(args) => procs::calibrate(&args),

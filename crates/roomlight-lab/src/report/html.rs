@@ -299,7 +299,8 @@ projection-mapping target enters the objective with weight w: {} patches on the 
 same attenuation captures as the charts, asked to stay at the black level, their squared errors weighed by w. \
 Per weight, on preset {}: the model's exact optimum (not rounds of the agents) rendered noiselessly, the \
 whole-room ΔE00 against the LEDs, the light left on the target, and the board's ANSI contrast under that \
-projector lighting. The rounds above run at w = 0; {} is the weight suggested for a dark target.</p>\
+projector lighting. The last row is the agents' rounds on that preset at the weight the preset asks for \
+(<code>dark_weight</code> in the scene, or <code>demo --dark-weight</code>); {} is the weight suggested for a dark target.</p>\
 <table><tr><th>weight w</th><th>whole-room ΔE00 mean</th><th>95th percentile</th>\
 <th>light on the target (share of the LEDs')</th><th>ANSI contrast, projector lighting</th></tr>",
         d.patches,
@@ -315,6 +316,19 @@ projector lighting. The rounds above run at w = 0; {} is the weight suggested fo
             p.room_de00_p95,
             100.0 * p.target_light_share,
             p.ansi_contrast
+        );
+    }
+    if let Some(r) = &d.rounds {
+        let _ = write!(
+            h,
+            "<tr><td>the rounds, w = {} ({} captures; charts ΔE00 {:.2})</td><td>{:.2}</td><td>{:.2}</td><td>{:.0}%</td><td>{:.1}:1</td></tr>",
+            r.point.weight,
+            r.captures,
+            r.charts_de00_mean,
+            r.point.room_de00_mean,
+            r.point.room_de00_p95,
+            100.0 * r.point.target_light_share,
+            r.point.ansi_contrast
         );
     }
     h.push_str("</table>");

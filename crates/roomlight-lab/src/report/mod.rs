@@ -22,6 +22,8 @@ pub struct PresetOutcome {
     pub name: String,
     /// The measured model the agents ran on.
     pub model: Model,
+    /// The weight of the light on the target in that model (0: the charts alone).
+    pub dark_weight: f64,
     /// The true problem on the model's patches (the noiseless truth's transport, black and
     /// target): what the room could reach, for `problem.json`.
     pub truth: Problem,
@@ -85,6 +87,8 @@ pub struct DarkTarget {
     /// Target patches in the model (at a weight above 0).
     pub patches: usize,
     pub points: Vec<crate::dark_target::TradeoffPoint>,
+    /// What the agents' rounds reached on the same preset, at the weight they ran with.
+    pub rounds: Option<crate::dark_target::RoundsPoint>,
 }
 
 /// One projector leaves, another joins that the camera agent has never measured: it is
@@ -225,6 +229,7 @@ pub fn metrics(report: &Report) -> Value {
         m["dark_target_tradeoff_preset"] = json!(d.preset);
         m["dark_target_patches"] = json!(d.patches);
         m["dark_target_default_weight"] = json!(crate::dark_target::DEFAULT_WEIGHT);
+        m["dark_target_rounds"] = json!(d.rounds);
     }
     m
 }
@@ -271,6 +276,7 @@ fn preset_metrics(report: &Report, index: usize, p: &PresetOutcome) -> Value {
         "whole_room": w,
         "whole_room_model_best": p.model_best,
         "ansi_contrast": ansi,
+        "dark_weight": p.dark_weight,
         "linear_png_scale": p.pictures.linear.iter().map(|(f, s)| (f.clone(), json!(s))).collect::<serde_json::Map<_, _>>(),
         "settled": r.settled,
         "final_excess": r.final_excess,
