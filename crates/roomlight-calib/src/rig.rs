@@ -121,9 +121,19 @@ impl Assignment {
                 }
             }
         }
+        // A node's flat inside (and everything outside the nodes) is one light: its code is
+        // worked out once, not three powers a pixel.
+        let mut last: Option<(LinearRgb, [f32; 3])> = None;
         light
             .into_iter()
-            .map(|l| self.response.to_code(l))
+            .map(|l| match last {
+                Some((seen, code)) if seen.0.map(f64::to_bits) == l.0.map(f64::to_bits) => code,
+                _ => {
+                    let code = self.response.to_code(l);
+                    last = Some((l, code));
+                    code
+                }
+            })
             .collect()
     }
 }
@@ -225,5 +235,76 @@ pub fn block_on<F: Future>(future: F) -> F::Output {
             Poll::Ready(out) => return out,
             Poll::Pending => std::thread::park(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every pixel's code is the response to its nodes' summed light, bit for bit, in the flat
+    /// insides (where a code is reused) and in the feathered band alike; unlisted nodes draw
+    /// black.
+    #[test]
+    fn draw_codes_each_pixels_summed_light() {
+        let (width, height) = (40u32, 3u32);
+        let n = (width * height) as usize;
+        // Node 1 on columns 0–24, node 2 on 15–39, feathered over 15–24; node 3 unlisted.
+        let weight = |i: usize, lo: u32, hi: u32, rising: bool| {
+            let x = i as u32 % width;
+            if x < lo || x > hi {
+                return 0.0;
+            }
+            let t = (x.saturating_sub(15) as f32 / 10.0).min(1.0);
+            if rising {
+                t.max(0.05)
+            } else {
+                (1.0 - t).max(0.05)
+            }
+        };
+        let node = |id: u32, lo: u32, hi: u32, rising: bool| {
+            let weights: Vec<(u32, f32)> = (0..n)
+                .map(|i| (i as u32, weight(i, lo, hi, rising)))
+                .filter(|(_, w)| *w > 0.0)
+                .collect();
+            (id, weights)
+        };
+        let a = Assignment {
+            width,
+            height,
+            response: Response {
+                gamma: [2.2, 2.0, 2.4],
+                max_residual: [0.0; 3],
+            },
+            nodes: vec![
+                node(1, 0, 24, false),
+                node(2, 15, 39, true),
+                node(3, 0, 39, true),
+            ],
+        };
+        let values = [
+            (1, LinearRgb([0.3, 0.6, 0.9])),
+            (2, LinearRgb([0.8, 0.2, 0.5])),
+        ];
+        let codes = a.draw(&values);
+        assert_eq!(codes.len(), n);
+        let mut distinct = std::collections::HashSet::new();
+        for (i, code) in codes.iter().enumerate() {
+            let mut light = LinearRgb::ZERO;
+            for (id, weights) in &a.nodes[..2] {
+                let v = values
+                    .iter()
+                    .find(|(m, _)| m == id)
+                    .map(|(_, v)| *v)
+                    .expect("a listed node");
+                if let Some((_, w)) = weights.iter().find(|(p, _)| *p as usize == i) {
+                    light += v * f64::from(*w);
+                }
+            }
+            let want = a.response.to_code(light);
+            assert_eq!(code.map(f32::to_bits), want.map(f32::to_bits), "pixel {i}");
+            distinct.insert(code.map(f32::to_bits));
+        }
+        assert!(distinct.len() > 10, "the feathered band has its own codes");
     }
 }

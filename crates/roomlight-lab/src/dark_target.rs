@@ -196,7 +196,7 @@ impl<'a> Yardstick<'a> {
         Ok(Self {
             room,
             reach,
-            frames: FrameBuilder::new(room, &cal.regions, cal.responses.clone()),
+            frames: FrameBuilder::new(room, &cal.regions, cal.responses.clone())?,
             dark,
             led,
             white,

@@ -317,9 +317,9 @@ pub fn run<'a>(
             let regions = board_regions
                 .take()
                 .context("the board's evaluation view is built once")?;
-            FrameBuilder::new(&eval, &regions, lights.cal.responses.clone())
+            FrameBuilder::new(&eval, &regions, lights.cal.responses.clone())?
         } else {
-            FrameBuilder::new(&eval, &lights.cal.regions, lights.cal.responses.clone())
+            FrameBuilder::new(&eval, &lights.cal.regions, lights.cal.responses.clone())?
         };
         let mut view = View::new(&eval, &lights, luminaires, first, seed)?;
         if board {

@@ -22,7 +22,7 @@ pub fn of_values(
     reference: &Capture,
     x: &[LinearRgb],
 ) -> Result<WholeRoom> {
-    let frames = FrameBuilder::new(room, &cal.regions, cal.responses.clone());
+    let frames = FrameBuilder::new(room, &cal.regions, cal.responses.clone())?;
     let lit = room.render(&frames.frames(x), None)?;
     let surface: Vec<bool> = reach.reach.iter().map(|r| *r != Reach::NoSurface).collect();
     let white = white_luminance(reference, &surface)?;

@@ -3,7 +3,7 @@
 //! cut-off. The model's patches and problem come from [`Target`], as for a camera agent
 //! surveying a room.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use rayon::prelude::*;
 use roomlight_calib::procedure::Target;
 use roomlight_calib::response::Response;
@@ -27,9 +27,6 @@ pub struct Model {
     pub conventional: Vec<LinearRgb>,
 }
 
-/// A node's non-zero weights: `(node, [(pixel, weight)])`.
-type SparseNode = (usize, Vec<(u32, f32)>);
-
 /// A node region's non-zero weights as `(pixel, weight)`, row-major pixels.
 pub fn sparse_weights(region: &NodeRegion) -> Vec<(u32, f32)> {
     region
@@ -41,74 +38,157 @@ pub fn sparse_weights(region: &NodeRegion) -> Vec<(u32, f32)> {
         .collect()
 }
 
+/// Rows a task of [`FrameBuilder::frames`] codes.
+const FRAME_ROWS: usize = 16;
+
+/// One projector's nodes by pixel, compactly (a pixel's nodes are few, node ids small): pixel
+/// `i` has `counts[i]` `(node, weight)` pairs, in ascending node order, in `nodes` and
+/// `weights`, starting at `row_start[row]` plus the counts of the row's pixels before it.
+#[derive(Debug)]
+struct PixelNodes {
+    width: u32,
+    height: u32,
+    row_start: Vec<u32>,
+    counts: Vec<u8>,
+    nodes: Vec<u16>,
+    weights: Vec<f32>,
+}
+
+impl PixelNodes {
+    /// The non-zero weights of `regions` (node `n` is `regions[n]`) on projector `k`. Refused
+    /// when a pixel lies in more than 255 nodes or a node id exceeds 65535 (no room comes
+    /// near either).
+    fn new(width: u32, height: u32, regions: &[NodeRegion], k: usize) -> Result<Self> {
+        let count = (width * height) as usize;
+        let mine: Vec<(usize, &NodeRegion)> = regions
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.projector == k)
+            .collect();
+        let mut counts = vec![0u8; count];
+        for (n, r) in &mine {
+            anyhow::ensure!(
+                *n <= usize::from(u16::MAX),
+                "node {n}: a frame builder takes node ids up to {}",
+                u16::MAX
+            );
+            for (c, w) in counts.iter_mut().zip(&r.weights) {
+                if *w > 0.0 {
+                    *c = c.checked_add(1).with_context(|| {
+                        format!("projector {k}: a pixel in more than 255 nodes")
+                    })?;
+                }
+            }
+        }
+        let mut row_start = Vec::with_capacity(height as usize + 1);
+        let mut total = 0u32;
+        for row in counts.chunks(width.max(1) as usize) {
+            row_start.push(total);
+            total += row.iter().map(|&c| u32::from(c)).sum::<u32>();
+        }
+        row_start.push(total);
+        // Each pixel's next free slot; nodes in ascending order fill them in that order.
+        let mut next = Vec::with_capacity(count);
+        let mut at = 0u32;
+        for &c in &counts {
+            next.push(at);
+            at += u32::from(c);
+        }
+        let mut nodes = vec![0u16; total as usize];
+        let mut weights = vec![0.0f32; total as usize];
+        for (n, r) in &mine {
+            for (slot, w) in next.iter_mut().zip(&r.weights) {
+                if *w > 0.0 {
+                    nodes[*slot as usize] = *n as u16;
+                    weights[*slot as usize] = *w;
+                    *slot += 1;
+                }
+            }
+        }
+        Ok(Self {
+            width,
+            height,
+            row_start,
+            counts,
+            nodes,
+            weights,
+        })
+    }
+}
+
 /// Node values as projector frames: each pixel's linear light is the sum of its nodes' weights
-/// times their values, turned into a code through the projector's measured response (as a node
-/// agent does before it shows a frame). Each node's weights are kept sparse.
+/// times their values (in ascending node order), turned into a code through the projector's
+/// measured response (as a node agent does before it shows a frame). The weights are kept by
+/// pixel, so a frame is written in one pass with no light buffer.
 #[derive(Debug)]
 pub struct FrameBuilder {
-    /// Per projector: width, height, and its nodes.
-    projectors: Vec<(u32, u32, Vec<SparseNode>)>,
+    projectors: Vec<PixelNodes>,
     responses: Vec<Response>,
 }
 
 impl FrameBuilder {
-    /// For `regions` of `room`'s projectors with their measured `responses`.
-    pub fn new(room: &Room, regions: &[NodeRegion], responses: Vec<Response>) -> Self {
+    /// For `regions` of `room`'s projectors with their measured `responses`. Refused when a
+    /// projector pixel lies in more than 255 nodes or there are more than 65536 nodes.
+    pub fn new(room: &Room, regions: &[NodeRegion], responses: Vec<Response>) -> Result<Self> {
+        // Built on the calling thread: its memory lives as long as the builder, and kept in a
+        // worker thread's malloc arena it held that arena's freed memory too.
         let projectors = room
             .projectors()
             .iter()
             .enumerate()
-            .map(|(k, p)| {
-                let nodes = regions
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, r)| r.projector == k)
-                    .map(|(n, r)| (n, sparse_weights(r)))
-                    .collect();
-                (p.pinhole.width, p.pinhole.height, nodes)
-            })
-            .collect();
-        Self {
+            .map(|(k, p)| PixelNodes::new(p.pinhole.width, p.pinhole.height, regions, k))
+            .collect::<Result<_>>()?;
+        Ok(Self {
             projectors,
             responses,
-        }
+        })
     }
 
     /// The frames for node values `x` (a missing value counts as black).
     pub fn frames(&self, x: &[LinearRgb]) -> Vec<Frame> {
         let linear = Response::linear();
-        // One projector's frame per task: independent, the same on any number of cores.
+        // Bands of rows are independent tasks: the same codes on any number of cores.
         self.projectors
             .par_iter()
             .enumerate()
-            .map(|(k, (width, height, nodes))| {
-                let mut light = vec![LinearRgb::ZERO; (width * height) as usize];
-                for (n, weights) in nodes {
-                    let v = x.get(*n).copied().unwrap_or(LinearRgb::ZERO);
-                    for &(i, w) in weights {
-                        light[i as usize] += v * f64::from(w);
-                    }
-                }
+            .map(|(k, p)| {
                 let response = self.responses.get(k).unwrap_or(&linear);
-                // A node's inside (and everything outside the nodes) is one light: its code
-                // is worked out once (three powers a pixel were most of a run's capture).
-                let mut last: Option<(LinearRgb, [f32; 3])> = None;
-                let pixels = light
-                    .into_iter()
-                    .map(|l| match last {
-                        Some((seen, code)) if seen.0.map(f64::to_bits) == l.0.map(f64::to_bits) => {
-                            code
+                let width = p.width.max(1) as usize;
+                let mut pixels = vec![[0.0f32; 3]; p.counts.len()];
+                pixels
+                    .par_chunks_mut(width * FRAME_ROWS)
+                    .enumerate()
+                    .for_each(|(band, chunk)| {
+                        let first = band * width * FRAME_ROWS;
+                        let mut at = p.row_start[band * FRAME_ROWS] as usize;
+                        // A node's inside (and everything outside the nodes) is one light: its
+                        // code is worked out once (three powers a pixel were most of a capture).
+                        let mut last: Option<(LinearRgb, [f32; 3])> = None;
+                        for (code, &c) in chunk.iter_mut().zip(&p.counts[first..]) {
+                            let end = at + usize::from(c);
+                            let mut l = LinearRgb::ZERO;
+                            for (&n, &w) in p.nodes[at..end].iter().zip(&p.weights[at..end]) {
+                                let v = x.get(usize::from(n)).copied().unwrap_or(LinearRgb::ZERO);
+                                l += v * f64::from(w);
+                            }
+                            at = end;
+                            *code = match last {
+                                Some((seen, known))
+                                    if seen.0.map(f64::to_bits) == l.0.map(f64::to_bits) =>
+                                {
+                                    known
+                                }
+                                _ => {
+                                    let fresh = response.to_code(l);
+                                    last = Some((l, fresh));
+                                    fresh
+                                }
+                            };
                         }
-                        _ => {
-                            let code = response.to_code(l);
-                            last = Some((l, code));
-                            code
-                        }
-                    })
-                    .collect();
+                    });
                 Frame::Image(ProjectorImage {
-                    width: *width,
-                    height: *height,
+                    width: p.width,
+                    height: p.height,
                     pixels,
                 })
             })
@@ -178,7 +258,9 @@ mod tests {
         };
         let responses = vec![response.clone(); room.projectors().len()];
         let x = [LinearRgb([0.2, 0.5, 0.9]), LinearRgb([0.7, 0.1, 0.4])];
-        let frames = FrameBuilder::new(&room, &regions, responses).frames(&x);
+        let frames = FrameBuilder::new(&room, &regions, responses)
+            .expect("builder")
+            .frames(&x);
         let Frame::Image(img) = &frames[0] else {
             panic!("an image for the projector with nodes");
         };
@@ -190,5 +272,23 @@ mod tests {
             distinct.insert(code.map(f32::to_bits));
         }
         assert!(distinct.len() > 10, "the feathered band has its own codes");
+    }
+
+    /// A pixel in 255 nodes is taken, in 256 refused with the projector named; the nodes of
+    /// other projectors are not counted.
+    #[test]
+    fn pixel_nodes_refuse_a_pixel_in_too_many_nodes() {
+        let region = |projector: usize| NodeRegion {
+            projector,
+            weights: vec![0.5, 0.0],
+        };
+        let mut regions: Vec<NodeRegion> = (0..255).map(|_| region(0)).collect();
+        regions.push(region(1));
+        let nodes = PixelNodes::new(2, 1, &regions, 0).expect("255 nodes on pixel 0");
+        assert_eq!(nodes.counts, vec![255, 0]);
+        assert_eq!(nodes.row_start, vec![0, 255]);
+        regions.push(region(0));
+        let e = PixelNodes::new(2, 1, &regions, 0).expect_err("256 nodes on pixel 0");
+        assert!(format!("{e:#}").contains("projector 0"), "{e:#}");
     }
 }

@@ -225,7 +225,7 @@ pub fn run_detailed(
     for &n in &churn.joining {
         initial[n] = LinearRgb::ZERO;
     }
-    let hw = sim_hardware(room, cal, model, transport, &options, &initial);
+    let hw = sim_hardware(room, cal, model, transport, &options, &initial)?;
     let reference = Reference::new(model, truth, &hw, &churn, &initial)?;
     let owners = cal.owners(room);
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -322,10 +322,14 @@ fn sim_hardware(
     transport: &Transport,
     options: &RunOptions,
     initial: &[LinearRgb],
-) -> SimHardware {
-    SimHardware {
+) -> Result<SimHardware> {
+    Ok(SimHardware {
         room: room.clone(),
-        frames: Arc::new(FrameBuilder::new(room, &cal.regions, cal.responses.clone())),
+        frames: Arc::new(FrameBuilder::new(
+            room,
+            &cal.regions,
+            cal.responses.clone(),
+        )?),
         setup: transport.setup.clone(),
         // A model without wall patches reads nothing of the walls: their pixels are not rendered.
         pixels: if model
@@ -345,7 +349,7 @@ fn sim_hardware(
         latency: options.latency,
         delayed: Arc::new(Mutex::new(VecDeque::new())),
         gate: Arc::new(super::gate::Gate::new()),
-    }
+    })
 }
 
 /// What the run is measured against: the optima of the room left behind (measured model and

@@ -49,7 +49,7 @@ pub fn preset_pictures(
     dir: &Path,
 ) -> Result<PresetPictures> {
     let dark = vec![Frame::Black; room.projectors().len()];
-    let frames = pipeline::FrameBuilder::new(room, &cal.regions, cal.responses.clone());
+    let frames = pipeline::FrameBuilder::new(room, &cal.regions, cal.responses.clone())?;
     let captures = [
         room.render(&dark, Some(preset))?,
         room.render(&frames.frames(&model.conventional), None)?,

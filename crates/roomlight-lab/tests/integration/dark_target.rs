@@ -49,7 +49,8 @@ fn a_weight_darkens_the_target_at_a_cost_and_weight_zero_is_todays_model() {
         "light on the target {shares:?}"
     );
     // The share is the simulator's: re-render the heaviest optimum independently.
-    let frames = pipeline::FrameBuilder::new(&room, &cal.regions, cal.responses.clone());
+    let frames =
+        pipeline::FrameBuilder::new(&room, &cal.regions, cal.responses.clone()).expect("frames");
     let black = vec![Frame::Black; room.projectors().len()];
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
     let dark = room.render(&black, None).expect("ok");
@@ -101,7 +102,8 @@ fn the_rounds_with_a_dark_weight_darken_the_target_and_reach_their_optimum() {
     let cal = pipeline::calibrate_with(&room, true, &mut noise, &bar, |_| {}).expect("cal");
     let lit = pipeline::measure_lit(&room, &cal, 0, &mut noise).expect("lit");
     let transport = pipeline::Transport::new(&room, &cal.regions, cal.setup()).expect("transport");
-    let frames = pipeline::FrameBuilder::new(&room, &cal.regions, cal.responses.clone());
+    let frames =
+        pipeline::FrameBuilder::new(&room, &cal.regions, cal.responses.clone()).expect("frames");
     let black = vec![Frame::Black; room.projectors().len()];
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
     let dark = room.render(&black, None).expect("dark");
@@ -157,6 +159,7 @@ fn the_luminaires_throw_no_direct_light_on_the_board() {
     let board_mask: Vec<bool> = board.pixels().iter().map(|p| p.target).collect();
     let direct = |regions: &[roomlight_sim::NodeRegion]| {
         let frames = pipeline::FrameBuilder::new(&board, regions, cal.responses.clone())
+            .expect("frames")
             .frames(&vec![roomlight_core::LinearRgb::splat(1.0); regions.len()]);
         (0..frames.len())
             .map(|k| luminance(board.target_irradiance(k, &frames[k]).expect("direct")))
