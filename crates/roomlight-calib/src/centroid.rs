@@ -102,6 +102,49 @@ pub fn spots_over(
     Ok(out)
 }
 
+/// Spots whose centroids lie within `radius` of each other (through others within `radius`,
+/// single linkage) merged into one: the light-weighted mean of their centroids, their light and
+/// pixels summed. A footprint split into pieces by an edge or by noise is then one spot again,
+/// as long as footprints shown together lie further apart than `radius`. Merged spots come in
+/// the order of their first piece.
+pub fn merge_spots(spots: &[Spot], radius: f64) -> Vec<Spot> {
+    let n = spots.len();
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for i in 0..n {
+        for j in i + 1..n {
+            let (a, b) = (spots[i].centroid, spots[j].centroid);
+            if (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) <= radius * radius {
+                let (ri, rj) = (root(&mut parent, i), root(&mut parent, j));
+                parent[ri.max(rj)] = ri.min(rj);
+            }
+        }
+    }
+    let mut acc: Vec<Option<(f64, f64, f64, usize)>> = vec![None; n];
+    for (i, s) in spots.iter().enumerate() {
+        let r = root(&mut parent, i);
+        let a = acc[r].get_or_insert((0.0, 0.0, 0.0, 0));
+        a.0 += s.light * s.centroid[0];
+        a.1 += s.light * s.centroid[1];
+        a.2 += s.light;
+        a.3 += s.pixels;
+    }
+    acc.into_iter()
+        .flatten()
+        .map(|(sx, sy, light, pixels)| Spot {
+            centroid: [sx / light, sy / light],
+            light,
+            pixels,
+        })
+        .collect()
+}
+
 /// Light of `width`-wide rows, finite everywhere.
 fn check_image(light: &[f32], width: usize) -> Result<(), CalibError> {
     if width == 0 || !light.len().is_multiple_of(width) {
@@ -361,6 +404,41 @@ mod tests {
             let err = ((spot.centroid[0] - cx).powi(2) + (spot.centroid[1] - cy).powi(2)).sqrt();
             assert!(err < 0.3, "{spot:?} against ({cx}, {cy}): {err:.3} px");
         }
+    }
+
+    #[test]
+    fn a_spot_split_by_an_edge_is_merged_back_to_its_centroid() {
+        // A blurred disc cut in two by a dark gap two pixels wide through its centre (an edge),
+        // and a second spot 60 px away that must stay apart.
+        let (w, h) = (140usize, 60usize);
+        let (cut, other) = ((40.0, 30.3), (100.4, 28.7));
+        let mut img = blurred_disc(w, h, cut, 4.0, 2.5);
+        for (v, s) in img.iter_mut().zip(blurred_disc(w, h, other, 4.0, 2.5)) {
+            *v += s;
+        }
+        for y in 0..h {
+            img[y * w + 39] = 0.0;
+            img[y * w + 40] = 0.0;
+        }
+        let peak = img.iter().copied().fold(0.0f32, f32::max);
+        let found = spots(&img, w, 0.05 * peak, 4).expect("spots");
+        assert_eq!(found.len(), 3, "{found:?}");
+        let merged = merge_spots(&found, 16.0);
+        assert_eq!(merged.len(), 2, "{merged:?}");
+        for (cx, cy) in [cut, other] {
+            let err = merged
+                .iter()
+                .map(|s| ((s.centroid[0] - cx).powi(2) + (s.centroid[1] - cy).powi(2)).sqrt())
+                .fold(f64::INFINITY, f64::min);
+            assert!(err < 0.3, "{merged:?} against ({cx}, {cy}): {err:.3} px");
+        }
+        let total: f64 = found.iter().map(|s| s.light).sum();
+        let kept: f64 = merged.iter().map(|s| s.light).sum();
+        assert!(
+            (total - kept).abs() < 1e-9 * total,
+            "{total} against {kept}"
+        );
+        assert!(merge_spots(&[], 16.0).is_empty());
     }
 
     #[test]

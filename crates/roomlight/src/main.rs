@@ -283,6 +283,9 @@ enum BenchCommand {
         /// The small test room instead of the lab.
         #[arg(long)]
         quick: bool,
+        /// Only the large aperture's light-weighted centroids (a minute or two on the lab).
+        #[arg(long)]
+        area_only: bool,
     },
     // Its help says the sizes it runs, from the constants it runs them from.
     #[command(about = net_about(), long_about = None)]
@@ -477,7 +480,7 @@ fn bench(args: BenchArgs) -> Result<()> {
         Some(BenchCommand::Net { quick, json }) => {
             bench::net::run(quick, json.as_deref()).map(|_| ())
         }
-        Some(BenchCommand::Calib { quick }) => bench::calib::run(quick),
+        Some(BenchCommand::Calib { quick, area_only }) => bench::calib::run(quick, area_only),
         Some(BenchCommand::Console { nodes, rounds }) => {
             bench::console::run(nodes, rounds).map(|_| ())
         }

@@ -105,7 +105,9 @@ fn scene(quick: bool) -> Result<roomlight_sim::Scene> {
     })
 }
 
-pub fn run(quick: bool) -> Result<()> {
+/// The calibration bench on the lab (or the small room, `quick`); `area_only`: only the large
+/// aperture's light-weighted centroids.
+pub fn run(quick: bool, area_only: bool) -> Result<()> {
     let t0 = Instant::now();
     let room = Room::build(scene(quick)?).context("building the room")?;
     println!(
@@ -113,6 +115,14 @@ pub fn run(quick: bool) -> Result<()> {
         room.scene().name,
         t0.elapsed().as_secs_f64()
     );
+    if area_only {
+        for k in 0..room.projectors().len() {
+            if room.projectors()[k].kind == ProjectorKind::LargeAperture {
+                area::centroids(&room, k)?;
+            }
+        }
+        return Ok(());
+    }
     bringup::cold_start(&room)?;
     bringup::hot_join(&room)?;
     let (decoded_all, decode_secs) = structured_light(&room)?;
