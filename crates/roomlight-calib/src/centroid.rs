@@ -126,10 +126,12 @@ pub fn merge_spots(spots: &[Spot], radius: f64) -> Vec<Spot> {
             }
         }
     }
-    let mut acc: Vec<Option<(f64, f64, f64, usize)>> = vec![None; n];
+    // Per group: light-weighted sums, light, pixels, and the first piece's centroid.
+    type Group = (f64, f64, f64, usize, [f64; 2]);
+    let mut acc: Vec<Option<Group>> = vec![None; n];
     for (i, s) in spots.iter().enumerate() {
         let r = root(&mut parent, i);
-        let a = acc[r].get_or_insert((0.0, 0.0, 0.0, 0));
+        let a = acc[r].get_or_insert((0.0, 0.0, 0.0, 0, s.centroid));
         a.0 += s.light * s.centroid[0];
         a.1 += s.light * s.centroid[1];
         a.2 += s.light;
@@ -137,8 +139,13 @@ pub fn merge_spots(spots: &[Spot], radius: f64) -> Vec<Spot> {
     }
     acc.into_iter()
         .flatten()
-        .map(|(sx, sy, light, pixels)| Spot {
-            centroid: [sx / light, sy / light],
+        .map(|(sx, sy, light, pixels, first)| Spot {
+            // Spots carry light above a floor; a group without any keeps its first centroid.
+            centroid: if light > 0.0 {
+                [sx / light, sy / light]
+            } else {
+                first
+            },
             light,
             pixels,
         })
@@ -439,6 +446,22 @@ mod tests {
             "{total} against {kept}"
         );
         assert!(merge_spots(&[], 16.0).is_empty());
+    }
+
+    #[test]
+    fn merged_spots_without_light_keep_the_first_centroid() {
+        let dark = |x: f64| Spot {
+            centroid: [x, 5.0],
+            light: 0.0,
+            pixels: 3,
+        };
+        let merged = merge_spots(&[dark(10.0), dark(12.0)], 4.0);
+        assert_eq!(merged.len(), 1, "{merged:?}");
+        assert_eq!(
+            merged[0].centroid.map(f64::to_bits),
+            [10.0f64, 5.0].map(f64::to_bits)
+        );
+        assert_eq!(merged[0].pixels, 6);
     }
 
     #[test]
