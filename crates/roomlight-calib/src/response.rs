@@ -48,6 +48,24 @@ impl Response {
         std::array::from_fn(|c| share[c].clamp(0.0, 1.0).powf(1.0 / self.gamma[c]) as f32)
     }
 
+    /// [`Self::to_code`], reusing `last`'s code when `share` is bit for bit its light (a node's
+    /// flat inside, everything outside the nodes: three powers a pixel are most of drawing a
+    /// frame otherwise); `last` becomes this light and its code.
+    pub fn to_code_after(
+        &self,
+        share: LinearRgb,
+        last: &mut Option<(LinearRgb, [f32; 3])>,
+    ) -> [f32; 3] {
+        match *last {
+            Some((seen, code)) if seen.0.map(f64::to_bits) == share.0.map(f64::to_bits) => code,
+            _ => {
+                let code = self.to_code(share);
+                *last = Some((share, code));
+                code
+            }
+        }
+    }
+
     /// The light share of a code.
     pub fn to_share(&self, code: [f32; 3]) -> LinearRgb {
         LinearRgb(std::array::from_fn(|c| {

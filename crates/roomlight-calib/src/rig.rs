@@ -121,19 +121,10 @@ impl Assignment {
                 }
             }
         }
-        // A node's flat inside (and everything outside the nodes) is one light: its code is
-        // worked out once, not three powers a pixel.
-        let mut last: Option<(LinearRgb, [f32; 3])> = None;
+        let mut last = None;
         light
             .into_iter()
-            .map(|l| match last {
-                Some((seen, code)) if seen.0.map(f64::to_bits) == l.0.map(f64::to_bits) => code,
-                _ => {
-                    let code = self.response.to_code(l);
-                    last = Some((l, code));
-                    code
-                }
-            })
+            .map(|l| self.response.to_code_after(l, &mut last))
             .collect()
     }
 }

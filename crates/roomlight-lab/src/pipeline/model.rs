@@ -161,9 +161,7 @@ impl FrameBuilder {
                     .for_each(|(band, chunk)| {
                         let first = band * width * FRAME_ROWS;
                         let mut at = p.row_start[band * FRAME_ROWS] as usize;
-                        // A node's inside (and everything outside the nodes) is one light: its
-                        // code is worked out once (three powers a pixel were most of a capture).
-                        let mut last: Option<(LinearRgb, [f32; 3])> = None;
+                        let mut last = None;
                         for (code, &c) in chunk.iter_mut().zip(&p.counts[first..]) {
                             let end = at + usize::from(c);
                             let mut l = LinearRgb::ZERO;
@@ -172,18 +170,7 @@ impl FrameBuilder {
                                 l += v * f64::from(w);
                             }
                             at = end;
-                            *code = match last {
-                                Some((seen, known))
-                                    if seen.0.map(f64::to_bits) == l.0.map(f64::to_bits) =>
-                                {
-                                    known
-                                }
-                                _ => {
-                                    let fresh = response.to_code(l);
-                                    last = Some((l, fresh));
-                                    fresh
-                                }
-                            };
+                            *code = response.to_code_after(l, &mut last);
                         }
                     });
                 Frame::Image(ProjectorImage {
@@ -272,6 +259,17 @@ mod tests {
             distinct.insert(code.map(f32::to_bits));
         }
         assert!(distinct.len() > 10, "the feathered band has its own codes");
+        // Projectors without nodes show black on every pixel.
+        for frame in &frames[1..] {
+            let Frame::Image(img) = frame else {
+                panic!("an image for every projector");
+            };
+            assert!(
+                img.pixels
+                    .iter()
+                    .all(|c| c.iter().all(|v| v.to_bits() == 0))
+            );
+        }
     }
 
     /// A pixel in 255 nodes is taken, in 256 refused with the projector named; the nodes of

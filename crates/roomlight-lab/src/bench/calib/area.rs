@@ -109,14 +109,7 @@ pub(super) fn centroids(room: &Room, k: usize) -> Result<()> {
             if count < CENTROID_MIN_PIXELS {
                 continue;
             }
-            let nearest = |found: &[Spot]| {
-                found
-                    .iter()
-                    .map(|s| {
-                        ((s.centroid[0] - c[0]).powi(2) + (s.centroid[1] - c[1]).powi(2)).sqrt()
-                    })
-                    .fold(f64::INFINITY, f64::min)
-            };
+            let nearest = |found: &[Spot]| nearest_to(found, c);
             let err = nearest(&found);
             errors.push(err);
             errors_global.push(nearest(&global));
@@ -130,18 +123,11 @@ pub(super) fn centroids(room: &Room, k: usize) -> Result<()> {
             } else {
                 let mut worst = 0.0f64;
                 for (pc, _) in big {
-                    let e = small
-                        .iter()
-                        .map(|s| {
-                            ((s.centroid[0] - pc[0]).powi(2) + (s.centroid[1] - pc[1]).powi(2))
-                                .sqrt()
-                        })
-                        .fold(f64::INFINITY, f64::min);
+                    let e = nearest_to(&small, *pc);
                     piece_errors.push(e);
                     worst = worst.max(e);
                 }
                 split_worst.push(worst);
-                let top = diff.iter().copied().fold(0.0f32, f32::max);
                 if err > 1.0 && diff[(c[1] as usize) * cw + c[0] as usize] < 0.05 * top {
                     split_dark += 1;
                 }
@@ -255,6 +241,14 @@ const CENTROID_WINDOW: usize = 12;
 const CENTROID_SHARE: f32 = 0.1;
 /// The least floor, in standard deviations of the capture's noise.
 const CENTROID_NOISE: f32 = 6.0;
+
+/// Distance from `point` to the nearest spot's centroid (infinite when there is none).
+fn nearest_to(spots: &[Spot], point: [f64; 2]) -> f64 {
+    spots
+        .iter()
+        .map(|s| ((s.centroid[0] - point[0]).powi(2) + (s.centroid[1] - point[1]).powi(2)).sqrt())
+        .fold(f64::INFINITY, f64::min)
+}
 
 /// Spots closer than this (camera pixels, centroid to centroid) are merged into one: more than
 /// a footprint's pieces lie apart, less than footprints shown together do.
