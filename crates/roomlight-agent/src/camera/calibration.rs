@@ -331,7 +331,11 @@ async fn over_the_wire(
     let lit = !shared.registry.lock().projectors().dark();
     let claimed = claims_beside(shared, survey, &batch);
     let first = shared.live().problem.nodes() as u32;
-    let settings = Settings::default();
+    let settings = if lit {
+        Settings::default().lit_room()
+    } else {
+        Settings::default()
+    };
     let mut rig = WireRig::new(shared, eye, batch);
     let mut procedure = Procedure::new(&mut rig, settings, notes.reporter(shared));
     let live = procedure.rig().projectors();
@@ -365,7 +369,12 @@ async fn over_the_wire(
     let (columns, measurable) = if lit {
         let mut hot = Vec::with_capacity(placed.len());
         for p in &placed {
-            hot.push(procedure.hot(&setup, &p.projector.id, &p.ids()).await?);
+            // Every projector of the batch black, the others lit: the room as `dark` saw it.
+            hot.push(
+                procedure
+                    .hot(&setup, &p.projector.id, &p.ids(), Some(&dark))
+                    .await?,
+            );
         }
         hot_columns(survey, &excluded, &hot)?
     } else {
@@ -417,7 +426,9 @@ async fn hot_images(
     let excluded = shared.live().excluded.clone();
     let mut rig = WireRig::new(shared, eye, vec![projector.to_string()]);
     let mut procedure = Procedure::new(&mut rig, Settings::default(), notes.reporter(shared));
-    let hot = procedure.hot(&setup(survey), projector, &nodes).await?;
+    let hot = procedure
+        .hot(&setup(survey), projector, &nodes, None)
+        .await?;
     let (columns, measurable) = hot_columns(survey, &excluded, std::slice::from_ref(&hot))?;
     Ok(Outcome {
         placed: Vec::new(),

@@ -283,13 +283,16 @@ pub struct SecondPass {
 /// the units of a normal one. The exposure comes from the masked white at the normal exposure
 /// ([`second_pass_exposure`], at most `longest`); the pass decodes only the pixels the first
 /// found reached but could not decode and merges them into `first`
-/// ([`Correspondence::merge_second_pass`]).
+/// ([`Correspondence::merge_second_pass`]). With `single` the bit patterns are shown without
+/// their inverses ([`super::Captures::single_shot`]).
+#[allow(clippy::too_many_arguments)]
 pub fn second_pass<E: From<CalibError>>(
     manifest: &Manifest,
     config: &DecodeConfig,
     first: &mut Correspondence,
     saturation: f32,
     longest: f32,
+    single: bool,
     mut shoot: impl FnMut(&LinearImage, f32) -> Result<LinearImage, E>,
 ) -> Result<Option<SecondPass>, E> {
     let Some(plan) = SecondPassPlan::new(config, first) else {
@@ -299,11 +302,14 @@ pub fn second_pass<E: From<CalibError>>(
     let exposure = plan.exposure(first, &white, saturation, longest)?;
     let mut captures = Reduced::new();
     for p in &manifest.patterns {
+        if single && matches!(p.pattern, Pattern::Bit { inverse: true, .. }) {
+            continue;
+        }
         captures.add(p, &shoot(&plan.pattern(manifest, p.pattern)?, exposure)?)?;
     }
-    Ok(Some(
-        plan.finish(manifest, config, first, exposure, &captures)?,
-    ))
+    Ok(Some(plan.finish(
+        manifest, config, first, exposure, &captures, single,
+    )?))
 }
 
 /// A [`second_pass`] decided on, taken apart for callers that show and capture on their own
@@ -379,8 +385,9 @@ impl SecondPassPlan {
     }
 
     /// Decodes the pattern captures (every pattern of `manifest`, taken at `exposure`, reduced
-    /// as they arrived) over the pixels the first pass left unknown and merges them into
-    /// `first` ([`Correspondence::merge_second_pass`]).
+    /// as they arrived; without the inverses when `single`, [`super::Captures::single_shot`])
+    /// over the pixels the first pass left unknown and merges them into `first`
+    /// ([`Correspondence::merge_second_pass`]).
     pub fn finish(
         &self,
         manifest: &Manifest,
@@ -388,13 +395,20 @@ impl SecondPassPlan {
         first: &mut Correspondence,
         exposure: f32,
         captures: &Reduced,
+        single: bool,
     ) -> Result<SecondPass, CalibError> {
+        let mut made = Vec::new();
+        let captures_read = if single {
+            captures.captures_single_shot(manifest, &mut made)?
+        } else {
+            captures.captures(manifest)?
+        };
         let second = decode_captures(
             manifest,
             &config.exposed_longer(exposure),
             Some(&self.todo),
             false,
-            &captures.captures(manifest)?,
+            &captures_read,
         )?;
         let taken = first.merge_second_pass(&second, &self.shown)?;
         Ok(SecondPass {

@@ -59,6 +59,11 @@ pub struct Settings {
     /// the projector) averages them away; it needs plain Gray code, as a defocused
     /// projector does ([`Settings::coding`]).
     pub fine_stripes: bool,
+    /// Capture each bit pattern of an XOR-coded projector once, without its inverse: half
+    /// the structured light's captures ([`crate::graycode::Captures::single_shot`]). On the
+    /// photographic tests it leaves 0.5% more lit pixels unknown and none wrong. Plain Gray
+    /// code always shows both.
+    pub single_shot: bool,
 }
 
 impl Default for Settings {
@@ -72,6 +77,7 @@ impl Default for Settings {
             scheme: Scheme::Hadamard,
             nodes: NodeConfig::default(),
             fine_stripes: true,
+            single_shot: true,
         }
     }
 }
@@ -85,6 +91,25 @@ impl Settings {
         } else {
             Coding::Gray
         }
+    }
+
+    /// The settings for projectors calibrated while others light the room: every bit pattern
+    /// with its inverse. Shown once, a difference is 2·pattern − white, so the white must not
+    /// clip and the others' light must stay as the dark and white captures saw it; the
+    /// others' light makes the first likelier and a pair needs neither. Over the wire the
+    /// rendered room's hot join shown once converged only after 69 captures instead of
+    /// under 30 (the processes test); pairs there as before.
+    pub fn lit_room(self) -> Self {
+        Self {
+            single_shot: false,
+            ..self
+        }
+    }
+
+    /// Whether projector `p`'s bit patterns are shown without their inverses
+    /// ([`Settings::single_shot`]; XOR coding only).
+    pub fn shows_once(&self, p: &Projector) -> bool {
+        self.single_shot && self.coding(p) == Coding::Xor04
     }
 
     /// The decoder for a projector: strict for a large aperture, whose blur makes a stripe

@@ -3,8 +3,13 @@
 //! shown or photos come from.
 
 use super::*;
-use crate::graycode::{Captures, Pattern, Reduced, brightest, decode_captures, less_black};
+use crate::graycode::{
+    Captures, Pattern, PatternFile, Reduced, brightest, decode_captures, less_black,
+    second_pass_exposure,
+};
 use std::sync::Arc;
+
+mod coding;
 
 /// Runs the steps of calibration on a rig, counting captures and reporting progress.
 pub struct Procedure<'a, R: Rig> {
@@ -128,158 +133,6 @@ impl<'a, R: Rig> Procedure<'a, R> {
         Ok(decoded)
     }
 
-    /// The first structured-light pass on `projectors` (see [`Self::structured_light`]):
-    /// those whose footprints do not overlap coded at the same time, each decoding the camera
-    /// pixels it lights most, its direct light elsewhere zeroed ([`disown`]). In the order of
-    /// `projectors`.
-    pub async fn code(
-        &mut self,
-        projectors: &[Projector],
-        dark: &LinearImage,
-        whites: &[LinearImage],
-    ) -> Result<Vec<Decoded>, ProcedureError> {
-        let manifests: Vec<Manifest> = projectors
-            .iter()
-            .map(|p| Manifest::with_coding(p.width, p.height, self.settings.coding(p)))
-            .collect::<Result<_, _>>()?;
-        let groups = coding_groups(projectors, dark, whites, &self.settings);
-        let planned = groups
-            .iter()
-            .map(|g| {
-                g.iter()
-                    .map(|&k| bit_count(&manifests[k]))
-                    .max()
-                    .unwrap_or(0)
-            })
-            .sum();
-        self.report(Event::Stage {
-            stage: Stage::StructuredLight,
-            captures: planned,
-        });
-        self.report(Event::Grouped {
-            groups: groups
-                .iter()
-                .map(|g| g.iter().map(|&k| projectors[k].id.clone()).collect())
-                .collect(),
-        });
-        let dark_intensity = dark.intensity();
-        let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
-        let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
-        for group in &groups {
-            let white = group_white(dark, &group.iter().map(|&k| &whites[k]).collect::<Vec<_>>());
-            let decoded = self
-                .code_group(
-                    projectors,
-                    &manifests,
-                    group,
-                    &gains,
-                    (&dark_intensity, &white),
-                )
-                .await?;
-            for (&k, c) in group.iter().zip(decoded) {
-                corrs[k] = Some(c);
-            }
-        }
-        Ok(projectors
-            .iter()
-            .zip(corrs)
-            .filter_map(|(p, corr)| {
-                corr.map(|corr| Decoded {
-                    projector: p.clone(),
-                    corr,
-                    second: None,
-                })
-            })
-            .collect())
-    }
-
-    /// Shows one group's bit patterns slot by slot (member `k` its own bit pattern `j`, black
-    /// once it has no more), captures each, leaves the members black and decodes each. The
-    /// manifests' white and black are not shown again: they are the group's white
-    /// ([`group_white`]) and the dark capture (`dark`, its intensity), captured before in the
-    /// same state of the room. Each capture is reduced as it arrives to its intensity less
-    /// dark's, all the decoder reads of it ([`less_black`]): 3.1 MB instead of 9.4 for the
-    /// lab's camera, some 44 per group.
-    async fn code_group(
-        &mut self,
-        projectors: &[Projector],
-        manifests: &[Manifest],
-        group: &[usize],
-        gains: &[Vec<f32>],
-        (dark, white): (&[f32], &LinearImage),
-    ) -> Result<Vec<Correspondence>, ProcedureError> {
-        let bits: Vec<Vec<Pattern>> = manifests.iter().map(bit_patterns).collect();
-        let longest = group.iter().map(|&k| bits[k].len()).max().unwrap_or(0);
-        let mut captures = Vec::with_capacity(longest);
-        for j in 0..longest {
-            let frames: Vec<(&str, Frame)> = group
-                .iter()
-                .map(|&k| {
-                    let frame = match bits[k].get(j) {
-                        Some(&pattern) => Frame::Structured {
-                            pattern,
-                            coding: manifests[k].coding,
-                        },
-                        None => Frame::BLACK,
-                    };
-                    (projectors[k].id.as_str(), frame)
-                })
-                .collect();
-            let image = self
-                .show_and_capture(Stage::StructuredLight, &frames)
-                .await?;
-            let slot = format!("structured-light capture {} of {longest}", j + 1);
-            image.expect_size(white.width, white.height, &slot)?;
-            captures.push(less_black(&image, dark));
-        }
-        let members: Vec<Projector> = group.iter().map(|&k| projectors[k].clone()).collect();
-        self.black(&members).await?;
-        let jobs: Vec<(Projector, Manifest, DecodeConfig, Option<Vec<bool>>)> = group
-            .iter()
-            .zip(owned_pixels(group, gains))
-            .map(|(&k, ours)| {
-                let p = &projectors[k];
-                // Clipping here is planned around by the second passes, not refused.
-                let config = DecodeConfig {
-                    refuse_saturated: false,
-                    ..self.settings.decoder(p)
-                };
-                (p.clone(), manifests[k].clone(), config, ours)
-            })
-            .collect();
-        let group_captures = GroupCaptures {
-            size: (white.width, white.height),
-            white: white.intensity(),
-            white_top: brightest(white),
-            dark: dark.to_vec(),
-            bits: captures,
-        };
-        let corrs = self
-            .rig
-            .offload(move || {
-                jobs.iter()
-                    .map(|(p, m, config, ours)| {
-                        let mut corr = group_captures.decode(m, config, ours.as_deref()).map_err(
-                            |source| ProcedureError::Projector {
-                                projector: p.id.clone(),
-                                source,
-                            },
-                        )?;
-                        disown(&mut corr, ours.as_deref());
-                        Ok::<_, ProcedureError>(corr)
-                    })
-                    .collect::<Result<Vec<_>, _>>()
-            })
-            .await??;
-        for (p, corr) in members.iter().zip(&corrs) {
-            self.report(Event::Decoded {
-                projector: p.id.clone(),
-                share: corr.decoded_share(),
-            });
-        }
-        Ok(corrs)
-    }
-
     /// A second structured-light pass on standard projector `p` coded with XOR-04 (shown
     /// alone; the others keep their light) where [`SecondPassPlan::new`] finds it worth its
     /// captures and the rig can show masked patterns: plain Gray code's coarse stripes do not
@@ -301,9 +154,16 @@ impl<'a, R: Rig> Procedure<'a, R> {
             }
             _ => return Ok(None),
         };
+        // The masked patterns without their inverses where the first pass showed none.
+        let once = self.settings.shows_once(p);
+        let patterns: Vec<&PatternFile> = manifest
+            .patterns
+            .iter()
+            .filter(|f| !(once && matches!(f.pattern, Pattern::Bit { inverse: true, .. })))
+            .collect();
         self.report(Event::Stage {
             stage: Stage::SecondPass,
-            captures: manifest.patterns.len() + 1,
+            captures: patterns.len() + 1,
         });
         let refused = |source| ProcedureError::Projector {
             projector: p.id.clone(),
@@ -324,14 +184,14 @@ impl<'a, R: Rig> Procedure<'a, R> {
         drop(white);
         // Reduced as they arrive: the decoder reads one intensity per capture.
         let mut captures = Reduced::new();
-        for f in &manifest.patterns {
+        for f in patterns {
             self.rig.show(&[(&p.id, masked(f.pattern))]).await?;
             let image = self.capture(Stage::SecondPass, exposure).await?;
             captures.add(f, &image).map_err(refused)?;
         }
         self.rig.show(&[(&p.id, Frame::BLACK)]).await?;
         let pass = plan
-            .finish(manifest, &config, corr, exposure, &captures)
+            .finish(manifest, &config, corr, exposure, &captures, once)
             .map_err(refused)?;
         self.report(Event::SecondPass {
             projector: p.id.clone(),
@@ -429,22 +289,27 @@ impl<'a, R: Rig> Procedure<'a, R> {
         Ok(Columns { ids, attenuation })
     }
 
-    /// Hot calibration of projector `id`'s `nodes` (DESIGN §4.7): its nodes all black, then
-    /// each alone at white, one capture each, while every other projector keeps its light.
-    /// Leaves its nodes black.
+    /// Hot calibration of projector `id`'s `nodes` (DESIGN §4.7): its nodes all black (the
+    /// capture `black` when the caller took one in that state, else one now), then each alone
+    /// at white, one capture each, while every other projector keeps its light. Leaves its
+    /// nodes black.
     pub async fn hot(
         &mut self,
         setup: &Setup,
         id: &str,
         nodes: &[u32],
+        black: Option<&LinearImage>,
     ) -> Result<Hot, ProcedureError> {
         self.report(Event::Stage {
             stage: Stage::Hot,
-            captures: nodes.len() + 1,
+            captures: nodes.len() + usize::from(black.is_none()),
         });
         let one = [(id.to_string(), nodes.to_vec())];
         let off = node_frames(&one, |_| false);
-        let image = self.show_and_capture(Stage::Hot, &borrow(&off)).await?;
+        let image = match black {
+            Some(image) => image.clone(),
+            None => self.show_and_capture(Stage::Hot, &borrow(&off)).await?,
+        };
         let black = setup.sample_room(&image)?;
         let mut measurable: Vec<bool> = black.iter().map(|s| s.status == PatchStatus::Ok).collect();
         let (mut columns, mut sigma) = (Vec::new(), Vec::new());
@@ -516,10 +381,10 @@ impl<'a, R: Rig> Procedure<'a, R> {
     }
 
     /// Calibrates live projector `id` while the others keep their light: its black offset
-    /// and white, structured light (pattern against inverse, so the others' light cancels),
-    /// a second pass where needed, its response, its nodes beside the projectors already lit
-    /// (`claimed`, the sum of their claims) with ids from `first_node`, and its attenuation
-    /// measured hot. Leaves its nodes black.
+    /// and white, structured light (pattern against inverse, [`Settings::lit_room`]), a second
+    /// pass where needed, its response, its nodes beside the projectors
+    /// already lit (`claimed`, the sum of their claims) with ids from `first_node`, and its
+    /// attenuation measured hot against the dark capture. Leaves its nodes black.
     pub async fn join(
         &mut self,
         setup: &Setup,
@@ -536,8 +401,12 @@ impl<'a, R: Rig> Procedure<'a, R> {
         let one = std::slice::from_ref(&projector);
         let dark = self.dark(one).await?;
         let whites = self.whites(one).await?;
-        let decoded = self.structured_light(one, &dark, &whites).await?;
-        let measured = self.responses(decoded, one, &dark, &whites).await?;
+        // Pattern and inverse in a lit room ([`Settings::lit_room`]).
+        let settings = self.settings;
+        self.settings = settings.lit_room();
+        let decoded = self.structured_light(one, &dark, &whites).await;
+        self.settings = settings;
+        let measured = self.responses(decoded?, one, &dark, &whites).await?;
         let nodes = self.settings.nodes;
         let placed = place(
             setup,
@@ -553,104 +422,16 @@ impl<'a, R: Rig> Procedure<'a, R> {
             return Err(RigError::Gone(id.to_string()).into());
         };
         self.assign(std::slice::from_ref(&placed)).await?;
-        let hot = self.hot(setup, &placed.projector.id, &placed.ids()).await?;
+        // Its nodes all black, the others lit: the room as its dark capture saw it.
+        let hot = self
+            .hot(setup, &placed.projector.id, &placed.ids(), Some(&dark))
+            .await?;
         Ok(Joined {
             measured,
             placed,
             hot,
             captures: self.captures,
         })
-    }
-}
-
-/// A projector coded together with others decodes only the camera pixels its white raises
-/// most (`ours`); the direct light its captures show elsewhere is the other members' (all were
-/// shown at once). It is zeroed there, so that the second-pass plan does not take another
-/// member's footprint for its own reached but unknown pixels: over the wire that cost every
-/// member of a group a second pass that took nothing (the apart room: 130 captures together
-/// against 93 one after the other).
-fn disown(corr: &mut Correspondence, ours: Option<&[bool]>) {
-    let Some(ours) = ours else { return };
-    for (direct, &mine) in corr.direct.iter_mut().zip(ours) {
-        if !mine {
-            *direct = 0.0;
-        }
-    }
-}
-
-/// One coding group's captures as its members' decoders read them: the group's white and the
-/// dark capture as intensities (and white's brightest channel), and each slot's capture less
-/// dark ([`less_black`]), slot `j` showing every member's bit pattern `j`.
-struct GroupCaptures {
-    size: (u32, u32),
-    white: Vec<f32>,
-    white_top: Vec<f32>,
-    dark: Vec<f32>,
-    bits: Vec<Vec<f32>>,
-}
-
-impl GroupCaptures {
-    /// Decodes the member with manifest `m` over the camera pixels `ours` marks
-    /// ([`crate::graycode::decode_where`]'s checks).
-    fn decode(
-        &self,
-        m: &Manifest,
-        config: &DecodeConfig,
-        ours: Option<&[bool]>,
-    ) -> Result<Correspondence, CalibError> {
-        let slots = bit_patterns(m);
-        let captures = Captures::new(
-            m,
-            self.size,
-            (&self.white, &self.dark, &self.white_top),
-            |pattern| {
-                slots
-                    .iter()
-                    .position(|q| *q == pattern)
-                    .and_then(|j| self.bits.get(j))
-                    .map(Vec::as_slice)
-                    .ok_or_else(|| CalibError::File {
-                        file: format!("{pattern:?}"),
-                        problem: format!("not captured ({} slots)", self.bits.len()),
-                    })
-            },
-        )?;
-        decode_captures(m, config, ours, true, &captures)
-    }
-}
-
-/// A manifest's bit patterns (pattern and inverse), in order: what structured light shows,
-/// white and black being the dark and white captures taken before.
-fn bit_patterns(m: &Manifest) -> Vec<Pattern> {
-    m.patterns
-        .iter()
-        .map(|f| f.pattern)
-        .filter(|p| matches!(p, Pattern::Bit { .. }))
-        .collect()
-}
-
-fn bit_count(m: &Manifest) -> usize {
-    bit_patterns(m).len()
-}
-
-/// A group's white as one capture of all its members at white would show it: `dark` plus
-/// each member's white's rise above it (light adds; their footprints are disjoint).
-fn group_white(dark: &LinearImage, whites: &[&LinearImage]) -> LinearImage {
-    match whites {
-        [one] => (*one).clone(),
-        _ => {
-            let mut white = dark.clone();
-            for w in whites {
-                for (o, (p, d)) in white
-                    .pixels
-                    .iter_mut()
-                    .zip(w.pixels.iter().zip(&dark.pixels))
-                {
-                    *o = std::array::from_fn(|c| o[c] + p[c] - d[c]);
-                }
-            }
-            white
-        }
     }
 }
 
@@ -694,99 +475,4 @@ fn node_frames(owners: &[(String, Vec<u32>)], on: impl Fn(usize) -> bool) -> Vec
             (id.clone(), Frame::Nodes(values))
         })
         .collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::graycode::decode_where;
-    use crate::graycode::synthetic::{Lit, capture};
-
-    fn same_bits(a: &[f32], b: &[f32]) -> bool {
-        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
-    }
-
-    /// A coding group decoded from its captures reduced as they arrived ([`GroupCaptures`])
-    /// gives, to the bit, what decoding the whole images gave before (the lookup of
-    /// `code_group` up to ed2da48, kept here as the reference).
-    #[test]
-    fn a_group_decodes_from_reduced_captures_as_from_the_images() {
-        let size = (72, 30);
-        let manifests = [
-            Manifest::new(40, 24).expect("manifest"),
-            Manifest::new(20, 12).expect("manifest"),
-        ];
-        let lit = [
-            Lit {
-                manifest: &manifests[0],
-                area: (2, 1, 40, 29),
-            },
-            Lit {
-                manifest: &manifests[1],
-                area: (36, 3, 70, 27),
-            },
-        ];
-        let dark = capture(size, &lit, &[None, None], 1000);
-        let whites: Vec<LinearImage> = (0..2)
-            .map(|k| {
-                let shown = [0, 1].map(|o| (o == k).then_some(Pattern::White));
-                capture(size, &lit, &shown, 1001 + k as u64)
-            })
-            .collect();
-        let white = group_white(&dark, &whites.iter().collect::<Vec<_>>());
-        let slots: Vec<Vec<Pattern>> = manifests.iter().map(bit_patterns).collect();
-        let longest = slots.iter().map(Vec::len).max().unwrap_or(0);
-        assert!(
-            slots[1].len() < longest,
-            "the members have different bit counts"
-        );
-        let images: Vec<LinearImage> = (0..longest)
-            .map(|j| {
-                let shown = [0, 1].map(|k| slots[k].get(j).copied());
-                capture(size, &lit, &shown, j as u64)
-            })
-            .collect();
-        let dark_intensity = dark.intensity();
-        let group = GroupCaptures {
-            size,
-            white: white.intensity(),
-            white_top: brightest(&white),
-            dark: dark_intensity.clone(),
-            bits: images
-                .iter()
-                .map(|i| less_black(i, &dark_intensity))
-                .collect(),
-        };
-        let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
-        for (k, ours) in owned_pixels(&[0, 1], &gains).into_iter().enumerate() {
-            let m = &manifests[k];
-            let config = DecodeConfig {
-                refuse_saturated: false,
-                ..DecodeConfig::default()
-            };
-            let before = decode_where(m, &config, ours.as_deref(), |f| {
-                Ok(match f.pattern {
-                    Pattern::White => &white,
-                    Pattern::Black => &dark,
-                    Pattern::Bit { .. } => {
-                        let j = bit_patterns(m)
-                            .iter()
-                            .position(|q| *q == f.pattern)
-                            .unwrap_or(0);
-                        &images[j]
-                    }
-                })
-            })
-            .expect("decode images");
-            let after = group
-                .decode(m, &config, ours.as_deref())
-                .expect("decode reduced");
-            assert!(before.decoded_share() > 0.2, "member {k}");
-            assert_eq!(before.map, after.map, "member {k}");
-            assert!(same_bits(&before.confidence, &after.confidence));
-            assert!(same_bits(&before.direct, &after.direct));
-            assert!(same_bits(&before.global, &after.global));
-            assert_eq!(before.reach.to_bits(), after.reach.to_bits());
-        }
-    }
 }

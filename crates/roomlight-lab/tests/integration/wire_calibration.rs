@@ -249,7 +249,8 @@ async fn projectors_with_disjoint_footprints_joining_together_are_coded_at_the_s
         together.captures, left.captures, right.captures
     );
     // Together saves at least one set of structured light: the smaller projector's bit
-    // patterns (white and black are the footprint captures, one per projector either way).
+    // patterns, shown once in a dark room (white and black are the footprint captures, one
+    // per projector either way).
     let patterns = apart_scene()
         .projectors
         .iter()
@@ -258,7 +259,12 @@ async fn projectors_with_disjoint_footprints_joining_together_are_coded_at_the_s
                 .expect("manifest")
                 .patterns
                 .iter()
-                .filter(|f| matches!(f.pattern, roomlight_calib::graycode::Pattern::Bit { .. }))
+                .filter(|f| {
+                    matches!(
+                        f.pattern,
+                        roomlight_calib::graycode::Pattern::Bit { inverse: false, .. }
+                    )
+                })
                 .count() as u64
         })
         .min()

@@ -1,0 +1,515 @@
+//! The structured-light pass of a group of projectors coded at the same time: its slots
+//! shown and captured, each member decoded from them (shown once, or with inverses where
+//! once left too much unknown), its direct light elsewhere disowned.
+
+use super::*;
+
+impl<R: Rig> Procedure<'_, R> {
+    /// The first structured-light pass on `projectors` (see [`Self::structured_light`]):
+    /// those whose footprints do not overlap coded at the same time, each decoding the camera
+    /// pixels it lights most, its direct light elsewhere zeroed ([`disown`]). In the order of
+    /// `projectors`.
+    pub async fn code(
+        &mut self,
+        projectors: &[Projector],
+        dark: &LinearImage,
+        whites: &[LinearImage],
+    ) -> Result<Vec<Decoded>, ProcedureError> {
+        let manifests: Vec<Manifest> = projectors
+            .iter()
+            .map(|p| Manifest::with_coding(p.width, p.height, self.settings.coding(p)))
+            .collect::<Result<_, _>>()?;
+        let groups = coding_groups(projectors, dark, whites, &self.settings);
+        let once: Vec<bool> = projectors
+            .iter()
+            .map(|p| self.settings.shows_once(p))
+            .collect();
+        let planned = groups
+            .iter()
+            .map(|g| {
+                g.iter()
+                    .map(|&k| bit_patterns(&manifests[k], once[k]).len())
+                    .max()
+                    .unwrap_or(0)
+            })
+            .sum();
+        self.report(Event::Stage {
+            stage: Stage::StructuredLight,
+            captures: planned,
+        });
+        self.report(Event::Grouped {
+            groups: groups
+                .iter()
+                .map(|g| g.iter().map(|&k| projectors[k].id.clone()).collect())
+                .collect(),
+        });
+        let dark_intensity = dark.intensity();
+        let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
+        let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
+        for group in &groups {
+            let white = group_white(dark, &group.iter().map(|&k| &whites[k]).collect::<Vec<_>>());
+            let decoded = self
+                .code_group(
+                    projectors,
+                    (&manifests, &once),
+                    group,
+                    &gains,
+                    (&dark_intensity, &white),
+                )
+                .await?;
+            for (&k, c) in group.iter().zip(decoded) {
+                corrs[k] = Some(c);
+            }
+        }
+        Ok(projectors
+            .iter()
+            .zip(corrs)
+            .filter_map(|(p, corr)| {
+                corr.map(|corr| Decoded {
+                    projector: p.clone(),
+                    corr,
+                    second: None,
+                })
+            })
+            .collect())
+    }
+
+    /// Shows one group's bit patterns slot by slot (member `k` its own bit pattern `j`, black
+    /// once it has no more), captures each, leaves the members black and decodes each. The
+    /// manifests' white and black are not shown again: they are the group's white
+    /// ([`group_white`]) and the dark capture (`dark`, its intensity), captured before in the
+    /// same state of the room. Each capture is reduced as it arrives to its intensity less
+    /// dark's, all the decoder reads of it ([`less_black`]): 3.1 MB instead of 9.4 for the
+    /// lab's camera, some 44 per group.
+    async fn code_group(
+        &mut self,
+        projectors: &[Projector],
+        (manifests, once): (&[Manifest], &[bool]),
+        group: &[usize],
+        gains: &[Vec<f32>],
+        (dark, white): (&[f32], &LinearImage),
+    ) -> Result<Vec<Correspondence>, ProcedureError> {
+        let bits: Vec<Vec<Pattern>> = manifests
+            .iter()
+            .zip(once)
+            .map(|(m, &once)| bit_patterns(m, once))
+            .collect();
+        let longest = group.iter().map(|&k| bits[k].len()).max().unwrap_or(0);
+        // A group shown once (every member XOR-coded) is exposed longer where its white leaves
+        // room below the ceiling (its 99.9th percentile at 80% of it, as a second pass's), up
+        // to SINGLE_SHOT_EXPOSURE and the camera's longest; a group with inverses at the
+        // normal exposure.
+        let exposure = if group.iter().all(|&k| once[k]) {
+            let limits = self.rig.camera();
+            let everywhere = vec![true; white.pixels.len()];
+            let longest = SINGLE_SHOT_EXPOSURE.min(limits.longest_exposure);
+            second_pass_exposure(white, &everywhere, limits.saturation, longest)
+        } else {
+            1.0
+        };
+        let captures = self
+            .capture_slots(
+                projectors,
+                (manifests, &bits),
+                group,
+                exposure,
+                (dark, white),
+                false,
+            )
+            .await?;
+        let members: Vec<Projector> = group.iter().map(|&k| projectors[k].clone()).collect();
+        self.black(&members).await?;
+        let jobs: Vec<Job> = group
+            .iter()
+            .zip(owned_pixels(group, gains))
+            .map(|(&k, ours)| {
+                let p = &projectors[k];
+                // Clipping here is planned around by the second passes, not refused.
+                let config = DecodeConfig {
+                    refuse_saturated: false,
+                    ..self.settings.decoder(p)
+                };
+                (p.clone(), manifests[k].clone(), config, ours, once[k])
+            })
+            .collect();
+        let group_captures = GroupCaptures {
+            size: (white.width, white.height),
+            exposure,
+            white: white.intensity(),
+            white_top: brightest(white),
+            dark: dark.to_vec(),
+            bits: captures,
+            inverses: None,
+        };
+        let (mut corrs, mut group_captures) =
+            self.decode_group(jobs.clone(), group_captures).await?;
+        // Shown once, a member that left many reached pixels unknown (the noisier
+        // differences, on dim parts of a footprint with bright ones) is shown its inverses
+        // after all, with the whole group, and every member decoded from the pairs.
+        let weak = jobs
+            .iter()
+            .zip(&corrs)
+            .any(|((.., config, _, once), corr)| {
+                *once && unknown_share(corr, config) > PAIRS_AFTER_SINGLE
+            });
+        if weak {
+            self.report(Event::Stage {
+                stage: Stage::StructuredLight,
+                captures: longest,
+            });
+            let inverses = self
+                .capture_slots(
+                    projectors,
+                    (manifests, &bits),
+                    group,
+                    exposure,
+                    (dark, white),
+                    true,
+                )
+                .await?;
+            self.black(&members).await?;
+            group_captures.inverses = Some(inverses);
+            corrs = self.decode_group(jobs, group_captures).await?.0;
+        }
+        for (p, corr) in members.iter().zip(&corrs) {
+            self.report(Event::Decoded {
+                projector: p.id.clone(),
+                share: corr.decoded_share(),
+            });
+        }
+        Ok(corrs)
+    }
+
+    /// Shows a group's bit patterns slot by slot (member `k` its pattern `j`, or its inverse
+    /// when `inverse`; black once it has no more) and captures each at `exposure`, reduced to
+    /// its intensity less dark.
+    async fn capture_slots(
+        &mut self,
+        projectors: &[Projector],
+        (manifests, bits): (&[Manifest], &[Vec<Pattern>]),
+        group: &[usize],
+        exposure: f32,
+        (dark, white): (&[f32], &LinearImage),
+        inverse: bool,
+    ) -> Result<Vec<Vec<f32>>, ProcedureError> {
+        let longest = group.iter().map(|&k| bits[k].len()).max().unwrap_or(0);
+        let mut captures = Vec::with_capacity(longest);
+        for j in 0..longest {
+            let frames: Vec<(&str, Frame)> = group
+                .iter()
+                .map(|&k| {
+                    let frame = match bits[k].get(j) {
+                        Some(&pattern) => Frame::Structured {
+                            pattern: if inverse { inverted(pattern) } else { pattern },
+                            coding: manifests[k].coding,
+                        },
+                        None => Frame::BLACK,
+                    };
+                    (projectors[k].id.as_str(), frame)
+                })
+                .collect();
+            self.rig.show(&frames).await?;
+            let image = self.capture(Stage::StructuredLight, exposure).await?;
+            let slot = format!("structured-light capture {} of {longest}", j + 1);
+            image.expect_size(white.width, white.height, &slot)?;
+            captures.push(less_black(&image, dark));
+        }
+        Ok(captures)
+    }
+
+    /// Decodes every member of a group off the runtime ([`GroupCaptures::decode`], then
+    /// [`disown`]), handing the captures back.
+    async fn decode_group(
+        &mut self,
+        jobs: Vec<Job>,
+        group_captures: GroupCaptures,
+    ) -> Result<(Vec<Correspondence>, GroupCaptures), ProcedureError> {
+        let out = self
+            .rig
+            .offload(move || {
+                let corrs = jobs
+                    .iter()
+                    .map(|(p, m, config, ours, once)| {
+                        let mut corr = group_captures
+                            .decode(m, config, ours.as_deref(), *once)
+                            .map_err(|source| ProcedureError::Projector {
+                                projector: p.id.clone(),
+                                source,
+                            })?;
+                        disown(&mut corr, ours.as_deref());
+                        Ok::<_, ProcedureError>(corr)
+                    })
+                    .collect::<Result<Vec<_>, _>>();
+                corrs.map(|c| (c, group_captures))
+            })
+            .await??;
+        Ok(out)
+    }
+}
+
+/// The longest a group's bit patterns shown once are exposed, a multiple of the normal
+/// exposure (the white's): a pattern − inverse pair has twice one capture's noise variance, a
+/// single shot against white (2·pattern − white) four times a pattern's and white's once, so
+/// at twice the exposure a read-noise-limited difference is as clean as a pair's. Only where
+/// the group's white leaves the room: at a fixed ×2 a lit pattern that clipped where white
+/// nearly did lost its sign (the lab's floor-right: 0.32% of its decoded pixels off by more
+/// than 2; the texture projector, at full power, not seen at all).
+const SINGLE_SHOT_EXPOSURE: f32 = 2.0;
+
+/// A member shown once whose decode leaves more of its reached pixels unknown than this share
+/// of its decoded ones ([`Correspondence::reached_unknown`]) has its group shown the inverses
+/// too. Measured on the lab (`roomlight bench calib`, 2026-11-28): shown once, the walls left
+/// 0.00–0.55% and the floor projectors 1.19% and 5.93% (their bright near floor keeps the
+/// exposure at ×1, and their far parts are dim).
+const PAIRS_AFTER_SINGLE: f64 = 0.01;
+
+/// One member's decode: the projector, its manifest, decoder, the camera pixels it owns in
+/// its group and whether it was shown once.
+type Job = (Projector, Manifest, DecodeConfig, Option<Vec<bool>>, bool);
+
+/// The share of `corr`'s decoded pixels that are reached but unknown (0 with none decoded).
+fn unknown_share(corr: &Correspondence, config: &DecodeConfig) -> f64 {
+    let unknown = corr.reached_unknown(config).iter().filter(|u| **u).count();
+    let decoded = corr.map.iter().filter(|m| m.is_some()).count();
+    if decoded == 0 {
+        0.0
+    } else {
+        unknown as f64 / decoded as f64
+    }
+}
+
+/// The other one of a bit pattern and its inverse (white and black unchanged).
+fn inverted(pattern: Pattern) -> Pattern {
+    match pattern {
+        Pattern::Bit { axis, bit, inverse } => Pattern::Bit {
+            axis,
+            bit,
+            inverse: !inverse,
+        },
+        other => other,
+    }
+}
+
+/// A projector coded together with others decodes only the camera pixels its white raises
+/// most (`ours`); the direct light its captures show elsewhere is the other members' (all were
+/// shown at once). It is zeroed there, so that the second-pass plan does not take another
+/// member's footprint for its own reached but unknown pixels: over the wire that cost every
+/// member of a group a second pass that took nothing (the apart room: 130 captures together
+/// against 93 one after the other).
+fn disown(corr: &mut Correspondence, ours: Option<&[bool]>) {
+    let Some(ours) = ours else { return };
+    for (direct, &mine) in corr.direct.iter_mut().zip(ours) {
+        if !mine {
+            *direct = 0.0;
+        }
+    }
+}
+
+/// One coding group's captures as its members' decoders read them: the group's white and the
+/// dark capture as intensities (and white's brightest channel), and each slot's capture less
+/// dark ([`less_black`]), slot `j` showing every member's bit pattern `j`.
+struct GroupCaptures {
+    size: (u32, u32),
+    /// The bit captures' exposure, a multiple of white's (scaled back to its units).
+    exposure: f32,
+    white: Vec<f32>,
+    white_top: Vec<f32>,
+    dark: Vec<f32>,
+    bits: Vec<Vec<f32>>,
+    /// The inverse of each slot, where members shown once were shown them after all
+    /// ([`PAIRS_AFTER_SINGLE`]): they then decode from pairs.
+    inverses: Option<Vec<Vec<f32>>>,
+}
+
+impl GroupCaptures {
+    /// Decodes the member with manifest `m` over the camera pixels `ours` marks
+    /// ([`crate::graycode::decode_where`]'s checks); `once`: its bit patterns were shown
+    /// without their inverses ([`Captures::single_shot`]).
+    fn decode(
+        &self,
+        m: &Manifest,
+        config: &DecodeConfig,
+        ours: Option<&[bool]>,
+        once: bool,
+    ) -> Result<Correspondence, CalibError> {
+        let slots = bit_patterns(m, once);
+        let slot = |pattern| {
+            slots
+                .iter()
+                .position(|q| *q == pattern)
+                .and_then(|j| self.bits.get(j))
+                .map(Vec::as_slice)
+                .ok_or_else(|| CalibError::File {
+                    file: format!("{pattern:?}"),
+                    problem: format!("not captured ({} slots)", self.bits.len()),
+                })
+        };
+        let light = (
+            self.white.as_slice(),
+            self.dark.as_slice(),
+            self.white_top.as_slice(),
+        );
+        let mut made = Vec::new();
+        let paired;
+        let config = match (&self.inverses, once) {
+            (Some(_), true) => {
+                paired = config.exposed_longer(self.exposure);
+                &paired
+            }
+            _ => config,
+        };
+        let captures = match (&self.inverses, once) {
+            (Some(inverses), true) => {
+                Captures::new(m, self.size, light, |pattern| match pattern {
+                    Pattern::Bit { inverse: true, .. } => slots
+                        .iter()
+                        .position(|q| *q == inverted(pattern))
+                        .and_then(|j| inverses.get(j))
+                        .map(Vec::as_slice)
+                        .ok_or_else(|| CalibError::File {
+                            file: format!("{pattern:?}"),
+                            problem: format!("not captured ({} inverse slots)", inverses.len()),
+                        }),
+                    _ => slot(pattern),
+                })?
+            }
+            (None, true) => {
+                Captures::single_shot(m, self.size, light, slot, &mut made, self.exposure)?
+            }
+            (_, false) => Captures::new(m, self.size, light, slot)?,
+        };
+        decode_captures(m, config, ours, true, &captures)
+    }
+}
+
+/// A manifest's bit patterns (pattern and inverse; without the inverses when shown `once`),
+/// in order: what structured light shows, white and black being the dark and white captures
+/// taken before.
+fn bit_patterns(m: &Manifest, once: bool) -> Vec<Pattern> {
+    m.patterns
+        .iter()
+        .map(|f| f.pattern)
+        .filter(|p| match p {
+            Pattern::Bit { inverse, .. } => !(once && *inverse),
+            _ => false,
+        })
+        .collect()
+}
+
+/// A group's white as one capture of all its members at white would show it: `dark` plus
+/// each member's white's rise above it (light adds; their footprints are disjoint).
+fn group_white(dark: &LinearImage, whites: &[&LinearImage]) -> LinearImage {
+    match whites {
+        [one] => (*one).clone(),
+        _ => {
+            let mut white = dark.clone();
+            for w in whites {
+                for (o, (p, d)) in white
+                    .pixels
+                    .iter_mut()
+                    .zip(w.pixels.iter().zip(&dark.pixels))
+                {
+                    *o = std::array::from_fn(|c| o[c] + p[c] - d[c]);
+                }
+            }
+            white
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graycode::decode_where;
+    use crate::graycode::synthetic::{Lit, capture};
+
+    fn same_bits(a: &[f32], b: &[f32]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+    }
+
+    /// A coding group decoded from its captures reduced as they arrived ([`GroupCaptures`])
+    /// gives, to the bit, what decoding the whole images gave before (the lookup of
+    /// `code_group` up to ed2da48, kept here as the reference).
+    #[test]
+    fn a_group_decodes_from_reduced_captures_as_from_the_images() {
+        let size = (72, 30);
+        let manifests = [
+            Manifest::new(40, 24).expect("manifest"),
+            Manifest::new(20, 12).expect("manifest"),
+        ];
+        let lit = [
+            Lit {
+                manifest: &manifests[0],
+                area: (2, 1, 40, 29),
+            },
+            Lit {
+                manifest: &manifests[1],
+                area: (36, 3, 70, 27),
+            },
+        ];
+        let dark = capture(size, &lit, &[None, None], 1000);
+        let whites: Vec<LinearImage> = (0..2)
+            .map(|k| {
+                let shown = [0, 1].map(|o| (o == k).then_some(Pattern::White));
+                capture(size, &lit, &shown, 1001 + k as u64)
+            })
+            .collect();
+        let white = group_white(&dark, &whites.iter().collect::<Vec<_>>());
+        let slots: Vec<Vec<Pattern>> = manifests.iter().map(|m| bit_patterns(m, false)).collect();
+        let longest = slots.iter().map(Vec::len).max().unwrap_or(0);
+        assert!(
+            slots[1].len() < longest,
+            "the members have different bit counts"
+        );
+        let images: Vec<LinearImage> = (0..longest)
+            .map(|j| {
+                let shown = [0, 1].map(|k| slots[k].get(j).copied());
+                capture(size, &lit, &shown, j as u64)
+            })
+            .collect();
+        let dark_intensity = dark.intensity();
+        let group = GroupCaptures {
+            size,
+            exposure: 1.0,
+            white: white.intensity(),
+            white_top: brightest(&white),
+            dark: dark_intensity.clone(),
+            bits: images
+                .iter()
+                .map(|i| less_black(i, &dark_intensity))
+                .collect(),
+            inverses: None,
+        };
+        let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
+        for (k, ours) in owned_pixels(&[0, 1], &gains).into_iter().enumerate() {
+            let m = &manifests[k];
+            let config = DecodeConfig {
+                refuse_saturated: false,
+                ..DecodeConfig::default()
+            };
+            let before = decode_where(m, &config, ours.as_deref(), |f| {
+                Ok(match f.pattern {
+                    Pattern::White => &white,
+                    Pattern::Black => &dark,
+                    Pattern::Bit { .. } => {
+                        let j = bit_patterns(m, false)
+                            .iter()
+                            .position(|q| *q == f.pattern)
+                            .unwrap_or(0);
+                        &images[j]
+                    }
+                })
+            })
+            .expect("decode images");
+            let after = group
+                .decode(m, &config, ours.as_deref(), false)
+                .expect("decode reduced");
+            assert!(before.decoded_share() > 0.2, "member {k}");
+            assert_eq!(before.map, after.map, "member {k}");
+            assert!(same_bits(&before.confidence, &after.confidence));
+            assert!(same_bits(&before.direct, &after.direct));
+            assert!(same_bits(&before.global, &after.global));
+            assert_eq!(before.reach.to_bits(), after.reach.to_bits());
+        }
+    }
+}
