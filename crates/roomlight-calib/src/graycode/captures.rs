@@ -425,18 +425,23 @@ mod tests {
         );
     }
 
-    #[test]
-    fn captures_reduced_as_they_arrive_read_and_decode_as_the_images_did() {
+    /// A 48×20 projector's every pattern on a 64×30 camera, one capture each.
+    fn pattern_set() -> (Manifest, Vec<LinearImage>) {
         let manifest = Manifest::new(48, 20).expect("manifest");
-        let size = (64, 30);
         let lit = [Lit {
             manifest: &manifest,
             area: (4, 2, 62, 28),
         }];
-        let images: Vec<LinearImage> = (0u64..)
+        let images = (0u64..)
             .zip(&manifest.patterns)
-            .map(|(shot, f)| capture(size, &lit, &[Some(f.pattern)], shot))
+            .map(|(shot, f)| capture((64, 30), &lit, &[Some(f.pattern)], shot))
             .collect();
+        (manifest, images)
+    }
+
+    #[test]
+    fn captures_reduced_as_they_arrive_read_and_decode_as_the_images_did() {
+        let (manifest, images) = pattern_set();
         let image = |pattern: Pattern| {
             let j = manifest.patterns.iter().position(|f| f.pattern == pattern);
             images[j.expect("pattern")].clone()
@@ -483,7 +488,7 @@ mod tests {
         reduced.add(white_file, &images[0]).expect("add");
         let twice = reduced.add(white_file, &images[0]).expect_err("twice");
         assert!(twice.to_string().contains("white.png"), "{twice}");
-        let small = capture((8, 8), &lit[..0], &[], 0);
+        let small = capture((8, 8), &[], &[], 0);
         assert!(reduced.add(&manifest.patterns[1], &small).is_err());
         let missing = reduced.captures(&manifest).expect_err("black missing");
         assert!(missing.to_string().contains("black.png"), "{missing}");
@@ -491,16 +496,7 @@ mod tests {
 
     #[test]
     fn a_single_shot_decodes_where_pattern_and_inverse_do() {
-        let manifest = Manifest::new(48, 20).expect("manifest");
-        let size = (64, 30);
-        let lit = [Lit {
-            manifest: &manifest,
-            area: (4, 2, 62, 28),
-        }];
-        let images: Vec<LinearImage> = (0u64..)
-            .zip(&manifest.patterns)
-            .map(|(shot, f)| capture(size, &lit, &[Some(f.pattern)], shot))
-            .collect();
+        let (manifest, images) = pattern_set();
         let config = DecodeConfig {
             refuse_saturated: false,
             ..DecodeConfig::default()

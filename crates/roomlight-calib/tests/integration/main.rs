@@ -10,3 +10,4 @@ mod fuzz;
 mod graycode;
 mod nodes;
 mod overlap_partition;
+mod photographs;
