@@ -118,6 +118,16 @@ impl<'a> Captures<'a> {
             });
         }
         let n = (w as usize) * (h as usize);
+        if white.len() != n || black.len() != n {
+            return Err(CalibError::File {
+                file: "white and black".into(),
+                problem: format!(
+                    "{} and {} pixels, the captures have {w}x{h}",
+                    white.len(),
+                    black.len()
+                ),
+            });
+        }
         let mut patterns = Vec::new();
         made.clear();
         for (axis, bits) in [
@@ -131,15 +141,10 @@ impl<'a> Captures<'a> {
                     inverse: false,
                 };
                 let p = less_black(pattern)?;
-                if p.len() != n || white.len() != n || black.len() != n {
+                if p.len() != n {
                     return Err(CalibError::File {
                         file: format!("{pattern:?}"),
-                        problem: format!(
-                            "{} pixels (white {}, black {}), the captures have {w}x{h}",
-                            p.len(),
-                            white.len(),
-                            black.len()
-                        ),
+                        problem: format!("{} pixels, the captures have {w}x{h}", p.len()),
                     });
                 }
                 made.push(
@@ -154,18 +159,16 @@ impl<'a> Captures<'a> {
         let made: &'a Vec<Vec<f32>> = made;
         let mut captures = Self::new(manifest, (w, h), (white, black, white_top), |pattern| {
             match pattern {
-                Pattern::Bit {
-                    axis,
-                    bit,
-                    inverse: true,
-                } => patterns
+                Pattern::Bit { axis, bit, inverse } => patterns
                     .iter()
                     .position(|&(a, b, _)| (a, b) == (axis, bit))
-                    .map(|j| made[j].as_slice()),
-                Pattern::Bit { axis, bit, .. } => patterns
-                    .iter()
-                    .find(|&&(a, b, _)| (a, b) == (axis, bit))
-                    .map(|&(_, _, p)| p),
+                    .map(|j| {
+                        if inverse {
+                            made[j].as_slice()
+                        } else {
+                            patterns[j].2
+                        }
+                    }),
                 _ => None,
             }
             .ok_or_else(|| CalibError::Invalid {

@@ -223,6 +223,14 @@ impl Manifest {
         Ok(())
     }
 
+    /// The patterns shown, in display order: every one, or without the inverses when `once`
+    /// ([`Captures::single_shot`]).
+    pub fn shown(&self, once: bool) -> impl Iterator<Item = &PatternFile> {
+        self.patterns
+            .iter()
+            .filter(move |f| !(once && matches!(f.pattern, Pattern::Bit { inverse: true, .. })))
+    }
+
     /// The code value (0 or 1) of every projector pixel for a pattern.
     pub fn pattern_values(&self, pattern: Pattern) -> Vec<f32> {
         let (w, h) = (self.width, self.height);

@@ -101,6 +101,24 @@ impl Correspondence {
         (shown, share)
     }
 
+    /// The reached but unknown pixels ([`Self::reached_unknown`]) per decoded pixel (see
+    /// [`Self::unknown_share`]): what decides a second pass, and inverses after a single shot.
+    pub fn reached_unknown_share(&self, config: &DecodeConfig) -> f64 {
+        self.unknown_share(&self.reached_unknown(config))
+    }
+
+    /// How many of the pixels `todo` marks there are for each decoded pixel: 0 when none is
+    /// marked, infinite when some are and none is decoded.
+    fn unknown_share(&self, todo: &[bool]) -> f64 {
+        let unknown = todo.iter().filter(|t| **t).count();
+        let decoded = self.map.iter().filter(|m| m.is_some()).count();
+        match (unknown, decoded) {
+            (0, _) => 0.0,
+            (_, 0) => f64::INFINITY,
+            _ => unknown as f64 / decoded as f64,
+        }
+    }
+
     /// The camera pixels a second pass decodes: those this pass found reached by direct light
     /// (`direct ≥ reach`) but could not decode, inside a reached region (at least
     /// [`SOLID_NEIGHBOURS`] of the 8 neighbours reached, decoded or not). A pixel lit only by
@@ -301,10 +319,7 @@ pub fn second_pass<E: From<CalibError>>(
     let white = shoot(&plan.white(manifest)?, 1.0)?;
     let exposure = plan.exposure(first, &white, saturation, longest)?;
     let mut captures = Reduced::new();
-    for p in &manifest.patterns {
-        if single && matches!(p.pattern, Pattern::Bit { inverse: true, .. }) {
-            continue;
-        }
+    for p in manifest.shown(single) {
         captures.add(p, &shoot(&plan.pattern(manifest, p.pattern)?, exposure)?)?;
     }
     Ok(Some(plan.finish(
@@ -331,9 +346,7 @@ impl SecondPassPlan {
     /// ([`SECOND_PASS_WORTH`]); `None` otherwise.
     pub fn new(config: &DecodeConfig, first: &Correspondence) -> Option<Self> {
         let todo = first.reached_unknown(config);
-        let unknown = todo.iter().filter(|t| **t).count();
-        let decoded = first.map.iter().filter(|m| m.is_some()).count();
-        if (unknown as f64) <= SECOND_PASS_WORTH * decoded as f64 {
+        if first.unknown_share(&todo) <= SECOND_PASS_WORTH {
             return None;
         }
         let (shown, share) = first.second_pass_mask(&todo, SECOND_PASS_MARGIN);

@@ -156,11 +156,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
         };
         // The masked patterns without their inverses where the first pass showed none.
         let once = self.settings.shows_once(p);
-        let patterns: Vec<&PatternFile> = manifest
-            .patterns
-            .iter()
-            .filter(|f| !(once && matches!(f.pattern, Pattern::Bit { inverse: true, .. })))
-            .collect();
+        let patterns: Vec<&PatternFile> = manifest.shown(once).collect();
         self.report(Event::Stage {
             stage: Stage::SecondPass,
             captures: patterns.len() + 1,

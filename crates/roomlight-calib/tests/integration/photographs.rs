@@ -15,13 +15,9 @@ fn decode_photographs(
     decode_captures(manifest, &DecodeConfig::default(), None, &photos.captures)
 }
 
-#[test]
-fn photographs_decode_within_a_pixel_or_unknown_never_wrong() {
+/// A 128×96 pattern set photographed through a 160×120 camera (`common::photo`'s defaults).
+fn photographs() -> (Manifest, common::photo::Photographs) {
     use common::photo::{Shot, photograph};
-    // 256×192 through 320×240 (17:41 and 17:44 UTC, 2026-11-25): before resolving edges from
-    // the neighbours 78.79% within ±1, 21.14% unknown, in a lattice beside the edges every
-    // XOR-04 pattern shares; after, 99.25% within ±1, none gross, 0.69% unknown. Here half
-    // that size, to stay near a second: 99.26%, 1 pixel gross (0.006%), 0.70% unknown.
     let manifest = Manifest::new(128, 96).expect("manifest");
     let photos = photograph(
         &manifest,
@@ -30,25 +26,27 @@ fn photographs_decode_within_a_pixel_or_unknown_never_wrong() {
             ..Shot::default()
         },
     );
+    (manifest, photos)
+}
+
+#[test]
+fn photographs_decode_within_a_pixel_or_unknown_never_wrong() {
+    // 256×192 through 320×240 (17:41 and 17:44 UTC, 2026-11-25): before resolving edges from
+    // the neighbours 78.79% within ±1, 21.14% unknown, in a lattice beside the edges every
+    // XOR-04 pattern shares; after, 99.25% within ±1, none gross, 0.69% unknown. Here half
+    // that size, to stay near a second: 99.26%, 1 pixel gross (0.006%), 0.70% unknown.
+    let (manifest, photos) = photographs();
     let decoded = decode_photographs(&manifest, &photos).expect("decode");
     check("photographs", &photos, &decoded, 0.99);
 }
 
 #[test]
 fn photographs_decode_in_a_single_shot_per_bit_within_a_pixel_or_unknown() {
-    use common::photo::{Shot, photograph};
     // The photographs of the test above, each bit pattern's inverse not read: half the
     // captures, the inverse made from white. Measured (2026-11-28): 98.76% within ±1, none
     // gross, 1.19% unknown, against 99.26%, 0.006% and 0.70% with the inverses captured: the
     // noisier differences leave a half point more of the edge pixels unknown, none wrong.
-    let manifest = Manifest::new(128, 96).expect("manifest");
-    let photos = photograph(
-        &manifest,
-        &Shot {
-            camera: (160, 120),
-            ..Shot::default()
-        },
-    );
+    let (manifest, photos) = photographs();
     let decoded = decode_single_shot(&manifest, &DecodeConfig::default(), None, |f| {
         let i = manifest
             .patterns

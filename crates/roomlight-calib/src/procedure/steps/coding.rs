@@ -150,7 +150,7 @@ impl<R: Rig> Procedure<'_, R> {
             .iter()
             .zip(&corrs)
             .any(|((.., config, _, once), corr)| {
-                *once && unknown_share(corr, config) > PAIRS_AFTER_SINGLE
+                *once && corr.reached_unknown_share(config) > PAIRS_AFTER_SINGLE
             });
         if weak {
             self.report(Event::Stage {
@@ -257,7 +257,7 @@ impl<R: Rig> Procedure<'_, R> {
 const SINGLE_SHOT_EXPOSURE: f32 = 2.0;
 
 /// A member shown once whose decode leaves more of its reached pixels unknown than this share
-/// of its decoded ones ([`Correspondence::reached_unknown`]) has its group shown the inverses
+/// of its decoded ones ([`Correspondence::reached_unknown_share`]) has its group shown the inverses
 /// too. Measured on the lab (`roomlight bench calib`, 2026-11-28): shown once, the walls left
 /// 0.00–0.55% and the floor projectors 1.19% and 5.93% (their bright near floor keeps the
 /// exposure at ×1, and their far parts are dim).
@@ -266,17 +266,6 @@ const PAIRS_AFTER_SINGLE: f64 = 0.01;
 /// One member's decode: the projector, its manifest, decoder, the camera pixels it owns in
 /// its group and whether it was shown once.
 type Job = (Projector, Manifest, DecodeConfig, Option<Vec<bool>>, bool);
-
-/// The share of `corr`'s decoded pixels that are reached but unknown (0 with none decoded).
-fn unknown_share(corr: &Correspondence, config: &DecodeConfig) -> f64 {
-    let unknown = corr.reached_unknown(config).iter().filter(|u| **u).count();
-    let decoded = corr.map.iter().filter(|m| m.is_some()).count();
-    if decoded == 0 {
-        0.0
-    } else {
-        unknown as f64 / decoded as f64
-    }
-}
 
 /// The other one of a bit pattern and its inverse (white and black unchanged).
 fn inverted(pattern: Pattern) -> Pattern {
@@ -386,13 +375,9 @@ impl GroupCaptures {
 /// in order: what structured light shows, white and black being the dark and white captures
 /// taken before.
 fn bit_patterns(m: &Manifest, once: bool) -> Vec<Pattern> {
-    m.patterns
-        .iter()
+    m.shown(once)
         .map(|f| f.pattern)
-        .filter(|p| match p {
-            Pattern::Bit { inverse, .. } => !(once && *inverse),
-            _ => false,
-        })
+        .filter(|p| matches!(p, Pattern::Bit { .. }))
         .collect()
 }
 
