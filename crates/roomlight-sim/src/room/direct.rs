@@ -38,18 +38,22 @@ impl Room {
                 }
                 Frame::Image(img) | Frame::Linear(img) => {
                     let linear = matches!(frame, Frame::Linear(_));
-                    let light = pixel_light(projector, &img.pixels, linear);
+                    let mut light = self.buffers.take(img.pixels.len());
+                    pixel_light(projector, &img.pixels, linear, &mut light);
                     let maps: Vec<&ProjectorMap> = sets.iter().map(|s| &s.projectors[k]).collect();
-                    let table = maps
-                        .iter()
-                        .any(|m| !m.boxes.is_empty())
-                        .then(|| SummedArea::new(img.width, img.height, |i| light[i]));
-                    for (e, map) in out.iter_mut().zip(maps) {
+                    for (e, map) in out.iter_mut().zip(&maps) {
                         add_entries(e, &map.entries, |&px| light[px as usize]);
-                        if let Some(table) = &table {
+                    }
+                    // Then the boxes, over the light summed in place: each set still takes its
+                    // entries before its boxes, as one loop over the sets would.
+                    if maps.iter().any(|m| !m.boxes.is_empty()) {
+                        let table = SummedArea::in_place(img.width, light);
+                        for (e, map) in out.iter_mut().zip(&maps) {
                             add_entries(e, &map.boxes, |b| table.mean(*b));
                         }
+                        light = table.into_buffer();
                     }
+                    self.buffers.give(light);
                 }
             }
         }
@@ -85,9 +89,10 @@ fn add_weighted(e: &mut [LinearRgb], weights: &[f32], light: LinearRgb) {
         });
 }
 
-/// The light of every pixel of a frame (codes, or linear shares). Neighbouring pixels often
-/// share a code (a pattern's stripes, a node's flat inside), so each task keeps its last one.
-fn pixel_light(projector: &Projector, pixels: &[[f32; 3]], linear: bool) -> Vec<LinearRgb> {
+/// The light of every pixel of a frame (codes, or linear shares) into `out` (as long as the
+/// frame). Neighbouring pixels often share a code (a pattern's stripes, a node's flat inside),
+/// so each task keeps its last one.
+fn pixel_light(projector: &Projector, pixels: &[[f32; 3]], linear: bool, out: &mut [LinearRgb]) {
     let light = |c: [f32; 3]| {
         if linear {
             projector.light_linear(c)
@@ -95,23 +100,22 @@ fn pixel_light(projector: &Projector, pixels: &[[f32; 3]], linear: bool) -> Vec<
             projector.light(c)
         }
     };
-    pixels
-        .par_chunks(CHUNK)
-        .flat_map_iter(|chunk| {
+    out.par_chunks_mut(CHUNK)
+        .zip(pixels.par_chunks(CHUNK))
+        .for_each(|(out, chunk)| {
             let mut last: Option<([f32; 3], LinearRgb)> = None;
-            chunk.iter().map(move |&c| {
+            for (o, &c) in out.iter_mut().zip(chunk) {
                 // Equal bits, equal light (a NaN code never reaches here: frames are checked).
-                match last {
+                *o = match last {
                     Some((code, l)) if code.map(f32::to_bits) == c.map(f32::to_bits) => l,
                     _ => {
                         let l = light(c);
                         last = Some((c, l));
                         l
                     }
-                }
-            })
-        })
-        .collect()
+                };
+            }
+        });
 }
 
 /// `e[probe] += value(item) · factor` for every `(probe, item, factor)`, in the order given for

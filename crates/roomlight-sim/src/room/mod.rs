@@ -10,6 +10,7 @@ use rayon::prelude::*;
 use roomlight_core::LinearRgb;
 
 mod basis;
+mod buffers;
 mod capture;
 mod direct;
 mod noise;
@@ -125,6 +126,8 @@ pub struct Room {
     camera_probes: Probes,
     element_probes: Probes,
     patch_probes: Probes,
+    /// Per-pixel buffers of the renders, kept from one to the next.
+    buffers: buffers::Buffers,
 }
 
 /// Radiosity stops when no element's radiosity changes by more than this share of the largest.
@@ -164,6 +167,7 @@ impl Room {
             camera_probes: Probes::default(),
             element_probes: Probes::default(),
             patch_probes: Probes::default(),
+            buffers: buffers::Buffers::default(),
         };
         room.camera_probes = room.probes(camera_probes);
         room.element_probes = room.probes(probes::element_samples(&room.geometry));
@@ -292,7 +296,7 @@ impl Room {
                             img.height
                         )));
                     }
-                    if img.pixels.iter().flatten().any(|v| !v.is_finite()) {
+                    if !img.pixels.as_flattened().iter().all(|v| v.is_finite()) {
                         return Err(bad("a pixel code is not finite".into()));
                     }
                 }
