@@ -352,7 +352,7 @@ fn console_rounds_help() -> String {
 
 /// glibc's malloc gives the threads that allocate their own arenas (up to eight per core) and
 /// keeps what each one freed. The simulator's frame buffers, freed on rayon's and tokio's
-/// workers, left the full demo's peak at 894 MB with the default, 751 MB with two arenas, at the
+/// workers, left the full demo's peak at 915 MB with the default, 770 MB with two arenas, at the
 /// same speed (2026-11-28, `GLIBC_TUNABLES=glibc.malloc.arena_max=2`). The agents allocate
 /// little on their hot paths, so two serve them as well.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]

@@ -161,7 +161,11 @@ impl FrameBuilder {
                     .for_each(|(band, chunk)| {
                         let first = band * width * FRAME_ROWS;
                         let mut at = p.row_start[band * FRAME_ROWS] as usize;
-                        let mut last = None;
+                        // The last light's bits and code, kept apart rather than as an
+                        // `Option` of both: compared through memory, the option stalled every
+                        // pixel on a store it had just made (a quarter of a capture's time).
+                        let (mut seen, mut last_bits, mut last_code) =
+                            (false, [0u64; 3], [0.0f32; 3]);
                         for (code, &c) in chunk.iter_mut().zip(&p.counts[first..]) {
                             let end = at + usize::from(c);
                             let mut l = LinearRgb::ZERO;
@@ -170,7 +174,11 @@ impl FrameBuilder {
                                 l += v * f64::from(w);
                             }
                             at = end;
-                            *code = response.to_code_after(l, &mut last);
+                            let bits = l.0.map(f64::to_bits);
+                            if !seen || bits != last_bits {
+                                (seen, last_bits, last_code) = (true, bits, response.to_code(l));
+                            }
+                            *code = last_code;
                         }
                     });
                 Frame::Image(ProjectorImage {

@@ -103,17 +103,16 @@ fn pixel_light(projector: &Projector, pixels: &[[f32; 3]], linear: bool, out: &m
     out.par_chunks_mut(CHUNK)
         .zip(pixels.par_chunks(CHUNK))
         .for_each(|(out, chunk)| {
-            let mut last: Option<([f32; 3], LinearRgb)> = None;
+            // Equal bits, equal light (a NaN code never reaches here: frames are checked). The
+            // last code's bits and light are kept apart, not as an `Option` of both, which was
+            // compared through memory right after being stored.
+            let (mut seen, mut last_bits, mut last_light) = (false, [0u32; 3], LinearRgb::ZERO);
             for (o, &c) in out.iter_mut().zip(chunk) {
-                // Equal bits, equal light (a NaN code never reaches here: frames are checked).
-                *o = match last {
-                    Some((code, l)) if code.map(f32::to_bits) == c.map(f32::to_bits) => l,
-                    _ => {
-                        let l = light(c);
-                        last = Some((c, l));
-                        l
-                    }
-                };
+                let bits = c.map(f32::to_bits);
+                if !seen || bits != last_bits {
+                    (seen, last_bits, last_light) = (true, bits, light(c));
+                }
+                *o = last_light;
             }
         });
 }
