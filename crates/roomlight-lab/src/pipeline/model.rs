@@ -6,7 +6,7 @@
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use roomlight_calib::procedure::Target;
-use roomlight_calib::response::Response;
+use roomlight_calib::response::{Encoder, Response};
 use roomlight_core::optimum::Optimum;
 use roomlight_core::{LinearRgb, Problem};
 use roomlight_sim::{Frame, NodeRegion, ProjectorImage, Room};
@@ -118,12 +118,12 @@ impl PixelNodes {
 
 /// Node values as projector frames: each pixel's linear light is the sum of its nodes' weights
 /// times their values (in ascending node order), turned into a code through the projector's
-/// measured response (as a node agent does before it shows a frame). The weights are kept by
-/// pixel, so a frame is written in one pass with no light buffer.
+/// measured response's [`Encoder`] (as a node agent does before it shows a frame). The weights
+/// are kept by pixel, so a frame is written in one pass with no light buffer.
 #[derive(Debug)]
 pub struct FrameBuilder {
     projectors: Vec<PixelNodes>,
-    responses: Vec<Response>,
+    encoders: Vec<Encoder>,
 }
 
 impl FrameBuilder {
@@ -140,19 +140,21 @@ impl FrameBuilder {
             .collect::<Result<_>>()?;
         Ok(Self {
             projectors,
-            responses,
+            // A projector without a measured response is drawn linear.
+            encoders: (0..room.projectors().len())
+                .map(|k| responses.get(k).unwrap_or(&Response::linear()).encoder())
+                .collect(),
         })
     }
 
     /// The frames for node values `x` (a missing value counts as black).
     pub fn frames(&self, x: &[LinearRgb]) -> Vec<Frame> {
-        let linear = Response::linear();
         // Bands of rows are independent tasks: the same codes on any number of cores.
         self.projectors
             .par_iter()
             .enumerate()
             .map(|(k, p)| {
-                let response = self.responses.get(k).unwrap_or(&linear);
+                let encoder = &self.encoders[k];
                 let width = p.width.max(1) as usize;
                 let mut pixels = vec![[0.0f32; 3]; p.counts.len()];
                 pixels
@@ -176,7 +178,7 @@ impl FrameBuilder {
                             at = end;
                             let bits = l.0.map(f64::to_bits);
                             if !seen || bits != last_bits {
-                                (seen, last_bits, last_code) = (true, bits, response.to_code(l));
+                                (seen, last_bits, last_code) = (true, bits, encoder.code(l));
                             }
                             *code = last_code;
                         }
@@ -226,8 +228,9 @@ pub fn channel_excess(problem: &Problem, best: &Optimum, x: &[LinearRgb]) -> [f6
 mod tests {
     use super::*;
 
-    /// Each pixel's code is its response to the sum of its nodes' weights times their values,
-    /// feathered edges and flat insides alike (the code of a repeated light is reused).
+    /// Each pixel's code is its response (by table, within 1e-6 of the power) to the sum of its
+    /// nodes' weights times their values, feathered edges and flat insides alike (the code of a
+    /// repeated light is reused).
     #[test]
     fn frames_are_the_response_of_each_pixels_blended_light() {
         let room = Room::build(roomlight_sim::scenes::small().expect("scene")).expect("room");
@@ -260,10 +263,18 @@ mod tests {
             panic!("an image for the projector with nodes");
         };
         let mut distinct = std::collections::HashSet::new();
+        let encoder = response.encoder();
         for (i, code) in img.pixels.iter().enumerate() {
             let light = x[0] * f64::from(left[i]) + x[1] * f64::from(right[i]);
-            let want = response.to_code(light);
+            let want = encoder.code(light);
             assert_eq!(code.map(f32::to_bits), want.map(f32::to_bits), "pixel {i}");
+            let power = response.to_code(light);
+            for c in 0..3 {
+                assert!(
+                    (code[c] - power[c]).abs() < 1e-6,
+                    "pixel {i}: {code:?} {power:?}"
+                );
+            }
             distinct.insert(code.map(f32::to_bits));
         }
         assert!(distinct.len() > 10, "the feathered band has its own codes");
