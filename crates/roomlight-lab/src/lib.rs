@@ -11,6 +11,7 @@ pub mod commands;
 pub mod dark_target;
 pub mod demo;
 pub mod graycode_files;
+pub mod heap;
 pub mod pipeline;
 pub mod pm;
 pub mod process;

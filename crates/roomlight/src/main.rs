@@ -350,24 +350,8 @@ fn console_rounds_help() -> String {
     )
 }
 
-/// glibc's malloc gives the threads that allocate their own arenas (up to eight per core) and
-/// keeps what each one freed. The simulator's frame buffers, freed on rayon's and tokio's
-/// workers, left the full demo's peak at 915 MB with the default, 770 MB with two arenas, at the
-/// same speed (2026-11-28, `GLIBC_TUNABLES=glibc.malloc.arena_max=2`). The agents allocate
-/// little on their hot paths, so two serve them as well.
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-#[allow(unsafe_code)]
-fn limit_malloc_arenas() {
-    // SAFETY: mallopt only sets a tuning parameter of glibc's allocator, called before main
-    // starts any thread; it reports failure by its return value, which leaves the default.
-    let _ = unsafe { libc::mallopt(libc::M_ARENA_MAX, 2) };
-}
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn limit_malloc_arenas() {}
-
 fn main() -> Result<()> {
-    limit_malloc_arenas();
+    roomlight_lab::heap::limit_arenas();
     let cli = Cli::parse();
     procs::init_logs();
     match cli.command {
