@@ -26,6 +26,7 @@ pub mod nodes;
 pub mod procedure;
 pub mod response;
 pub mod rig;
+pub mod shared_ramp;
 
 /// What went wrong, naming the file or field and what was expected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

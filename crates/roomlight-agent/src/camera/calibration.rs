@@ -172,6 +172,9 @@ fn log_event(event: Event) {
         }
         Event::SecondPass { projector, pass } => tracing::info!(%projector, ?pass, "second pass"),
         Event::Response { projector, gamma } => tracing::info!(%projector, ?gamma, "response"),
+        Event::RampApart { reason } => {
+            tracing::warn!(%reason, "ramp shown together refused; each projector shows its own")
+        }
         Event::WholeFrame { projector, chart } => {
             tracing::info!(%projector, ?chart, "one node over its frame")
         }

@@ -48,8 +48,12 @@ pub struct Settings {
     pub footprint_share_large: f32,
     /// Levels of the response ramp, its ends (the dark and white captures) included: a power
     /// law per channel has one parameter, so two levels between the ends fit it and check the
-    /// fit. Each projector shows its levels alone (inter-reflection is its own light).
+    /// fit.
     pub ramp_levels: usize,
+    /// Every projector brought up together shows each ramp level at once, one capture a
+    /// level, the shares told apart by their whites ([`crate::shared_ramp`]); otherwise (or
+    /// when they cannot be told apart) each shows its levels alone.
+    pub ramp_together: bool,
     /// How the attenuation of a room brought up is multiplexed.
     pub scheme: Scheme,
     /// How projectors are split into nodes and feathered.
@@ -74,6 +78,7 @@ impl Default for Settings {
             footprint_share: 0.1,
             footprint_share_large: 0.01,
             ramp_levels: 4,
+            ramp_together: true,
             scheme: Scheme::Hadamard,
             nodes: NodeConfig::default(),
             fine_stripes: true,
@@ -246,6 +251,9 @@ pub enum Event {
     SecondPass { projector: String, pass: SecondPass },
     /// A projector's response fitted.
     Response { projector: String, gamma: [f64; 3] },
+    /// The ramp shown by every projector at once was refused (why): each shows its levels
+    /// alone instead ([`Settings::ramp_together`]).
+    RampApart { reason: String },
     /// A projector made one node over its frame (a large aperture, or one that lights no
     /// chart), with the chart it lights most.
     WholeFrame {

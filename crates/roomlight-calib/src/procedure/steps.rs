@@ -220,12 +220,22 @@ impl<'a, R: Rig> Procedure<'a, R> {
         }
         self.rig.show(&[(&d.projector.id, Frame::BLACK)]).await?;
         let (measured, noise) = footprint_ramp(&ramp, &d.corr);
-        let response = fit_response(&codes, &measured, &noise).map_err(|source| {
-            ProcedureError::Projector {
+        self.fitted(d, &codes, &measured, &noise)
+    }
+
+    /// The response fitted to a ramp read over `d`'s pixels, reported.
+    fn fitted(
+        &mut self,
+        d: Decoded,
+        codes: &[f64],
+        measured: &[LinearRgb],
+        noise: &[LinearRgb],
+    ) -> Result<Measured, ProcedureError> {
+        let response =
+            fit_response(codes, measured, noise).map_err(|source| ProcedureError::Projector {
                 projector: d.projector.id.clone(),
                 source,
-            }
-        })?;
+            })?;
         self.report(Event::Response {
             projector: d.projector.id.clone(),
             gamma: response.gamma,
@@ -236,6 +246,57 @@ impl<'a, R: Rig> Procedure<'a, R> {
             response,
             second: d.second,
         })
+    }
+
+    /// The middle levels of the ramp shown by every decoded projector at once, one capture a
+    /// level ([`Settings::ramp_together`]), `whites[k]` being `decoded[k]`'s. `None` (the
+    /// projectors black again, the captures counted) when the shares cannot be told apart:
+    /// the caller shows the levels one projector at a time.
+    async fn shared_levels(
+        &mut self,
+        decoded: &[Decoded],
+        dark: &LinearImage,
+        whites: &[&LinearImage],
+    ) -> Result<Option<Vec<Vec<LinearRgb>>>, ProcedureError> {
+        let codes = ramp_codes(self.settings.ramp_levels)?;
+        let middle = &codes[1..codes.len() - 1];
+        self.report(Event::Stage {
+            stage: Stage::Responses,
+            captures: middle.len(),
+        });
+        let corrs: Vec<&Correspondence> = decoded.iter().map(|d| &d.corr).collect();
+        let mut shares = Vec::with_capacity(middle.len());
+        let mut refused = None;
+        for &code in middle {
+            let frames: Vec<(&str, Frame)> = decoded
+                .iter()
+                .map(|d| (d.projector.id.as_str(), Frame::Uniform([code as f32; 3])))
+                .collect();
+            let level = self.show_and_capture(Stage::Responses, &frames).await?;
+            match crate::shared_ramp::shared_level(&level, dark, whites, &corrs) {
+                Ok(s) => shares.push(s),
+                Err(e) => {
+                    refused = Some(e);
+                    break;
+                }
+            }
+        }
+        self.black(
+            &decoded
+                .iter()
+                .map(|d| d.projector.clone())
+                .collect::<Vec<_>>(),
+        )
+        .await?;
+        match refused {
+            None => Ok(Some(shares)),
+            Some(e) => {
+                self.report(Event::RampApart {
+                    reason: e.to_string(),
+                });
+                Ok(None)
+            }
+        }
     }
 
     /// Hands every placed projector its nodes.
@@ -353,7 +414,8 @@ impl<'a, R: Rig> Procedure<'a, R> {
         })
     }
 
-    /// The responses of decoded projectors, `whites[k]` being `projectors[k]`'s.
+    /// The responses of decoded projectors, `whites[k]` being `projectors[k]`'s: shown
+    /// together when there are several ([`Settings::ramp_together`]), else one at a time.
     pub async fn responses(
         &mut self,
         decoded: Vec<Decoded>,
@@ -361,17 +423,46 @@ impl<'a, R: Rig> Procedure<'a, R> {
         dark: &LinearImage,
         whites: &[LinearImage],
     ) -> Result<Vec<Measured>, ProcedureError> {
+        let decoded: Vec<(Decoded, &LinearImage)> = decoded
+            .into_iter()
+            .filter_map(|d| {
+                let k = projectors.iter().position(|p| p.id == d.projector.id)?;
+                Some((d, &whites[k]))
+            })
+            .collect();
+        let (decoded, whites): (Vec<Decoded>, Vec<&LinearImage>) = decoded.into_iter().unzip();
+        let shared = if self.settings.ramp_together && decoded.len() > 1 {
+            self.shared_levels(&decoded, dark, &whites).await?
+        } else {
+            None
+        };
+        let mut measured = Vec::with_capacity(decoded.len());
+        if let Some(shares) = shared {
+            let codes = ramp_codes(self.settings.ramp_levels)?;
+            for (k, (d, white)) in decoded.into_iter().zip(whites).enumerate() {
+                // The ends as read alone; each level between is the dark plus its share of
+                // what the white adds, with the noise of the white's reading.
+                let (ends, noise) = footprint_ramp(&[dark.clone(), white.clone()], &d.corr);
+                let (low, high) = (ends[0], ends[1]);
+                let mut levels = vec![low];
+                let mut sigma = vec![noise[0]];
+                for level in &shares {
+                    levels.push(low + level[k].hadamard(high - low));
+                    sigma.push(noise[1]);
+                }
+                levels.push(high);
+                sigma.push(noise[1]);
+                measured.push(self.fitted(d, &codes, &levels, &sigma)?);
+            }
+            return Ok(measured);
+        }
         let levels = self.settings.ramp_levels.saturating_sub(2);
         self.report(Event::Stage {
             stage: Stage::Responses,
             captures: decoded.len() * levels,
         });
-        let mut measured = Vec::with_capacity(decoded.len());
-        for d in decoded {
-            let Some(k) = projectors.iter().position(|p| p.id == d.projector.id) else {
-                continue;
-            };
-            measured.push(self.response(d, dark, &whites[k]).await?);
+        for (d, white) in decoded.into_iter().zip(whites) {
+            measured.push(self.response(d, dark, white).await?);
         }
         Ok(measured)
     }

@@ -415,11 +415,20 @@ fn responses_detail(events: &[(Instant, Event)]) -> String {
                 "{projector} γ {:.2}/{:.2}/{:.2}",
                 gamma[0], gamma[1], gamma[2]
             )),
+            Event::RampApart { reason } => Some(format!("shown apart: {reason}")),
             _ => None,
         })
         .collect();
+    let apart = events
+        .iter()
+        .any(|(_, e)| matches!(e, Event::RampApart { .. }));
+    let between = if gammas.len() > 1 && !apart {
+        ", the levels between shown by all at once"
+    } else {
+        ""
+    };
     format!(
-        " (the ramps' ends are the dark and white captures); {}",
+        " (the ramps' ends are the dark and white captures{between}); {}",
         gammas.join(", ")
     )
 }
