@@ -472,6 +472,17 @@ fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Resul
         100.0 * close_lit,
         reached_lit
     );
+    if p.kind == ProjectorKind::LargeAperture {
+        let focus = in_focus(room, k);
+        let (sharp, close_sharp, far_sharp) = accuracy_in(&truth, decoded, width, &focus);
+        println!(
+            "{:<18} in focus (its blur within ±1 projector pixel): {sharp} camera pixels ({:.1}% of those it reaches), {:.2}% within ±1, {:.3}% of those decoded off by more than 2",
+            "",
+            100.0 * sharp as f64 / reached.max(1) as f64,
+            100.0 * close_sharp,
+            100.0 * far_sharp
+        );
+    }
     if far > 0.0 {
         println!(
             "{:<18} of the decoded pixels, {:.3}% lie where the simulator has no direct correspondence for it",
@@ -480,6 +491,71 @@ fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Resul
         );
     }
     Ok(())
+}
+
+/// Per camera pixel, whether large aperture `k` is in focus there: the display pixels its
+/// lens samples send to the surface point the pixel sees (the ray from each lens point through
+/// the point came from the display pixel imaged where that ray meets the focus plane, as the
+/// simulator renders it) all lie within ±1 of the lens centre's. False where the projector does
+/// not reach the pixel's point through its lens centre (visibility is the true
+/// correspondence's).
+fn in_focus(room: &Room, k: usize) -> Vec<bool> {
+    let p = &room.projectors()[k];
+    let truth = room.true_correspondence(k);
+    let w = p.pinhole.width;
+    room.pixels()
+        .iter()
+        .zip(&truth)
+        .map(|(info, t)| {
+            let (Some(point), Some(t), Some(focus)) = (info.point, t, p.focus) else {
+                return false;
+            };
+            let point = roomlight_sim::geometry::V3::from_array(point);
+            let depth = (point - p.pinhole.position).dot(p.pinhole.forward);
+            // Behind the lens (the true correspondence has none there).
+            if depth <= 1e-6 {
+                return false;
+            }
+            p.lens.iter().all(|&l| {
+                let image = l + (point - l) * (focus / depth);
+                p.pinhole
+                    .project(image)
+                    .and_then(|uv| p.pinhole.pixel(uv))
+                    .is_some_and(|px| {
+                        let dx = i64::from(px % w) - i64::from(t % w);
+                        let dy = i64::from(px / w) - i64::from(t / w);
+                        dx.abs().max(dy.abs()) <= 1
+                    })
+            })
+        })
+        .collect()
+}
+
+/// (pixels reached where `within`, share of them decoded within ±1, share of those decoded
+/// there off by more than 2).
+fn accuracy_in(
+    truth: &[Option<u32>],
+    decoded: &Correspondence,
+    width: u32,
+    within: &[bool],
+) -> (usize, f64, f64) {
+    let (reached, close, _) = accuracy_where(truth, decoded, width, |i| within[i]);
+    let only: Vec<Option<(u32, u32)>> = decoded
+        .map
+        .iter()
+        .zip(within)
+        .map(|(d, w)| d.filter(|_| *w))
+        .collect();
+    let (_, _, far) = accuracy_where(
+        truth,
+        &Correspondence {
+            map: only,
+            ..decoded.clone()
+        },
+        width,
+        |i| within[i],
+    );
+    (reached, close, far)
 }
 
 /// A diagnostic image of one decode (red: reached but unknown, green: decoded, blue: decoded
@@ -646,5 +722,57 @@ fn partition_misses(
     );
     for s in samples {
         println!("    {s}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `in_focus` against the thin lens worked out from the scene's description alone: a lens
+    /// point `r` from the centre sends a point at depth `z` to a display pixel
+    /// `r·|1 − f/z|·focal/f` pixels from the centre's, `f` the focus distance. Where that is at
+    /// most one pixel for the lens's rim the point is in focus; where it is three or more, not.
+    #[test]
+    fn in_focus_is_where_the_thin_lens_blur_is_under_a_pixel() {
+        let room = Room::build(scenes::small().expect("small room")).expect("room");
+        let k = room
+            .projectors()
+            .iter()
+            .position(|p| p.kind == ProjectorKind::LargeAperture)
+            .expect("a large aperture");
+        let spec = &room.scene().projectors[k];
+        let v =
+            |a: [f64; 3]| roomlight_sim::geometry::V3::from_array(a.map(|x| (x / 1000.0) as f32));
+        let (position, look_at) = (v(spec.position_mm), v(spec.look_at_mm));
+        let axis = (look_at - position).normalize();
+        let focal = 0.5 * f64::from(spec.resolution[0]) / (spec.fov_deg.to_radians() * 0.5).tan();
+        let rim = spec.aperture_mm.expect("aperture") / 2000.0;
+        let f = spec.focus_mm.expect("focus") / 1000.0;
+        let focus = in_focus(&room, k);
+        let truth = room.true_correspondence(k);
+        let (mut sharp, mut blurred, mut wrong) = (0usize, 0usize, 0usize);
+        for ((info, t), inside) in room.pixels().iter().zip(&truth).zip(&focus) {
+            let (Some(point), Some(_)) = (info.point, t) else {
+                assert!(!inside, "in focus where the projector does not reach");
+                continue;
+            };
+            let z =
+                f64::from((roomlight_sim::geometry::V3::from_array(point) - position).dot(axis));
+            let blur = rim * (1.0 - f / z).abs() * focal / f;
+            if blur <= 1.0 {
+                sharp += 1;
+                wrong += usize::from(!inside);
+            } else if blur >= 3.0 {
+                blurred += 1;
+                wrong += usize::from(*inside);
+            }
+        }
+        println!("{sharp} pixels sharp, {blurred} blurred by the thin lens, {wrong} disagree");
+        assert!(
+            sharp > 100 && blurred > 100,
+            "{sharp} sharp, {blurred} blurred"
+        );
+        assert_eq!(wrong, 0);
     }
 }

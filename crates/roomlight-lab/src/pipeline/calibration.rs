@@ -419,16 +419,8 @@ fn responses_detail(events: &[(Instant, Event)]) -> String {
             _ => None,
         })
         .collect();
-    let apart = events
-        .iter()
-        .any(|(_, e)| matches!(e, Event::RampApart { .. }));
-    let between = if gammas.len() > 1 && !apart {
-        ", the levels between shown by all at once"
-    } else {
-        ""
-    };
     format!(
-        " (the ramps' ends are the dark and white captures{between}); {}",
+        " (the ramps' ends are the dark and white captures); {}",
         gammas.join(", ")
     )
 }
