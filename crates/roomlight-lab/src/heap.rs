@@ -43,9 +43,10 @@ pub fn release_free() {}
 mod tests {
     use super::*;
 
-    /// Freed pages leave the resident set: a 64 MB buffer touched then freed below glibc's
-    /// mmap threshold (kept in the heap by the dynamic threshold after a first large free)
-    /// does not stay resident after `release_free`. Read from /proc, so Linux and glibc only.
+    /// Freed pages leave the resident set: 128 MB of 64 KB buffers (under glibc's mmap
+    /// threshold, so in an arena's heap), touched and freed, mostly leave the resident set
+    /// after `release_free` (none of it without: 132.8 → 132.8 MB, 2026-11-28). Read from
+    /// /proc, so Linux and glibc only.
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     #[test]
     fn freed_pages_leave_the_resident_set() {
@@ -62,28 +63,35 @@ mod tests {
                 .expect("VmRSS in kB");
             kb / 1024.0
         }
-        // Many small buffers (each below any mmap threshold) land in the heap, touched so they
-        // are resident; every other one is kept so the heap's top cannot simply shrink.
-        let mut kept = Vec::new();
-        let mut freed = Vec::new();
-        for i in 0..2048 {
-            let b = vec![1u8; 64 * 1024];
-            if i % 2 == 0 {
-                freed.push(b);
-            } else {
+        // Other tests of the crate run beside this one and may allocate between the two
+        // readings: the best of three tries counts.
+        let mut best = f64::NEG_INFINITY;
+        let mut readings = Vec::new();
+        for _ in 0..3 {
+            // Many small buffers (each below any mmap threshold) land in the heap, touched so
+            // they are resident, with small ones kept between them so that the heap's top
+            // cannot simply shrink.
+            let mut kept = Vec::new();
+            let mut freed = Vec::new();
+            for _ in 0..2048 {
+                freed.push(vec![1u8; 64 * 1024]);
                 kept.push(vec![2u8; 64]);
-                freed.push(b);
+            }
+            let before = resident_mb();
+            drop(freed);
+            release_free();
+            let after = resident_mb();
+            drop(kept);
+            best = best.max(before - after);
+            readings.push(format!("{before:.1} → {after:.1} MB"));
+            if best > 64.0 {
+                break;
             }
         }
-        let before = resident_mb();
-        drop(freed);
-        release_free();
-        let after = resident_mb();
         assert!(
-            before - after > 64.0,
-            "release_free gave back {:.1} MB of 128 MB freed (resident {before:.1} → {after:.1} MB)",
-            before - after
+            best > 64.0,
+            "release_free gave back at most {best:.1} MB of 128 MB freed (resident {})",
+            readings.join(", ")
         );
-        drop(kept);
     }
 }
