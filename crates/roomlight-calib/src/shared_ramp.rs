@@ -28,10 +28,10 @@ const MIN_SEPARATION: f64 = 1e-3;
 
 /// Each projector's share of its own white, per channel, in `level`: a capture of every
 /// projector of `whites` at one uniform code, `dark` the room with all of them black,
-/// `decoded[k]` where projector `k` was decoded. Pixels where any of the images clips are left
-/// out.
+/// `decoded[k]` where projector `k` (called `names[k]` in errors) was decoded. Pixels where
+/// any of the images clips are left out.
 ///
-/// Refused (with the projector named by its index) when the images differ in size, when a
+/// Refused (naming the projector) when the images differ in size, when a
 /// projector has fewer than [`MIN_PIXELS`] usable pixels, when two projectors' whites cannot
 /// be told apart over them, or when a share comes out non-finite; the caller then shows the
 /// levels one projector at a time.
@@ -40,12 +40,14 @@ pub fn shared_level(
     dark: &LinearImage,
     whites: &[&LinearImage],
     decoded: &[&Correspondence],
+    names: &[&str],
 ) -> Result<Vec<LinearRgb>, CalibError> {
     let n = level.pixels.len();
     let k_count = whites.len();
     let same = |w: u32, h: u32| w == level.width && h == level.height;
     if whites.is_empty()
         || decoded.len() != k_count
+        || names.len() != k_count
         || !same(dark.width, dark.height)
         || whites.iter().any(|w| !same(w.width, w.height))
         || decoded.iter().any(|d| !same(d.width, d.height))
@@ -54,8 +56,9 @@ pub fn shared_level(
         || decoded.iter().any(|d| d.map.len() != n)
     {
         return Err(invalid(format!(
-            "{k_count} whites and {} decoded maps against a {}×{} level capture: expected one of each per projector, all of the capture's size",
+            "{k_count} whites, {} decoded maps and {} names against a {}×{} level capture: expected one of each per projector, all of the capture's size",
             decoded.len(),
+            names.len(),
             level.width,
             level.height
         )));
@@ -100,8 +103,8 @@ pub fn shared_level(
     }
     if let Some(k) = used.iter().position(|&u| u < MIN_PIXELS) {
         return Err(invalid(format!(
-            "projector {k}: {} usable camera pixels (decoded, nothing clipped), expected at least {MIN_PIXELS}",
-            used[k]
+            "{}: {} usable camera pixels (decoded, nothing clipped), expected at least {MIN_PIXELS}",
+            names[k], used[k]
         )));
     }
     let mut shares = vec![LinearRgb::ZERO; k_count];
@@ -117,7 +120,8 @@ pub fn shared_level(
         let scale: Vec<f64> = (0..k_count).map(|a| m[(a, a)].sqrt()).collect();
         if let Some(k) = scale.iter().position(|s| !(*s > 0.0 && s.is_finite())) {
             return Err(invalid(format!(
-                "projector {k}: its white adds no light on channel {c} over the usable pixels"
+                "{}: its white adds no light on channel {c} over the usable pixels",
+                names[k]
             )));
         }
         let scaled = DMatrix::from_fn(k_count, k_count, |a, b| m[(a, b)] / (scale[a] * scale[b]));
@@ -136,7 +140,8 @@ pub fn shared_level(
             // The projector that weighs most in the nearly shared direction.
             let k = eigen.eigenvectors.column(at).iamax();
             return Err(invalid(format!(
-                "projector {k}: its white cannot be told apart from another's on channel {c} (separation {low:.1e}, expected above {MIN_SEPARATION:.0e})"
+                "{}: its white cannot be told apart from another's on channel {c} (separation {low:.1e}, expected above {MIN_SEPARATION:.0e})",
+                names[k]
             )));
         }
         let b = DVector::from_fn(k_count, |a, _| rhs[c][a] / scale[a]);
@@ -148,7 +153,7 @@ pub fn shared_level(
         for (k, share) in shares.iter_mut().enumerate() {
             let s = solved[k] / scale[k];
             if !s.is_finite() {
-                return Err(invalid(format!("projector {k}: share {s} on channel {c}")));
+                return Err(invalid(format!("{}: share {s} on channel {c}", names[k])));
             }
             share.0[c] = s;
         }
@@ -247,6 +252,7 @@ mod tests {
             &dark,
             &whites.iter().collect::<Vec<_>>(),
             &decoded.iter().collect::<Vec<_>>(),
+            &["a", "b", "c"],
         )
         .expect("shares");
         for k in 0..3 {
@@ -261,8 +267,14 @@ mod tests {
         }
         // Two projectors with the same white cannot be told apart: refused, not guessed.
         let twins = [&whites[0], &whites[0]];
-        let err = shared_level(&level, &dark, &twins, &[&decoded[0], &decoded[0]])
-            .expect_err("identical whites");
+        let err = shared_level(
+            &level,
+            &dark,
+            &twins,
+            &[&decoded[0], &decoded[0]],
+            &["a", "b"],
+        )
+        .expect_err("identical whites");
         assert!(err.to_string().contains("cannot be told apart"), "{err}");
         // A projector with no decoded pixel is refused by name.
         let none = decoded_where(w, h, |_| false);
@@ -271,8 +283,12 @@ mod tests {
             &dark,
             &[&whites[0], &whites[1]],
             &[&decoded[0], &none],
+            &["a", "b"],
         )
         .expect_err("nothing decoded");
-        assert!(err.to_string().contains("projector 1"), "{err}");
+        assert!(
+            err.to_string().contains("b: 0 usable camera pixels"),
+            "{err}"
+        );
     }
 }

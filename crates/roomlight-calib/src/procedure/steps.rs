@@ -265,6 +265,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
             captures: middle.len(),
         });
         let corrs: Vec<&Correspondence> = decoded.iter().map(|d| &d.corr).collect();
+        let names: Vec<&str> = decoded.iter().map(|d| d.projector.id.as_str()).collect();
         let mut shares = Vec::with_capacity(middle.len());
         let mut refused = None;
         for &code in middle {
@@ -273,7 +274,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
                 .map(|d| (d.projector.id.as_str(), Frame::Uniform([code as f32; 3])))
                 .collect();
             let level = self.show_and_capture(Stage::Responses, &frames).await?;
-            match crate::shared_ramp::shared_level(&level, dark, whites, &corrs) {
+            match crate::shared_ramp::shared_level(&level, dark, whites, &corrs, &names) {
                 Ok(s) => shares.push(s),
                 Err(e) => {
                     refused = Some(e);

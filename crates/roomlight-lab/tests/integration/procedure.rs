@@ -448,3 +448,55 @@ fn a_projector_joins_hot_beside_a_lit_one() {
     println!("hot: {checked} entries checked against the truth");
     assert!(checked > 20, "only {checked} entries above the noise");
 }
+
+/// Two projectors on one stand, aimed alike: their whites cannot tell their shares of a ramp
+/// shown together apart, so the procedure says so and shows each one's levels alone (one
+/// capture spent on the refused level), and both exponents still come out right.
+#[test]
+fn projectors_that_cannot_be_told_apart_show_their_ramps_alone() {
+    let mut scene = small_scene();
+    scene.projectors.truncate(2);
+    let left = scene.projectors[0].clone();
+    let twin = &mut scene.projectors[1];
+    (twin.position_mm, twin.look_at_mm, twin.up, twin.fov_deg) =
+        (left.position_mm, left.look_at_mm, left.up, left.fov_deg);
+    let room = Room::build(scene).expect("room");
+    let mut noise = CameraNoise::with_seed(&room, 41);
+    let mut rig = rig(&room, &mut noise, &["left", "right"]);
+    let (events, progress) = recorder();
+    let mut procedure = Procedure::new(&mut rig, Settings::default(), progress);
+    let live = procedure.rig().projectors();
+    let measured = block_on(async {
+        let dark = procedure.dark(&live).await?;
+        let whites = procedure.whites(&live).await?;
+        let decoded = procedure.structured_light(&live, &dark, &whites).await?;
+        procedure.responses(decoded, &live, &dark, &whites).await
+    })
+    .expect("responses");
+    let events = events.lock().expect("events").clone();
+    let apart: Vec<&Event> = events
+        .iter()
+        .filter(|e| matches!(e, Event::RampApart { .. }))
+        .collect();
+    assert_eq!(apart.len(), 1, "{events:?}");
+    // Named by id, and why.
+    assert!(
+        matches!(apart[0], Event::RampApart { reason } if reason.contains("left: its white cannot be told apart")),
+        "{apart:?}"
+    );
+    // The refused level, then the two middle levels of each projector alone.
+    assert_eq!(captured_in(&events, Stage::Responses), 1 + 2 * 2);
+    assert_eq!(measured.len(), 2);
+    for m in &measured {
+        let truth =
+            room.scene().projectors[room.projector(&m.projector.id).expect("projector")].gamma;
+        let gamma = m.response.gamma;
+        for c in 0..3 {
+            assert!(
+                (gamma[c] / truth[c] - 1.0).abs() < 0.03,
+                "{}: γ {gamma:?}, true {truth:?}",
+                m.projector.id
+            );
+        }
+    }
+}
