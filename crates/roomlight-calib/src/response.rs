@@ -174,7 +174,7 @@ pub fn fit_response(
 /// The mean camera value over the pixels a projector was decoded on, at each ramp level, with
 /// its standard error; pixels saturated at full white are left out.
 pub fn footprint_ramp(
-    ramp: &[LinearImage],
+    ramp: &[&LinearImage],
     corr: &Correspondence,
 ) -> (Vec<LinearRgb>, Vec<LinearRgb>) {
     let top = ramp.last();

@@ -312,7 +312,9 @@ pub fn run<'a>(
     let mut board_regions: Option<Vec<NodeRegion>> = Some(board_regions);
     for board in [true, false] {
         // What the board's view freed goes back before the bust's view is built.
-        crate::heap::release_free();
+        if !board {
+            crate::heap::release_free();
+        }
         let eval = Room::build(evaluation_scene(base, board, false)?)
             .context("building the evaluation view")?;
         let luminaires = if board {

@@ -206,19 +206,19 @@ impl<'a, R: Rig> Procedure<'a, R> {
         white: &LinearImage,
     ) -> Result<Measured, ProcedureError> {
         let codes = ramp_codes(self.settings.ramp_levels)?;
-        let mut ramp = Vec::with_capacity(codes.len());
-        for (j, &code) in codes.iter().enumerate() {
-            ramp.push(if j == 0 {
-                dark.clone()
-            } else if j + 1 == codes.len() {
-                white.clone()
-            } else {
-                let frame = Frame::Uniform([code as f32; 3]);
+        let mut middle = Vec::with_capacity(codes.len().saturating_sub(2));
+        for &code in &codes[1..codes.len() - 1] {
+            let frame = Frame::Uniform([code as f32; 3]);
+            middle.push(
                 self.show_and_capture(Stage::Responses, &[(&d.projector.id, frame)])
-                    .await?
-            });
+                    .await?,
+            );
         }
         self.rig.show(&[(&d.projector.id, Frame::BLACK)]).await?;
+        let ramp: Vec<&LinearImage> = std::iter::once(dark)
+            .chain(&middle)
+            .chain(std::iter::once(white))
+            .collect();
         let (measured, noise) = footprint_ramp(&ramp, &d.corr);
         self.fitted(d, &codes, &measured, &noise)
     }
@@ -443,7 +443,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
             for (k, (d, white)) in decoded.into_iter().zip(whites).enumerate() {
                 // The ends as read alone; each level between is the dark plus its share of
                 // what the white adds, with the noise of the white's reading.
-                let (ends, noise) = footprint_ramp(&[dark.clone(), white.clone()], &d.corr);
+                let (ends, noise) = footprint_ramp(&[dark, white], &d.corr);
                 let (low, high) = (ends[0], ends[1]);
                 let mut levels = vec![low];
                 let mut sigma = vec![noise[0]];

@@ -45,7 +45,8 @@ fn accuracy(truth: &[Option<u32>], decoded: &Correspondence, width: u32) -> (usi
     accuracy_where(truth, decoded, width, |_| true)
 }
 
-/// [`accuracy`] over the reached pixels that `count` accepts.
+/// [`accuracy`] over the pixels that `count` accepts (reached ones for the share within ±1,
+/// decoded ones for the share off by more than 2).
 fn accuracy_where(
     truth: &[Option<u32>],
     decoded: &Correspondence,
@@ -65,7 +66,9 @@ fn accuracy_where(
             reached += 1;
             close += usize::from(d.is_some_and(|d| off(*t, d) <= 1));
         }
-        if let Some(d) = d {
+        if let Some(d) = d
+            && count(i)
+        {
             n += 1;
             far += usize::from(t.is_none_or(|t| off(t, *d) > 2));
         }
@@ -474,7 +477,7 @@ fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Resul
     );
     if p.kind == ProjectorKind::LargeAperture {
         let focus = in_focus(room, k);
-        let (sharp, close_sharp, far_sharp) = accuracy_in(&truth, decoded, width, &focus);
+        let (sharp, close_sharp, far_sharp) = accuracy_where(&truth, decoded, width, |i| focus[i]);
         println!(
             "{:<18} in focus (its blur within ±1 projector pixel): {sharp} camera pixels ({:.1}% of those it reaches), {:.2}% within ±1, {:.3}% of those decoded off by more than 2",
             "",
@@ -529,33 +532,6 @@ fn in_focus(room: &Room, k: usize) -> Vec<bool> {
             })
         })
         .collect()
-}
-
-/// (pixels reached where `within`, share of them decoded within ±1, share of those decoded
-/// there off by more than 2).
-fn accuracy_in(
-    truth: &[Option<u32>],
-    decoded: &Correspondence,
-    width: u32,
-    within: &[bool],
-) -> (usize, f64, f64) {
-    let (reached, close, _) = accuracy_where(truth, decoded, width, |i| within[i]);
-    let only: Vec<Option<(u32, u32)>> = decoded
-        .map
-        .iter()
-        .zip(within)
-        .map(|(d, w)| d.filter(|_| *w))
-        .collect();
-    let (_, _, far) = accuracy_where(
-        truth,
-        &Correspondence {
-            map: only,
-            ..decoded.clone()
-        },
-        width,
-        |i| within[i],
-    );
-    (reached, close, far)
 }
 
 /// A diagnostic image of one decode (red: reached but unknown, green: decoded, blue: decoded
