@@ -110,7 +110,7 @@ fn decode_texture(room: &Room, k: usize, noise: &mut CameraNoise) -> Result<Corr
     let decoded = block_on(async {
         let dark = procedure.dark(&texture).await?;
         let whites = procedure.whites(&texture).await?;
-        procedure.code(&texture, &dark, &whites).await
+        procedure.code(&texture, &dark, &whites, None).await
     })?;
     decoded
         .into_iter()

@@ -347,7 +347,11 @@ async fn over_the_wire(
     }
     let dark = procedure.dark(&live).await?;
     let whites = procedure.whites(&live).await?;
-    let decoded = procedure.structured_light(&live, &dark, &whites).await?;
+    // A second pass only where the room still needs the batch's light.
+    let needed = claimed.as_deref().map(roomlight_calib::procedure::needed);
+    let decoded = procedure
+        .structured_light(&live, &dark, &whites, needed.as_deref())
+        .await?;
     let measured = procedure.responses(decoded, &live, &dark, &whites).await?;
     drop(whites);
     let (to_place, nodes) = (setup.clone(), settings.nodes);

@@ -104,7 +104,19 @@ impl Correspondence {
     /// The reached but unknown pixels ([`Self::reached_unknown`]) per decoded pixel (see
     /// [`Self::unknown_share`]): what decides a second pass, and inverses after a single shot.
     pub fn reached_unknown_share(&self, config: &DecodeConfig) -> f64 {
-        self.unknown_share(&self.reached_unknown(config))
+        self.reached_unknown_share_in(config, None)
+    }
+
+    /// [`Self::reached_unknown_share`] counting only the unknown pixels `needed` marks (all
+    /// when `None`), still per decoded pixel.
+    pub fn reached_unknown_share_in(&self, config: &DecodeConfig, needed: Option<&[bool]>) -> f64 {
+        let mut todo = self.reached_unknown(config);
+        if let Some(needed) = needed {
+            for (i, t) in todo.iter_mut().enumerate() {
+                *t &= needed.get(i).copied().unwrap_or(false);
+            }
+        }
+        self.unknown_share(&todo)
     }
 
     /// How many of the pixels `todo` marks there are for each decoded pixel: 0 when none is
@@ -313,7 +325,7 @@ pub fn second_pass<E: From<CalibError>>(
     single: bool,
     mut shoot: impl FnMut(&LinearImage, f32) -> Result<LinearImage, E>,
 ) -> Result<Option<SecondPass>, E> {
-    let Some(plan) = SecondPassPlan::new(config, first) else {
+    let Some(plan) = SecondPassPlan::new(config, first, None) else {
         return Ok(None);
     };
     let white = shoot(&plan.white(manifest)?, 1.0)?;
@@ -343,9 +355,23 @@ pub struct SecondPassPlan {
 
 impl SecondPassPlan {
     /// The plan when the first pass left enough reached pixels unknown
-    /// ([`SECOND_PASS_WORTH`]); `None` otherwise.
-    pub fn new(config: &DecodeConfig, first: &Correspondence) -> Option<Self> {
-        let todo = first.reached_unknown(config);
+    /// ([`SECOND_PASS_WORTH`]) among the camera pixels `needed` marks (all when `None`);
+    /// `None` otherwise. A projector joining a lit room is needed only where the others leave
+    /// some of the light to it ([`crate::procedure::needed`]): where they give all of it, its
+    /// weights will be zero however well it is decoded, and a second pass there would cost
+    /// its captures for nothing.
+    pub fn new(
+        config: &DecodeConfig,
+        first: &Correspondence,
+        needed: Option<&[bool]>,
+    ) -> Option<Self> {
+        let is_needed = |i: usize| needed.is_none_or(|n| n.get(i).copied().unwrap_or(false));
+        let todo: Vec<bool> = first
+            .reached_unknown(config)
+            .into_iter()
+            .enumerate()
+            .map(|(i, t)| t && is_needed(i))
+            .collect();
         if first.unknown_share(&todo) <= SECOND_PASS_WORTH {
             return None;
         }
@@ -360,7 +386,8 @@ impl SecondPassPlan {
         )
         .into_iter()
         .zip(&first.map)
-        .map(|(t, m)| t && m.is_none())
+        .enumerate()
+        .map(|(i, (t, m))| t && m.is_none() && is_needed(i))
         .collect();
         Some(Self { shown, share, todo })
     }

@@ -407,6 +407,21 @@ pub fn luminaires(projectors: &[Projector]) -> Vec<Projector> {
         .collect()
 }
 
+/// The share of a surface point's light the projectors already lit may leave to one joining
+/// them before the joiner is needed there ([`needed`]): the partition of unity's tighter
+/// tolerance. Below it, the joiner's weight is at most this however well it is decoded.
+pub const LEFT_TO_JOINER: f32 = 1e-3;
+
+/// The camera pixels where a projector joining a lit room is needed: those where the
+/// projectors already lit, whose claims sum to `claimed`, leave more than [`LEFT_TO_JOINER`]
+/// of the light (a share that is not finite counts as needing it).
+pub fn needed(claimed: &[f32]) -> Vec<bool> {
+    claimed
+        .iter()
+        .map(|c| c.is_nan() || *c < 1.0 - LEFT_TO_JOINER)
+        .collect()
+}
+
 /// The coding a projector's optics allow: a large aperture's defocus blurs XOR-04's fine
 /// stripes away, so it gets plain Gray code (for a camera that resolves the stripes; see
 /// [`Settings::coding`]).

@@ -116,19 +116,24 @@ impl<'a, R: Rig> Procedure<'a, R> {
 
     /// Structured light on `projectors` (black, with `dark` and `whites` from [`Self::dark`]
     /// and [`Self::whites`]): the first pass ([`Self::code`]), then a second pass for each
-    /// standard projector where the first left enough reached pixels unknown (on rigs that
-    /// show images). In the order of `projectors`.
+    /// standard projector where the first left enough reached pixels unknown among the camera
+    /// pixels `needed` marks (all when `None`; [`needed`] for projectors joining a lit room),
+    /// on rigs that show images; the same pixels decide whether a projector shown once needs
+    /// its inverses. In the order of `projectors`.
     pub async fn structured_light(
         &mut self,
         projectors: &[Projector],
         dark: &LinearImage,
         whites: &[LinearImage],
+        needed: Option<&[bool]>,
     ) -> Result<Vec<Decoded>, ProcedureError> {
-        let mut decoded = self.code(projectors, dark, whites).await?;
+        let mut decoded = self.code(projectors, dark, whites, needed).await?;
         for d in &mut decoded {
             let coding = self.settings.coding(&d.projector);
             let m = Manifest::with_coding(d.projector.width, d.projector.height, coding)?;
-            d.second = self.second_pass(&d.projector, &m, &mut d.corr).await?;
+            d.second = self
+                .second_pass(&d.projector, &m, &mut d.corr, needed)
+                .await?;
         }
         Ok(decoded)
     }
@@ -136,15 +141,17 @@ impl<'a, R: Rig> Procedure<'a, R> {
     /// A second structured-light pass on standard projector `p` coded with XOR-04 (shown
     /// alone; the others keep their light) where [`SecondPassPlan::new`] finds it worth its
     /// captures and the rig can show masked patterns: plain Gray code's coarse stripes do not
-    /// cancel the reflected light a second pass is for. Leaves `p` black.
+    /// cancel the reflected light a second pass is for. Only the camera pixels `needed` marks
+    /// count (all when `None`). Leaves `p` black.
     pub async fn second_pass(
         &mut self,
         p: &Projector,
         manifest: &Manifest,
         corr: &mut Correspondence,
+        needed: Option<&[bool]>,
     ) -> Result<Option<SecondPass>, ProcedureError> {
         let config = self.settings.decode;
-        let plan = match SecondPassPlan::new(&config, corr) {
+        let plan = match SecondPassPlan::new(&config, corr, needed) {
             Some(plan)
                 if p.kind == ProjectorKind::Standard
                     && manifest.coding == Coding::Xor04
@@ -399,7 +406,9 @@ impl<'a, R: Rig> Procedure<'a, R> {
         let luminaires = luminaires(&live);
         let dark = self.dark(&live).await?;
         let whites = self.whites(&luminaires).await?;
-        let decoded = self.structured_light(&luminaires, &dark, &whites).await?;
+        let decoded = self
+            .structured_light(&luminaires, &dark, &whites, None)
+            .await?;
         let measured = self.responses(decoded, &luminaires, &dark, &whites).await?;
         drop(whites);
         let nodes = self.settings.nodes;
@@ -470,7 +479,8 @@ impl<'a, R: Rig> Procedure<'a, R> {
 
     /// Calibrates live projector `id` while the others keep their light: its black offset
     /// and white, structured light (pattern against inverse, [`Settings::lit_room`]), a second
-    /// pass where needed, its response, its nodes beside the projectors
+    /// pass where pixels the others do not already light fully were left unknown
+    /// ([`needed`]), its response, its nodes beside the projectors
     /// already lit (`claimed`, the sum of their claims) with ids from `first_node`, and its
     /// attenuation measured hot against the dark capture. Leaves its nodes black.
     pub async fn join(
@@ -492,7 +502,10 @@ impl<'a, R: Rig> Procedure<'a, R> {
         // Pattern and inverse in a lit room ([`Settings::lit_room`]).
         let settings = self.settings;
         self.settings = settings.lit_room();
-        let decoded = self.structured_light(one, &dark, &whites).await;
+        let needed = claimed.map(needed);
+        let decoded = self
+            .structured_light(one, &dark, &whites, needed.as_deref())
+            .await;
         self.settings = settings;
         let measured = self.responses(decoded?, one, &dark, &whites).await?;
         let nodes = self.settings.nodes;

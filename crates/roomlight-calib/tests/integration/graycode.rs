@@ -5,8 +5,8 @@ use crate::common;
 use common::pattern_captures;
 
 use roomlight_calib::graycode::{
-    Axis, DecodeConfig, Manifest, Pattern, bits_for, decode_single_shot, decode_where, gray,
-    gray_inverse, group_disjoint, second_pass, second_pass_exposure,
+    Axis, DecodeConfig, Manifest, Pattern, SecondPassPlan, bits_for, decode_single_shot,
+    decode_where, gray, gray_inverse, group_disjoint, second_pass, second_pass_exposure,
 };
 use roomlight_calib::image_io::LinearImage;
 use roomlight_sim::{Room, scenes};
@@ -383,6 +383,33 @@ fn a_second_pass_with_the_bright_surface_black_decodes_the_face_its_reflection_h
         .merge_second_pass(&crowded, &vec![true; 64 * 16])
         .expect("same sizes");
     assert_eq!(taken, 0);
+    // Needed nowhere (projectors already lit give all the light there): no plan; needed on
+    // the face: the plan, as with no claims at all; needed on half the face's rows: its
+    // pixels to decode are those.
+    let claims = |light: &dyn Fn(u32, u32) -> f32| -> Vec<bool> {
+        roomlight_calib::procedure::needed(
+            &(0..64 * 16u32)
+                .map(|i| light(i % 64, i / 64))
+                .collect::<Vec<_>>(),
+        )
+    };
+    let lit = claims(&|_, _| 1.0);
+    assert!(SecondPassPlan::new(&config, &first, Some(&lit)).is_none());
+    let dark = claims(&|_, _| 0.0);
+    let full = SecondPassPlan::new(&config, &first, None).expect("a plan");
+    let dark_plan = SecondPassPlan::new(&config, &first, Some(&dark)).expect("a plan");
+    assert_eq!(full, dark_plan);
+    // Half the light left is needed, a NaN claim too; 0.9995 left to the others is not.
+    let half = claims(&|_, y| match y {
+        0..8 => 0.5,
+        8..12 => f32::NAN,
+        _ => 0.9995,
+    });
+    assert!(half[0] && half[8 * 64] && !half[12 * 64]);
+    assert!(SecondPassPlan::new(&config, &first, Some(&half)).is_some());
+    assert!(
+        first.reached_unknown_share_in(&config, Some(&half)) < first.reached_unknown_share(&config)
+    );
     let before = first.clone();
     let mut shown_frames = Vec::new();
     let done = second_pass_at(&manifest, &config, &mut first, |img, exposure| {

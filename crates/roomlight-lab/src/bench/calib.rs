@@ -126,6 +126,9 @@ pub fn run(quick: bool, area_only: bool) -> Result<()> {
         }
         return Ok(());
     }
+    if std::env::var_os("ROOMLIGHT_JOIN_ONLY").is_some() {
+        return bringup::hot_join(&room);
+    }
     bringup::cold_start(&room)?;
     bringup::hot_join(&room)?;
     let (decoded_all, decode_secs) = structured_light(&room)?;
@@ -345,7 +348,7 @@ fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64
         .collect::<Result<_, _>>()?;
     let alone: usize = manifests.iter().map(|m| m.patterns.len()).sum();
     let before = procedure.captures();
-    let mut decoded = block_on(procedure.code(&live, &dark, &whites))?;
+    let mut decoded = block_on(procedure.code(&live, &dark, &whites, None))?;
     let grouped = procedure.captures();
     println!(
         "structured light: {alone} captures one projector at a time with its own white and black; {} with non-overlapping projectors coded together, white and black being the footprint captures ({} groups: {:?}), after {before} footprint captures",
@@ -370,6 +373,7 @@ fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64
             std::slice::from_ref(&live[k]),
             &dark,
             std::slice::from_ref(&whites[k]),
+            None,
         ))?;
         for d in &one {
             report(room, &d.projector.id, &d.corr, true)?;
@@ -597,7 +601,7 @@ fn second_pass(
         .count();
     let decoded_before = first.map.iter().filter(|d| d.is_some()).count();
     let t = Instant::now();
-    let Some(done) = block_on(procedure.second_pass(&d.projector, m, first))? else {
+    let Some(done) = block_on(procedure.second_pass(&d.projector, m, first, None))? else {
         println!(
             "{name:<18} second pass: not needed ({left} reached pixels unknown, {:.2}% of {decoded_before} decoded)",
             100.0 * left as f64 / decoded_before.max(1) as f64

@@ -318,7 +318,8 @@ impl StageLog {
     }
 }
 
-fn stage_name(stage: Stage) -> &'static str {
+/// A stage as the bench and the demo print it.
+pub(crate) fn stage_name(stage: Stage) -> &'static str {
     match stage {
         Stage::Dark => "dark",
         Stage::Footprints => "footprints",

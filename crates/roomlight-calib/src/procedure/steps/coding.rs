@@ -8,12 +8,14 @@ impl<R: Rig> Procedure<'_, R> {
     /// The first structured-light pass on `projectors` (see [`Self::structured_light`]):
     /// those whose footprints do not overlap coded at the same time, each decoding the camera
     /// pixels it lights most, its direct light elsewhere zeroed ([`disown`]). In the order of
-    /// `projectors`.
+    /// `projectors`. A member shown once is shown its inverses too when it leaves too many of
+    /// the camera pixels `needed` marks (all when `None`) unknown.
     pub async fn code(
         &mut self,
         projectors: &[Projector],
         dark: &LinearImage,
         whites: &[LinearImage],
+        needed: Option<&[bool]>,
     ) -> Result<Vec<Decoded>, ProcedureError> {
         let manifests: Vec<Manifest> = projectors
             .iter()
@@ -55,6 +57,7 @@ impl<R: Rig> Procedure<'_, R> {
                     group,
                     &gains,
                     (&dark_intensity, &white),
+                    needed,
                 )
                 .await?;
             for (&k, c) in group.iter().zip(decoded) {
@@ -88,6 +91,7 @@ impl<R: Rig> Procedure<'_, R> {
         group: &[usize],
         gains: &[Vec<f32>],
         (dark, white): (&[f32], &LinearImage),
+        needed: Option<&[bool]>,
     ) -> Result<Vec<Correspondence>, ProcedureError> {
         let bits: Vec<Vec<Pattern>> = manifests
             .iter()
@@ -143,14 +147,14 @@ impl<R: Rig> Procedure<'_, R> {
         };
         let (mut corrs, mut group_captures) =
             self.decode_group(jobs.clone(), group_captures).await?;
-        // Shown once, a member that left many reached pixels unknown (the noisier
-        // differences, on dim parts of a footprint with bright ones) is shown its inverses
-        // after all, with the whole group, and every member decoded from the pairs.
+        // Shown once, a member that left many reached pixels unknown where it is needed (the
+        // noisier differences, on dim parts of a footprint with bright ones) is shown its
+        // inverses after all, with the whole group, and every member decoded from the pairs.
         let weak = jobs
             .iter()
             .zip(&corrs)
             .any(|((.., config, _, once), corr)| {
-                *once && corr.reached_unknown_share(config) > PAIRS_AFTER_SINGLE
+                *once && corr.reached_unknown_share_in(config, needed) > PAIRS_AFTER_SINGLE
             });
         if weak {
             self.report(Event::Stage {

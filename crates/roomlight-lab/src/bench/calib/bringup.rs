@@ -5,8 +5,8 @@
 use super::report;
 use crate::pipeline::{self, SimRig};
 use anyhow::{Context, Result};
-use roomlight_calib::nodes::add_claim;
-use roomlight_calib::procedure::{Procedure, Settings};
+use roomlight_calib::nodes::{Partition, add_claim, dilate, partition_of_unity};
+use roomlight_calib::procedure::{Event, Placed, Procedure, Settings, Stage};
 use roomlight_calib::rig::{Rig, block_on};
 use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Room};
@@ -149,18 +149,86 @@ pub(super) fn hot_join(room: &Room) -> Result<()> {
         }
     }
     let first = up.placed.iter().map(|p| p.nodes.len() as u32).sum();
-    let joined = block_on(Procedure::new(&mut rig, Settings::default(), |_| {}).join(
+    // The stage of every capture, in order.
+    let stages = std::sync::Mutex::new(Vec::new());
+    let record = |e| {
+        if let Event::Captured { stage } = e {
+            stages
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .push(stage);
+        }
+    };
+    let joined = block_on(Procedure::new(&mut rig, Settings::default(), record).join(
         &setup,
         &joiner,
         Some(&claimed),
         first,
     ))?;
+    let stages = stages
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let mut counts: Vec<(Stage, usize)> = Vec::new();
+    for s in stages {
+        match counts.iter_mut().find(|(t, _)| *t == s) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((s, 1)),
+        }
+    }
+    let breakdown: Vec<String> = counts
+        .iter()
+        .map(|(s, n)| format!("{n} {}", pipeline::stage_name(*s)))
+        .collect();
     println!(
-        "hot join of {joiner} beside {} lit projectors: {} captures ({} nodes)",
+        "hot join of {joiner} beside {} lit projectors: {} captures ({}; {} nodes)",
         up.placed.len(),
         joined.captures,
+        breakdown.join(", "),
         joined.placed.nodes.len()
     );
     report(room, &joiner, &joined.measured.corr, false)?;
+    let blended: Vec<&Placed> = up
+        .placed
+        .iter()
+        .chain(std::iter::once(&joined.placed))
+        .filter(|p| p.claim.is_some())
+        .collect();
+    println!(
+        "{:<18} partition of unity after the join, {} projectors that blend: {}",
+        "",
+        blended.len(),
+        partition(room, &blended)?
+    );
     Ok(())
+}
+
+/// The partition of unity of placed projectors through the simulator's true correspondence,
+/// away from the target (its margin is black), as the segmentation's is measured.
+fn partition(room: &Room, placed: &[&Placed]) -> Result<Partition> {
+    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
+    let mut truth = Vec::with_capacity(placed.len());
+    for p in placed {
+        let k = room
+            .projector(&p.projector.id)
+            .with_context(|| format!("no projector {} in the room", p.projector.id))?;
+        truth.push(room.true_correspondence(k));
+    }
+    let weights: Vec<Vec<f32>> = placed
+        .iter()
+        .map(|p| {
+            let mut sum = vec![0.0f32; (p.projector.width * p.projector.height) as usize];
+            for n in &p.nodes {
+                sum.iter_mut().zip(&n.weights).for_each(|(s, w)| *s += w);
+            }
+            sum
+        })
+        .collect();
+    let dark: Vec<Vec<bool>> = placed.iter().map(|p| p.excluded.clone()).collect();
+    Ok(partition_of_unity(
+        &truth,
+        &weights,
+        &dark,
+        &dilate(&mask, w, h, 8),
+    ))
 }
