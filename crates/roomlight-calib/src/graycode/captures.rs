@@ -93,6 +93,16 @@ impl<'a> Captures<'a> {
     /// (≥ 1; scaled back to white's units). At twice the exposure a read-noise-limited
     /// difference is as clean as a pair's in half the captures. Plain Gray code is refused:
     /// its coarse stripes move the reflected light with them.
+    ///
+    /// Where a lit pattern can clip (white's brightest channel at `clip`, the level at which
+    /// a pattern capture clips in these captures' units: the camera's ceiling over the
+    /// patterns' exposure; none when it is not a positive number), white less black
+    /// understates what a lit pattern would give, and the pixel would read every pattern as
+    /// lit: a code from the clipping alone, confidently wrong (a joiner's edge in a room the
+    /// others light near the ceiling). There the inverse is made from the pixel's own brightest
+    /// and darkest pattern instead (their sum stands for white): XOR coding lights about half
+    /// of a pixel's patterns, so the two are its lit and unlit levels, and a pixel that reads
+    /// the same under every pattern gets no difference at all, unknown, as a pair would.
     pub fn single_shot(
         manifest: &Manifest,
         (w, h): (u32, u32),
@@ -100,6 +110,7 @@ impl<'a> Captures<'a> {
         mut less_black: impl FnMut(Pattern) -> Result<&'a [f32], CalibError>,
         made: &'a mut Vec<Vec<f32>>,
         exposure: f32,
+        clip: f32,
     ) -> Result<Self, CalibError> {
         if !(exposure.is_finite() && exposure >= 1.0) {
             return Err(CalibError::Invalid {
@@ -147,14 +158,33 @@ impl<'a> Captures<'a> {
                         problem: format!("{} pixels, the captures have {w}x{h}", p.len()),
                     });
                 }
-                made.push(
-                    p.iter()
-                        .zip(white.iter().zip(black))
-                        .map(|(v, (a, b))| (a - b) - v)
-                        .collect(),
-                );
                 patterns.push((axis, bit, p));
             }
+        }
+        // What a lit pattern plus an unlit one give each pixel (see above).
+        let ceiling = clip * (1.0 - 1e-3);
+        let base: Vec<f32> = (0..n)
+            .map(|i| {
+                let clips = clip > 0.0 && white_top[i] >= ceiling;
+                if !clips {
+                    return white[i] - black[i];
+                }
+                let (lo, hi) = patterns
+                    .iter()
+                    .map(|(.., p)| p[i])
+                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+                        (lo.min(v), hi.max(v))
+                    });
+                // No pattern (a manifest of no bits): nothing to read either way.
+                if lo.is_finite() && hi.is_finite() {
+                    lo + hi
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        for (.., p) in &patterns {
+            made.push(p.iter().zip(&base).map(|(v, b)| b - v).collect());
         }
         let made: &'a Vec<Vec<f32>> = made;
         let mut captures = Self::new(manifest, (w, h), (white, black, white_top), |pattern| {
@@ -308,6 +338,7 @@ impl Reduced {
         &'s self,
         manifest: &Manifest,
         made: &'s mut Vec<Vec<f32>>,
+        clip: f32,
     ) -> Result<Captures<'s>, CalibError> {
         let (size, light) = self.light(manifest)?;
         Captures::single_shot(
@@ -317,6 +348,7 @@ impl Reduced {
             |pattern| self.bit(manifest, pattern),
             made,
             1.0,
+            clip,
         )
     }
 

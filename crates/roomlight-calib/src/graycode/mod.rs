@@ -499,7 +499,7 @@ pub(crate) fn decode_checked<'a>(
     let reduced = Reduced::read(manifest, single, &mut capture)?;
     let mut made = Vec::new();
     let captures = if single {
-        reduced.captures_single_shot(manifest, &mut made)?
+        reduced.captures_single_shot(manifest, &mut made, config.saturation)?
     } else {
         reduced.captures(manifest)?
     };

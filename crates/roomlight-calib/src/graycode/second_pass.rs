@@ -439,7 +439,8 @@ impl SecondPassPlan {
     ) -> Result<SecondPass, CalibError> {
         let mut made = Vec::new();
         let captures_read = if single {
-            captures.captures_single_shot(manifest, &mut made)?
+            // Every capture `exposure` times as long, scaled back.
+            captures.captures_single_shot(manifest, &mut made, config.saturation / exposure)?
         } else {
             captures.captures(manifest)?
         };

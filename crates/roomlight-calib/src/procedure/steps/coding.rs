@@ -123,14 +123,17 @@ impl<R: Rig> Procedure<'_, R> {
             .await?;
         let members: Vec<Projector> = group.iter().map(|&k| projectors[k].clone()).collect();
         self.black(&members).await?;
+        let saturation = self.rig.camera().saturation;
         let jobs: Vec<Job> = group
             .iter()
             .zip(owned_pixels(group, gains))
             .map(|(&k, ours)| {
                 let p = &projectors[k];
-                // Clipping here is planned around by the second passes, not refused.
+                // Clipping here is planned around by the second passes, not refused; where
+                // it clips is the camera's ceiling (a single shot reads those pixels apart).
                 let config = DecodeConfig {
                     refuse_saturated: false,
+                    saturation,
                     ..self.settings.decoder(p)
                 };
                 (p.clone(), manifests[k].clone(), config, ours, once[k])
@@ -367,7 +370,10 @@ impl GroupCaptures {
                 })?
             }
             (None, true) => {
-                Captures::single_shot(m, self.size, light, slot, &mut made, self.exposure)?
+                // White was captured at the normal exposure, the patterns `exposure` times as
+                // long and scaled back: they clip at the camera's ceiling over that.
+                let clip = config.saturation / self.exposure;
+                Captures::single_shot(m, self.size, light, slot, &mut made, self.exposure, clip)?
             }
             (_, false) => Captures::new(m, self.size, light, slot)?,
         };
