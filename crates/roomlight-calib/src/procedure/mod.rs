@@ -101,9 +101,13 @@ impl Settings {
     /// The settings for projectors calibrated while others light the room: every bit pattern
     /// with its inverse. Shown once, a difference is 2·pattern − white, so the white must not
     /// clip and the others' light must stay as the dark and white captures saw it; the
-    /// others' light makes the first likelier and a pair needs neither. Over the wire the
-    /// rendered room's hot join shown once converged only after 69 captures instead of
-    /// under 30 (the processes test); pairs there as before.
+    /// others' light makes the first likelier and a pair needs neither. Where white clips a
+    /// single shot now reads a pixel from its own patterns (`Captures::single_shot`), which
+    /// took the wrong codes out (the small room's joiner: 0.27% off by more than 2 → none),
+    /// and the lab's hot join shown once takes 28 captures with the same partition of unity
+    /// after it as pairs (48); but over the wire the rendered room's joiner shown once still
+    /// reached 1% of the optimum 17 captures after its calibration against 3 with pairs (the
+    /// processes test, 2026-11-28), for a reason not found: pairs there as before.
     pub fn lit_room(self) -> Self {
         Self {
             single_shot: false,
