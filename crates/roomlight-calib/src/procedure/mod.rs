@@ -426,6 +426,19 @@ pub fn needed(claimed: &[f32]) -> Vec<bool> {
         .collect()
 }
 
+/// What `placed` projectors give each of a camera's `pixels` together: the sum of their claims
+/// (a whole-frame node, which has none, gives nothing), what a projector joining them is placed
+/// beside ([`needed`], [`place`]).
+pub fn claimed_by(placed: &[Placed], pixels: usize) -> Vec<f32> {
+    let mut claimed = vec![0.0f32; pixels];
+    for p in placed {
+        if let Some(c) = &p.claim {
+            crate::nodes::add_claim(&mut claimed, c);
+        }
+    }
+    claimed
+}
+
 /// The coding a projector's optics allow: a large aperture's defocus blurs XOR-04's fine
 /// stripes away, so it gets plain Gray code (for a camera that resolves the stripes; see
 /// [`Settings::coding`]).

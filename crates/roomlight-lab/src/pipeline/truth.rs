@@ -167,6 +167,43 @@ impl Truth {
     }
 }
 
+/// The partition of unity of placed projectors (each one's nodes summed) through the
+/// simulator's true correspondence, away from the target (its mask dilated by 8 pixels: the
+/// margin luminaires keep black), as the segmentation's is measured. A projector the room does
+/// not have is refused, named.
+pub fn placed_partition(
+    room: &Room,
+    placed: &[&roomlight_calib::procedure::Placed],
+) -> Result<roomlight_calib::nodes::Partition> {
+    use anyhow::Context;
+    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
+    let mut truth = Vec::with_capacity(placed.len());
+    for p in placed {
+        let k = room
+            .projector(&p.projector.id)
+            .with_context(|| format!("no projector {} in the room", p.projector.id))?;
+        truth.push(room.true_correspondence(k));
+    }
+    let weights: Vec<Vec<f32>> = placed
+        .iter()
+        .map(|p| {
+            let mut sum = vec![0.0f32; (p.projector.width * p.projector.height) as usize];
+            for n in &p.nodes {
+                sum.iter_mut().zip(&n.weights).for_each(|(s, w)| *s += w);
+            }
+            sum
+        })
+        .collect();
+    let dark: Vec<Vec<bool>> = placed.iter().map(|p| p.excluded.clone()).collect();
+    Ok(roomlight_calib::nodes::partition_of_unity(
+        &truth,
+        &weights,
+        &dark,
+        &roomlight_calib::nodes::dilate(&mask, w, h, 8),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -5,7 +5,7 @@
 
 use roomlight_calib::charts::SampleConfig;
 use roomlight_calib::graycode::Correspondence;
-use roomlight_calib::nodes::{Partition, add_claim, dilate, partition_of_unity};
+use roomlight_calib::nodes::{Partition, add_claim};
 use roomlight_calib::procedure::{Decoded, Event, Placed, Procedure, Settings, Setup, Stage};
 use roomlight_calib::rig::{Frame, Projector, ProjectorKind, Rig, block_on};
 use roomlight_core::LinearRgb;
@@ -105,24 +105,7 @@ fn assert_accurate(room: &Room, id: &str, corr: &Correspondence) {
 /// The partition of unity of placed standard luminaires through the true correspondence,
 /// away from the target (its margin is black), as the nodes tests measure it.
 fn partition(room: &Room, placed: &[&Placed]) -> Partition {
-    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
-    let truth: Vec<Vec<Option<u32>>> = placed
-        .iter()
-        .map(|p| room.true_correspondence(room.projector(&p.projector.id).expect("projector")))
-        .collect();
-    let weights: Vec<Vec<f32>> = placed
-        .iter()
-        .map(|p| {
-            let mut sum = vec![0.0f32; (p.projector.width * p.projector.height) as usize];
-            for n in &p.nodes {
-                sum.iter_mut().zip(&n.weights).for_each(|(s, w)| *s += w);
-            }
-            sum
-        })
-        .collect();
-    let dark: Vec<Vec<bool>> = placed.iter().map(|p| p.excluded.clone()).collect();
-    partition_of_unity(&truth, &weights, &dark, &dilate(&mask, w, h, 8))
+    roomlight_lab::pipeline::placed_partition(room, placed).expect("partition")
 }
 
 /// The simulator's noiseless patch values with every projector showing `frames` (by id;
@@ -416,12 +399,7 @@ fn a_projector_joining_a_lit_room_decodes_again_only_where_it_is_needed() {
     block_on(rig.show(&frames_of(&up.placed, &[], LinearRgb::splat(0.5)))).expect("lit");
     rig.go_live("floor-right").expect("floor-right");
     let (w, h) = (room.camera().width as usize, room.camera().height as usize);
-    let mut claimed = vec![0.0f32; w * h];
-    for p in &up.placed {
-        if let Some(c) = &p.claim {
-            add_claim(&mut claimed, c);
-        }
-    }
+    let claimed = roomlight_calib::procedure::claimed_by(&up.placed, w * h);
     let first = up.placed.iter().map(|p| p.nodes.len() as u32).sum();
     let (events, progress) = recorder();
     let joined = block_on(
@@ -655,12 +633,7 @@ fn a_single_shot_beside_lit_projectors_is_never_wrong_where_it_clips() {
     block_on(rig.show(&frames_of(&up.placed, &[], LinearRgb::splat(0.5)))).expect("lit");
     rig.go_live("right").expect("right");
     let (w, h) = (room.camera().width as usize, room.camera().height as usize);
-    let mut claimed = vec![0.0f32; w * h];
-    for p in &up.placed {
-        if let Some(c) = &p.claim {
-            add_claim(&mut claimed, c);
-        }
-    }
+    let claimed = roomlight_calib::procedure::claimed_by(&up.placed, w * h);
     let needed = roomlight_calib::procedure::needed(&claimed);
     let mut procedure = Procedure::new(&mut rig, Settings::default(), |_| {});
     let right: Vec<Projector> = procedure

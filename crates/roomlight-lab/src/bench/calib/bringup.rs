@@ -5,8 +5,7 @@
 use super::report;
 use crate::pipeline::{self, SimRig};
 use anyhow::{Context, Result};
-use roomlight_calib::nodes::{Partition, add_claim, dilate, partition_of_unity};
-use roomlight_calib::procedure::{Event, Placed, Procedure, Settings, Stage};
+use roomlight_calib::procedure::{Event, Placed, Procedure, Settings, Stage, claimed_by};
 use roomlight_calib::rig::{Rig, block_on};
 use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{CameraNoise, Room};
@@ -142,12 +141,8 @@ pub(super) fn hot_join(room: &Room) -> Result<()> {
     let lit: Vec<(&str, RigFrame)> = lit.iter().map(|(id, f)| (id.as_str(), f.clone())).collect();
     block_on(rig.show(&lit))?;
     rig.go_live(&joiner)?;
-    let mut claimed = vec![0.0f32; (room.camera().width * room.camera().height) as usize];
-    for p in &up.placed {
-        if let Some(c) = &p.claim {
-            add_claim(&mut claimed, c);
-        }
-    }
+    let pixels = (room.camera().width * room.camera().height) as usize;
+    let claimed = claimed_by(&up.placed, pixels);
     let first = up.placed.iter().map(|p| p.nodes.len() as u32).sum();
     // The stage of every capture, in order.
     let stages = std::sync::Mutex::new(Vec::new());
@@ -197,38 +192,7 @@ pub(super) fn hot_join(room: &Room) -> Result<()> {
         "{:<18} partition of unity after the join, {} projectors that blend: {}",
         "",
         blended.len(),
-        partition(room, &blended)?
+        pipeline::placed_partition(room, &blended)?
     );
     Ok(())
-}
-
-/// The partition of unity of placed projectors through the simulator's true correspondence,
-/// away from the target (its margin is black), as the segmentation's is measured.
-fn partition(room: &Room, placed: &[&Placed]) -> Result<Partition> {
-    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
-    let mut truth = Vec::with_capacity(placed.len());
-    for p in placed {
-        let k = room
-            .projector(&p.projector.id)
-            .with_context(|| format!("no projector {} in the room", p.projector.id))?;
-        truth.push(room.true_correspondence(k));
-    }
-    let weights: Vec<Vec<f32>> = placed
-        .iter()
-        .map(|p| {
-            let mut sum = vec![0.0f32; (p.projector.width * p.projector.height) as usize];
-            for n in &p.nodes {
-                sum.iter_mut().zip(&n.weights).for_each(|(s, w)| *s += w);
-            }
-            sum
-        })
-        .collect();
-    let dark: Vec<Vec<bool>> = placed.iter().map(|p| p.excluded.clone()).collect();
-    Ok(partition_of_unity(
-        &truth,
-        &weights,
-        &dark,
-        &dilate(&mask, w, h, 8),
-    ))
 }
