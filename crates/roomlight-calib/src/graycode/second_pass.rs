@@ -110,13 +110,19 @@ impl Correspondence {
     /// [`Self::reached_unknown_share`] counting only the unknown pixels `needed` marks (all
     /// when `None`), still per decoded pixel.
     pub fn reached_unknown_share_in(&self, config: &DecodeConfig, needed: Option<&[bool]>) -> f64 {
+        self.unknown_share(&self.reached_unknown_in(config, needed))
+    }
+
+    /// [`Self::reached_unknown`] among the camera pixels `needed` marks (all when `None`; a
+    /// pixel beyond its end is not needed).
+    fn reached_unknown_in(&self, config: &DecodeConfig, needed: Option<&[bool]>) -> Vec<bool> {
         let mut todo = self.reached_unknown(config);
         if let Some(needed) = needed {
             for (i, t) in todo.iter_mut().enumerate() {
                 *t &= needed.get(i).copied().unwrap_or(false);
             }
         }
-        self.unknown_share(&todo)
+        todo
     }
 
     /// How many of the pixels `todo` marks there are for each decoded pixel: 0 when none is
@@ -365,13 +371,7 @@ impl SecondPassPlan {
         first: &Correspondence,
         needed: Option<&[bool]>,
     ) -> Option<Self> {
-        let is_needed = |i: usize| needed.is_none_or(|n| n.get(i).copied().unwrap_or(false));
-        let todo: Vec<bool> = first
-            .reached_unknown(config)
-            .into_iter()
-            .enumerate()
-            .map(|(i, t)| t && is_needed(i))
-            .collect();
+        let todo = first.reached_unknown_in(config, needed);
         if first.unknown_share(&todo) <= SECOND_PASS_WORTH {
             return None;
         }
@@ -387,7 +387,9 @@ impl SecondPassPlan {
         .into_iter()
         .zip(&first.map)
         .enumerate()
-        .map(|(i, (t, m))| t && m.is_none() && is_needed(i))
+        .map(|(i, (t, m))| {
+            t && m.is_none() && needed.is_none_or(|n| n.get(i).copied().unwrap_or(false))
+        })
         .collect();
         Some(Self { shown, share, todo })
     }

@@ -107,7 +107,8 @@ impl Settings {
     /// and the lab's hot join shown once takes 28 captures with the same partition of unity
     /// after it as pairs (48); but over the wire the rendered room's joiner shown once still
     /// reached 1% of the optimum 17 captures after its calibration against 3 with pairs (the
-    /// processes test, 2026-11-28), for a reason not found: pairs there as before.
+    /// processes test, 2026-11-28): pairs there as before. Likely why: that simulated camera
+    /// (`RemoteCamera`) reports no saturation, so the clip rule cannot engage there.
     pub fn lit_room(self) -> Self {
         Self {
             single_shot: false,

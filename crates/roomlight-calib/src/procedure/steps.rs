@@ -193,6 +193,11 @@ impl<'a, R: Rig> Procedure<'a, R> {
             captures.add(f, &image).map_err(refused)?;
         }
         self.rig.show(&[(&p.id, Frame::BLACK)]).await?;
+        // Where the patterns clip is the camera's ceiling, as in the first pass.
+        let config = DecodeConfig {
+            saturation: limits.saturation,
+            ..config
+        };
         let pass = plan
             .finish(manifest, &config, corr, exposure, &captures, once)
             .map_err(refused)?;

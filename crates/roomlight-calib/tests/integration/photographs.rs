@@ -6,7 +6,6 @@ use crate::common;
 use crate::graycode::decode_captures;
 
 use roomlight_calib::graycode::{Coding, DecodeConfig, Manifest, Pattern, decode_single_shot};
-use roomlight_calib::image_io::LinearImage;
 
 /// Decodes photographs (captures in the manifest's order) with the default decoder.
 fn decode_photographs(
@@ -155,75 +154,4 @@ fn check(
     assert!(t.close >= close, "{t:?}");
     assert!(t.gross <= 0.001, "{t:?}");
     assert!(t.unlit_gross as f64 <= 0.001 * t.lit as f64, "{t:?}");
-}
-
-/// Shown once, a pixel where a lit pattern clips: white less black understates what a lit
-/// pattern gives, and a pixel that clips under every pattern (lit by others near the ceiling,
-/// straddling the projector's edge) would read every bit as lit, a code from the clipping
-/// alone. Camera pixel `(x, y)` sees projector pixel `(x, y)` of a 64×16 XOR-coded set; the
-/// left half is dark, the right half lit by others at 0.7 of the ceiling (1.0), where a lit
-/// pattern adds 0.5 and clips. Columns 32–47 get nothing from an unlit pattern: their lit and
-/// unlit levels (1.0, 0.7) still tell the bits apart. Columns 48–63 get 0.35 from an unlit one:
-/// every pattern reads 1.0 there, which must be unknown, not a code. (The decoder happens to
-/// reject this synthetic constant code by itself; the procedure test
-/// `a_single_shot_beside_lit_projectors_is_never_wrong_where_it_clips` is where reading from
-/// white went wrong.)
-#[test]
-fn a_single_shot_reads_a_clipped_pixel_from_its_own_lit_and_unlit_levels_or_not_at_all() {
-    fn at(c: &roomlight_calib::graycode::Correspondence, x: u32) -> Vec<Option<(u32, u32)>> {
-        (0..16u32).map(|y| c.map[(y * 64 + x) as usize]).collect()
-    }
-    let manifest = Manifest::with_coding(64, 16, Coding::Xor04).expect("manifest");
-    let capture = |pattern: Pattern| {
-        let shown = manifest.pattern_image(pattern);
-        LinearImage {
-            width: 64,
-            height: 16,
-            pixels: shown
-                .pixels
-                .iter()
-                .enumerate()
-                .map(|(i, p)| {
-                    let x = i % 64;
-                    let (others, unlit) = match x {
-                        0..32 => (0.05_f32, 0.0_f32),
-                        32..48 => (0.7, 0.0),
-                        _ => (0.7, 0.35),
-                    };
-                    let v = (others + if p[0] > 0.5 { 0.5 } else { unlit }).min(1.0_f32);
-                    [v; 3]
-                })
-                .collect(),
-        }
-    };
-    let images: Vec<LinearImage> = manifest
-        .patterns
-        .iter()
-        .map(|f| capture(f.pattern))
-        .collect();
-    let decode = |saturation: f32| {
-        let config = DecodeConfig {
-            saturation,
-            refuse_saturated: false,
-            ..DecodeConfig::default()
-        };
-        decode_single_shot(&manifest, &config, None, |f| {
-            let i = manifest.patterns.iter().position(|p| p == f);
-            Ok(&images[i.expect("pattern")])
-        })
-        .expect("decode")
-    };
-    let known = decode(1.0);
-    for x in 0..48u32 {
-        for (y, m) in at(&known, x).into_iter().enumerate() {
-            assert_eq!(m, Some((x, y as u32)), "pixel ({x}, {y})");
-        }
-    }
-    for x in 48..64u32 {
-        assert!(
-            at(&known, x).iter().all(Option::is_none),
-            "column {x}: {:?}",
-            at(&known, x)
-        );
-    }
 }
