@@ -85,6 +85,7 @@ impl v1::rendered_room_server::RenderedRoom for Rendered {
             presets: scene.presets.iter().map(|p| p.name.clone()).collect(),
             camera_width: scene.camera.resolution[0],
             camera_height: scene.camera.resolution[1],
+            camera_saturation: scene.camera.saturation as f32,
         }))
     }
 
@@ -248,6 +249,8 @@ pub struct RenderedCamera {
     /// Room patch index of each model patch.
     patches: Arc<Vec<usize>>,
     sample: roomlight_calib::charts::SampleConfig,
+    /// Where a capture clips ([`v1::RoomDescription::camera_saturation`]); NaN: unknown.
+    saturation: f32,
 }
 
 impl RenderedCamera {
@@ -262,6 +265,21 @@ impl RenderedCamera {
             corners: Arc::new(corners),
             patches: Arc::new(patches),
             sample,
+            saturation: f32::NAN,
+        }
+    }
+
+    /// The camera clipping at `saturation` as the room described it (calibration reads a
+    /// single shot's clipped pixels from their own patterns there); a value that is not a
+    /// positive finite number (0: the room did not say) leaves it unknown.
+    pub fn with_saturation(self, saturation: f32) -> Self {
+        Self {
+            saturation: if saturation.is_finite() && saturation > 0.0 {
+                saturation
+            } else {
+                f32::NAN
+            },
+            ..self
         }
     }
 }
@@ -320,6 +338,13 @@ impl RenderedCamera {
 }
 
 impl roomlight_agent::hardware::Camera for RenderedCamera {
+    fn limits(&self) -> roomlight_calib::rig::CameraLimits {
+        roomlight_calib::rig::CameraLimits {
+            saturation: self.saturation,
+            longest_exposure: 1.0,
+        }
+    }
+
     fn capture_image(
         &mut self,
     ) -> impl Future<
@@ -510,7 +535,25 @@ mod tests {
         let corners = crate::pipeline::chart_corners(&room).expect("corners");
         let sample = crate::pipeline::sample_config(&room);
         let patches: Vec<usize> = (0..room.patches()).collect();
-        let mut camera = RenderedCamera::new(client, corners.clone(), patches, sample);
+        // The room says where its camera clips, and calibration plans with it; a room that
+        // does not say (0) leaves it unknown.
+        let described = client
+            .clone()
+            .describe(v1::DescribeRequest {})
+            .await
+            .expect("describe")
+            .into_inner()
+            .camera_saturation;
+        assert!(
+            (f64::from(described) - room.scene().camera.saturation).abs() < 1e-6,
+            "{described}"
+        );
+        let unsaid = RenderedCamera::new(client.clone(), Vec::new(), Vec::new(), sample);
+        assert!(unsaid.limits().saturation.is_nan());
+        assert!(unsaid.with_saturation(0.0).limits().saturation.is_nan());
+        let mut camera = RenderedCamera::new(client, corners.clone(), patches, sample)
+            .with_saturation(described);
+        assert!((camera.limits().saturation - described).abs() < 1e-6);
         display.show(0, LinearRgb::splat(0.5));
         display.flush().await;
         let served = camera.capture().await.expect("capture");

@@ -34,6 +34,8 @@ struct Checked {
     survey: SurveyFile,
     target_mask: Vec<bool>,
     presets: Vec<String>,
+    /// Where the rendered room's camera clips, as it describes it (NaN: a physical room).
+    saturation: f32,
 }
 
 impl Checked {
@@ -62,12 +64,15 @@ impl Checked {
                 patches: Arc::new(patches),
                 sample: self.survey.sample,
             })),
-            (None, SurveyRoom::Rendered(client)) => AnyCamera::Rendered(RenderedCamera::new(
-                client.clone(),
-                self.survey.corners.clone(),
-                patches,
-                self.survey.sample,
-            )),
+            (None, SurveyRoom::Rendered(client)) => AnyCamera::Rendered(
+                RenderedCamera::new(
+                    client.clone(),
+                    self.survey.corners.clone(),
+                    patches,
+                    self.survey.sample,
+                )
+                .with_saturation(self.saturation),
+            ),
             (None, SurveyRoom::Physical(_)) => {
                 bail!("a physical room is photographed by a real camera")
             }
@@ -98,6 +103,7 @@ pub(super) async fn survey_model(
                 target_mask: survey.target_mask(),
                 survey,
                 presets: vec![preset.unwrap_or("the room's LEDs").to_string()],
+                saturation: f32::NAN,
             }
         }
     };
@@ -174,6 +180,7 @@ async fn check(survey_path: &Path, client: &Client) -> Result<Checked> {
         survey,
         target_mask,
         presets: description.presets,
+        saturation: description.camera_saturation,
     })
 }
 
