@@ -428,13 +428,15 @@ fn processes_converge_survive_a_killed_node_and_leave_nothing_behind() {
 /// one process, through captures) and writes the files; `roomlight sim --scene small` serves it;
 /// the camera agent samples the charts of its images and one node agent per luminaire draws its
 /// nodes into its projector's image. The room converges to within 1% of the measured model's
-/// optimum.
+/// optimum, the camera's noise taken out ([`noise_free`]: a measured `G` sits about 6% above
+/// `G*` here from the noise alone, so within 1% as measured waited for a lucky capture).
 #[test]
 fn the_rendered_room_converges_through_separate_processes() {
     let dir = tempfile::tempdir().expect("temp dir");
     let d = dir.path();
     calibrate_small(d, "--seed=2");
-    let (model, _, best) = model_in(d);
+    let (model, _, _) = model_in(d);
+    let (best, excess) = noise_free(d);
     let projectors: Vec<String> = model["owners"]
         .as_object()
         .expect("owners")
@@ -460,10 +462,14 @@ fn the_rendered_room_converges_through_separate_processes() {
     }
     let n = projectors.len();
     let line = wait_line(&cam_out, Duration::from_secs(120), |l| {
-        status(l).is_some_and(|(c, g, live)| live == n && c >= 3 && best.excess(g) < 1e-2)
+        status(l).is_some_and(|(c, g, live)| live == n && c >= 3 && excess(g).abs() < 1e-2)
     });
     let (captures, g, _) = status(&line).expect("status");
-    assert!(best.excess(g) < 1e-2, "{line}: excess {}", best.excess(g));
+    assert!(excess(g).abs() < 1e-2, "{line}: excess {}", excess(g));
+    eprintln!(
+        "within 1% of G* = {:.4e} (noise taken out) at capture {captures} ({line})",
+        best.objective
+    );
     assert!(captures < 60, "{line}");
     drop(procs);
 }
