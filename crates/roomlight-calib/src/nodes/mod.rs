@@ -64,12 +64,13 @@ pub struct Segmentation {
 /// Projector pixel → the camera pixel that sees it: the most confident decoded one; else a
 /// bridged one (`map` is `c`'s map with its gaps bridged, `bridged` marks those,
 /// [`bridge::bridged`]); else filled outwards from those so that every projector pixel has one
-/// (nearest neighbour in projector space, 4-connected).
+/// (nearest neighbour in projector space, 4-connected). The second value is each pixel's
+/// number of steps from the decoded or bridged one it took its camera pixel from (0: its own).
 fn inverse_map(
     c: &Correspondence,
     map: &[Option<(u32, u32)>],
     bridged: &[bool],
-) -> Vec<Option<u32>> {
+) -> (Vec<Option<u32>>, Vec<u32>) {
     let (pw, ph) = (c.projector_width as usize, c.projector_height as usize);
     let mut inv: Vec<Option<u32>> = vec![None; pw * ph];
     let mut best = vec![f32::NEG_INFINITY; pw * ph];
@@ -90,6 +91,7 @@ fn inverse_map(
             }
         }
     }
+    let mut hops = vec![0u32; pw * ph];
     let mut queue: VecDeque<usize> = (0..pw * ph).filter(|&k| inv[k].is_some()).collect();
     while let Some(k) = queue.pop_front() {
         let (x, y) = (k % pw, k / pw);
@@ -102,15 +104,17 @@ fn inverse_map(
         for n in around.into_iter().flatten() {
             if inv[n].is_none() {
                 inv[n] = inv[k];
+                hops[n] = hops[k] + 1;
                 queue.push_back(n);
             }
         }
     }
-    inv
+    (inv, hops)
 }
 
-/// Distance (chamfer, in pixels) from every pixel inside `mask` to the nearest pixel outside it
-/// or to the image border; 0 outside.
+/// Distance (chamfer, in pixels) from every pixel inside `mask` to the nearest pixel outside it;
+/// 0 outside, infinite where the whole image is inside. The image's border is no edge: a
+/// footprint the view cuts goes on beyond it.
 fn distance_inside(mask: &[bool], w: usize, h: usize) -> Vec<f32> {
     const D: f32 = std::f32::consts::SQRT_2;
     let mut d: Vec<f32> = mask
@@ -119,7 +123,7 @@ fn distance_inside(mask: &[bool], w: usize, h: usize) -> Vec<f32> {
         .collect();
     let at = |x: isize, y: isize, d: &[f32]| {
         if x < 0 || y < 0 || x >= w as isize || y >= h as isize {
-            0.0
+            f32::INFINITY
         } else {
             d[y as usize * w + x as usize]
         }
@@ -373,12 +377,28 @@ fn blend_in_order(
             }
         };
         let (map, bridged) = bridge::bridged(c);
-        let inv = inverse_map(c, &map, &bridged);
+        let (inv, hops) = inverse_map(c, &map, &bridged);
+        // Further than half a camera pixel's worth of projector pixels from what was decoded.
+        let beyond = f64::max(bridge::step(c), 1.0) / 2.0;
         // Blend of each projector pixel: at the surface point it lights (all that is left
-        // there where no footprint has a share: unseen).
+        // there where neither it nor a projector after it has a share: unseen).
+        let reached = |i: usize| rest.iter().any(|&j| shares[j][i] > 0.0);
+        // On the outermost ring of its footprint (chamfer distance 1 or √2 from its edge).
+        let rim = |i: usize| shares[k][i] * config.edge_feather_px.max(1e-3) < 1.5;
+        let others_reach = |i: usize| (0..shares.len()).any(|j| j != k && shares[j][i] > 0.0);
         let blend: Vec<f32> = (0..pw * ph)
             .map(|p| match inv[p] {
-                Some(i) if shares[k][i as usize] > 0.0 => blend_at(i as usize),
+                // Filled from the ring, beyond the camera pixel it was filled from: where the
+                // decode missed (a grazing strip), and the others, seeing no footprint of this
+                // projector there, give all their light.
+                Some(i)
+                    if f64::from(hops[p]) > beyond
+                        && rim(i as usize)
+                        && others_reach(i as usize) =>
+                {
+                    0.0
+                }
+                Some(i) if reached(i as usize) => blend_at(i as usize),
                 Some(i) => (1.0 - taken[i as usize]).max(0.0),
                 None => 1.0,
             })
