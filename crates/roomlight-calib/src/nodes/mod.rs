@@ -378,12 +378,12 @@ fn blend_in_order(
         };
         let (map, bridged) = bridge::bridged(c);
         let (inv, hops) = inverse_map(c, &map, &bridged);
-        // Blend of each projector pixel: at the surface point it lights (all that is left
-        // there where neither it nor a projector after it has a share: unseen).
-        let reached = |i: usize| rest.iter().any(|&j| shares[j][i] > 0.0);
-        // On the outermost ring of its footprint (chamfer distance 1 or √2 from its edge).
+        // On the outermost ring of its footprint (chamfer distance 1 or √2 from its edge) or
+        // outside it.
         let rim = |i: usize| shares[k][i] * config.edge_feather_px.max(1e-3) < 1.5;
         let others_reach = |i: usize| (0..shares.len()).any(|j| j != k && shares[j][i] > 0.0);
+        // Blend of each projector pixel: at the surface point it lights (all that is left
+        // there where no footprint has a share: unseen).
         let blend: Vec<f32> = (0..pw * ph)
             .map(|p| match inv[p] {
                 // Filled from the rim, more than one step from what was decoded: beyond the
@@ -394,7 +394,7 @@ fn blend_in_order(
                 // map's own scale, caught 6% of the lab's misses instead of 21%: across a
                 // grazing strip that is more than one camera pixel).
                 Some(i) if hops[p] > 1 && rim(i as usize) && others_reach(i as usize) => 0.0,
-                Some(i) if reached(i as usize) => blend_at(i as usize),
+                Some(i) if shares[k][i as usize] > 0.0 => blend_at(i as usize),
                 Some(i) => (1.0 - taken[i as usize]).max(0.0),
                 None => 1.0,
             })

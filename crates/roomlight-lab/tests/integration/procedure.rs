@@ -6,7 +6,9 @@
 use roomlight_calib::charts::SampleConfig;
 use roomlight_calib::graycode::Correspondence;
 use roomlight_calib::nodes::{Partition, add_claim};
-use roomlight_calib::procedure::{Decoded, Event, Placed, Procedure, Settings, Setup, Stage};
+use roomlight_calib::procedure::{
+    BringUp, Decoded, Event, Placed, Procedure, Settings, Setup, Stage,
+};
 use roomlight_calib::rig::{Frame, Projector, ProjectorKind, Rig, block_on};
 use roomlight_core::LinearRgb;
 use roomlight_lab::pipeline::{SimRig, chart_corners};
@@ -151,6 +153,25 @@ fn check_columns(
 }
 
 /// Node values of `placed` as frames: node ids in `on` at white, the others at `rest`.
+/// `lit` brought up in the dark and lit at mid grey, then `joiner` live beside them: the rig,
+/// the bring-up, and the share of the light the lit ones give at each camera pixel.
+fn lit_then_joining<'a>(
+    room: &'a Room,
+    noise: &'a mut CameraNoise,
+    setup: &Setup,
+    lit: &[&str],
+    joiner: &str,
+) -> (SimRig<'a>, BringUp, Vec<f32>) {
+    let mut rig = rig(room, noise, lit);
+    let up = block_on(Procedure::new(&mut rig, Settings::default(), |_| {}).bring_up(setup))
+        .expect("bring-up");
+    block_on(rig.show(&frames_of(&up.placed, &[], LinearRgb::splat(0.5)))).expect("lit");
+    rig.go_live(joiner).expect("joiner");
+    let pixels = room.camera().width as usize * room.camera().height as usize;
+    let claimed = roomlight_calib::procedure::claimed_by(&up.placed, pixels);
+    (rig, up, claimed)
+}
+
 fn frames_of<'p>(placed: &'p [Placed], on: &[u32], rest: LinearRgb) -> Vec<(&'p str, Frame)> {
     placed
         .iter()
@@ -393,13 +414,13 @@ fn a_projector_joining_a_lit_room_decodes_again_only_where_it_is_needed() {
     let room = Room::build(scene).expect("room");
     let setup = setup(&room);
     let mut noise = CameraNoise::with_seed(&room, 43);
-    let mut rig = rig(&room, &mut noise, &["wall-front", "floor-left"]);
-    let up = block_on(Procedure::new(&mut rig, Settings::default(), |_| {}).bring_up(&setup))
-        .expect("bring-up");
-    block_on(rig.show(&frames_of(&up.placed, &[], LinearRgb::splat(0.5)))).expect("lit");
-    rig.go_live("floor-right").expect("floor-right");
-    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
-    let claimed = roomlight_calib::procedure::claimed_by(&up.placed, w * h);
+    let (mut rig, up, claimed) = lit_then_joining(
+        &room,
+        &mut noise,
+        &setup,
+        &["wall-front", "floor-left"],
+        "floor-right",
+    );
     let first = up.placed.iter().map(|p| p.nodes.len() as u32).sum();
     let (events, progress) = recorder();
     let joined = block_on(
@@ -627,13 +648,8 @@ fn a_single_shot_beside_lit_projectors_is_never_wrong_where_it_clips() {
     let room = Room::build(scenes::small().expect("small")).expect("room");
     let setup = setup(&room);
     let mut noise = CameraNoise::with_seed(&room, 41);
-    let mut rig = rig(&room, &mut noise, &["left", "area"]);
-    let up = block_on(Procedure::new(&mut rig, Settings::default(), |_| {}).bring_up(&setup))
-        .expect("bring-up");
-    block_on(rig.show(&frames_of(&up.placed, &[], LinearRgb::splat(0.5)))).expect("lit");
-    rig.go_live("right").expect("right");
-    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
-    let claimed = roomlight_calib::procedure::claimed_by(&up.placed, w * h);
+    let (mut rig, _, claimed) =
+        lit_then_joining(&room, &mut noise, &setup, &["left", "area"], "right");
     let needed = roomlight_calib::procedure::needed(&claimed);
     let mut procedure = Procedure::new(&mut rig, Settings::default(), |_| {});
     let right: Vec<Projector> = procedure
