@@ -33,8 +33,14 @@ work=$(mktemp -d)
 names=(sim cam n0 n1 n2)
 pids=()
 ok=0
+# Every process in this run's namespaces: `$!` of `in_ns … &` is the subshell running `ip netns
+# exec`, and killing it left the agents themselves running.
+in_namespaces() { for n in "${names[@]}"; do ip netns pids "$p-$n" 2>/dev/null || true; done; }
 cleanup() {
     for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
+    in_namespaces | xargs -r kill 2>/dev/null || true
+    for _ in $(seq 50); do [ -z "$(in_namespaces)" ] && break; sleep 0.1; done
+    in_namespaces | xargs -r kill -9 2>/dev/null || true
     for pid in "${pids[@]}"; do wait "$pid" 2>/dev/null || true; done
     for n in "${names[@]}"; do ip netns del "$p-$n" 2>/dev/null || true; done
     ip link del "$p-br" 2>/dev/null || true
@@ -45,6 +51,7 @@ cleanup() {
         for log in "$work"/*.log; do echo "--- $log (last lines)" >&2; tail -n 15 "$log" >&2; done
     fi
     if ip netns list | grep -q "^$p-"; then echo "netns test: namespaces left behind" >&2; exit 1; fi
+    if pgrep -f -- "$work/" >/dev/null; then echo "netns test: processes left behind" >&2; exit 1; fi
 }
 trap cleanup EXIT
 
