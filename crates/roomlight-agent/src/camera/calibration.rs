@@ -20,7 +20,7 @@ use super::{Shared, Survey};
 use crate::hardware::Camera;
 use roomlight_calib::attenuation::Attenuation;
 use roomlight_calib::procedure::{
-    Event, Hot, Placed, Procedure, ProcedureError, Settings, Setup, place,
+    Event, Hot, Placed, Procedure, ProcedureError, Settings, Setup, place_calibrated,
 };
 use roomlight_calib::rig::{Frame, Rig, RigError};
 use roomlight_core::conventional::conventional_value;
@@ -354,16 +354,16 @@ async fn over_the_wire(
         .await?;
     let measured = procedure.responses(decoded, &live, &dark, &whites).await?;
     drop(whites);
-    let (to_place, nodes) = (setup.clone(), settings.nodes);
+    let to_place = setup.clone();
     let placed = procedure
         .rig()
         .offload(move || {
-            place(
+            place_calibrated(
                 &to_place,
                 &measured,
                 claimed.as_deref(),
                 first,
-                &nodes,
+                &settings,
                 &mut log_event,
             )
         })

@@ -117,9 +117,10 @@ impl<'a, R: Rig> Procedure<'a, R> {
     /// Structured light on `projectors` (black, with `dark` and `whites` from [`Self::dark`]
     /// and [`Self::whites`]): the first pass ([`Self::code`]), then a second pass for each
     /// standard projector where the first left enough reached pixels unknown among the camera
-    /// pixels `needed` marks (all when `None`; [`needed`] for projectors joining a lit room),
-    /// on rigs that show images; the same pixels decide whether a projector shown once needs
-    /// its inverses. In the order of `projectors`.
+    /// pixels `needed` marks (all when `None`; [`needed`] for projectors joining a lit room)
+    /// that no other blending projector decoded ([`left_by`]), on rigs that show images; the
+    /// same pixels decide whether a projector shown once needs its inverses. In the order of
+    /// `projectors`.
     pub async fn structured_light(
         &mut self,
         projectors: &[Projector],
@@ -128,11 +129,20 @@ impl<'a, R: Rig> Procedure<'a, R> {
         needed: Option<&[bool]>,
     ) -> Result<Vec<Decoded>, ProcedureError> {
         let mut decoded = self.code(projectors, dark, whites, needed).await?;
-        for d in &mut decoded {
+        for k in 0..decoded.len() {
+            // Where another blending projector was decoded it takes the light whatever this
+            // one leaves unknown there: no second pass for it.
+            let others = decoded
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != k)
+                .map(|(_, d)| (&d.projector, &d.corr));
+            let left = left_by(others, needed, decoded[k].corr.map.len());
+            let d = &mut decoded[k];
             let coding = self.settings.coding(&d.projector);
             let m = Manifest::with_coding(d.projector.width, d.projector.height, coding)?;
             d.second = self
-                .second_pass(&d.projector, &m, &mut d.corr, needed)
+                .second_pass(&d.projector, &m, &mut d.corr, Some(&left))
                 .await?;
         }
         Ok(decoded)
@@ -405,7 +415,8 @@ impl<'a, R: Rig> Procedure<'a, R> {
 
     /// Brings up a dark room: every live projector black, then the luminaires' footprints,
     /// structured light (disjoint ones together, second passes), responses, nodes feathered
-    /// together with the target kept dark, and their attenuation. Leaves every node black.
+    /// together with the target kept dark ([`place_calibrated`]), and their attenuation.
+    /// Leaves every node black.
     pub async fn bring_up(&mut self, setup: &Setup) -> Result<BringUp, ProcedureError> {
         let live = self.rig.projectors();
         let luminaires = luminaires(&live);
@@ -416,8 +427,14 @@ impl<'a, R: Rig> Procedure<'a, R> {
             .await?;
         let measured = self.responses(decoded, &luminaires, &dark, &whites).await?;
         drop(whites);
-        let nodes = self.settings.nodes;
-        let placed = place(setup, &measured, None, 0, &nodes, &mut *self.progress)?;
+        let placed = place_calibrated(
+            setup,
+            &measured,
+            None,
+            0,
+            &self.settings,
+            &mut *self.progress,
+        )?;
         self.assign(&placed).await?;
         // Every node black is the room as `dark` saw it: its black level.
         let columns = self.attenuation(setup, &placed, Some(&dark)).await?;
@@ -539,6 +556,27 @@ impl<'a, R: Rig> Procedure<'a, R> {
             captures: self.captures,
         })
     }
+}
+
+/// The camera pixels `needed` marks (all when `None`) that no blending projector (a standard
+/// luminaire) among `decoded` decoded. Where one did, the blend gives it the light however
+/// another projector is decoded there, as a lit room's claims do for a joiner ([`needed`]):
+/// a projector brought up with others needs neither a second pass nor its inverses there.
+fn left_by<'a>(
+    decoded: impl IntoIterator<Item = (&'a Projector, &'a Correspondence)>,
+    needed: Option<&[bool]>,
+    pixels: usize,
+) -> Vec<bool> {
+    let mut left = needed.map_or_else(|| vec![true; pixels], <[bool]>::to_vec);
+    left.resize(pixels, false);
+    for (p, corr) in decoded {
+        if p.kind == ProjectorKind::Standard && p.role == ProjectorRole::Luminaire {
+            for (l, m) in left.iter_mut().zip(&corr.map) {
+                *l &= m.is_none();
+            }
+        }
+    }
+    left
 }
 
 /// Frames addressed by owned ids, as the rig takes them.

@@ -201,8 +201,9 @@ fn chart_sampling(room: &Room, charts: &[ChartCorners]) -> Result<()> {
 
 /// Partition of unity on the surface points, through the simulator's true correspondence,
 /// away from the target (its margin is black): the standard luminaires (`luminaires`, room
-/// indices, decoded as `corr`) segmented together (`seg`), and one after the other as
-/// projectors joining a lit room over the wire are.
+/// indices, decoded as `corr`) all segmented together (`seg`; the cold start's line gives
+/// the bring-up's own placement), and one after the other as projectors joining a lit room
+/// over the wire are.
 fn partition(
     room: &Room,
     luminaires: &[usize],
@@ -221,7 +222,8 @@ fn partition(
         .map(|k| projector_weights(&seg.nodes, k))
         .collect();
     println!(
-        "  partition of unity, segmented together: {}",
+        "  partition of unity, all segmented together (a bring-up places those that left over {:.0}% unknown beside the others): {}",
+        100.0 * roomlight_calib::procedure::BESIDE_UNKNOWN,
         partition_of_unity(&truth, &weights, &seg.excluded, &away)
     );
     if std::env::var_os("ROOMLIGHT_DIAG").is_some() {

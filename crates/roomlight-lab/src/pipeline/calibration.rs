@@ -10,8 +10,8 @@ use roomlight_calib::charts::ChartCorners;
 use roomlight_calib::charts::PatchSample;
 use roomlight_calib::procedure::Target;
 use roomlight_calib::procedure::{
-    BringUp, Event, Layout, Measured, Placed, Procedure, Settings, Setup, Stage, WallTiling, place,
-    wall_exclusion, wall_patches,
+    BringUp, Event, Layout, Measured, Placed, Procedure, Settings, Setup, Stage, WallTiling,
+    place_calibrated, wall_exclusion, wall_patches,
 };
 use roomlight_calib::response::Response;
 use roomlight_calib::rig::block_on;
@@ -46,6 +46,10 @@ pub struct Calibrated {
     /// Weight of each wall patch's squared error in the models built from this calibration
     /// ([`Target::with_walls`]; a chart patch weighs 1, 0 leaves the walls out).
     pub wall_weight: f64,
+    /// The projectors whose nodes blend with others' (a claim on the camera pixels, not a
+    /// whole-frame node), each with its pixels kept black for the target: what the partition
+    /// of unity is checked over ([`super::calibrated_partition`]).
+    pub blending: Vec<(String, Vec<bool>)>,
     /// The room as configured by hand, and how the procedure measured it.
     setup: Setup,
     settings: Settings,
@@ -72,14 +76,8 @@ impl Calibrated {
             target_mask: mask.to_vec(),
             ..self.setup.clone()
         };
-        let placed = place(
-            &setup,
-            &self.measured,
-            None,
-            0,
-            &self.settings.nodes,
-            &mut |_| {},
-        )?;
+        let placed =
+            place_calibrated(&setup, &self.measured, None, 0, &self.settings, &mut |_| {})?;
         let (regions, charts) = regions(room, &placed)?;
         if charts != self.node_charts {
             bail!(
@@ -114,6 +112,12 @@ impl Calibrated {
     /// The procedure's bring-up in the simulator's terms.
     fn new(room: &Room, setup: Setup, settings: Settings, up: BringUp) -> Result<Self> {
         let (regions, node_charts) = regions(room, &up.placed)?;
+        let blending = up
+            .placed
+            .iter()
+            .filter(|p| p.claim.is_some())
+            .map(|p| (p.projector.id.clone(), p.excluded.clone()))
+            .collect();
         let mut responses = vec![Response::linear(); room.projectors().len()];
         for m in &up.measured {
             responses[room.projector(&m.projector.id)?] = m.response.clone();
@@ -134,6 +138,7 @@ impl Calibrated {
             responses,
             measured: up.measured,
             wall_weight: 0.0,
+            blending,
             setup,
             settings,
         })

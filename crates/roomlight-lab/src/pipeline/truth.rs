@@ -167,6 +167,37 @@ impl Truth {
     }
 }
 
+/// The partition of unity of a calibration's blending projectors (their nodes' weights
+/// summed per projector pixel), read through the simulator's true correspondences, as
+/// [`placed_partition`] reads placed projectors.
+pub fn calibrated_partition(
+    room: &Room,
+    cal: &Calibrated,
+) -> Result<roomlight_calib::nodes::Partition> {
+    let mut truth = Vec::with_capacity(cal.blending.len());
+    let mut weights = Vec::with_capacity(cal.blending.len());
+    let mut dark = Vec::with_capacity(cal.blending.len());
+    for (id, excluded) in &cal.blending {
+        let k = room.projector(id)?;
+        let mut sum = Vec::new();
+        for r in cal.regions.iter().filter(|r| r.projector == k) {
+            sum.resize(r.weights.len().max(sum.len()), 0.0f32);
+            sum.iter_mut().zip(&r.weights).for_each(|(s, w)| *s += w);
+        }
+        truth.push(room.true_correspondence(k));
+        weights.push(sum);
+        dark.push(excluded.clone());
+    }
+    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
+    Ok(roomlight_calib::nodes::partition_of_unity(
+        &truth,
+        &weights,
+        &dark,
+        &roomlight_calib::nodes::dilate(&mask, w, h, 8),
+    ))
+}
+
 /// The partition of unity of placed projectors (each one's nodes summed) through the
 /// simulator's true correspondence, away from the target (its mask dilated by 8 pixels: the
 /// margin luminaires keep black), as the segmentation's is measured. A projector the room does

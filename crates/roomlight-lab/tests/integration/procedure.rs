@@ -404,6 +404,71 @@ fn a_second_pass_decodes_the_labs_grazing_face() {
 }
 
 #[test]
+fn a_bring_up_places_a_projector_that_left_a_face_unknown_beside_the_others() {
+    // The lab at a small camera resolution, wall-front, floor-left and floor-right brought up
+    // together. floor-right's first pass leaves its grazing face unknown (the test above),
+    // where the other two are decoded: they take the light there, so it is shown neither its
+    // inverses nor a second pass, and is placed beside them as a joiner would be.
+    let mut scene = scenes::lab().expect("lab");
+    scene.camera.resolution = [320, 240];
+    let room = Room::build(scene).expect("room");
+    let setup = setup(&room);
+    let mut noise = CameraNoise::with_seed(&room, 43);
+    let mut rig = rig(
+        &room,
+        &mut noise,
+        &["wall-front", "floor-left", "floor-right"],
+    );
+    let (events, progress) = recorder();
+    let up = block_on(Procedure::new(&mut rig, Settings::default(), progress).bring_up(&setup))
+        .expect("bring-up");
+    let events = events.lock().expect("events").clone();
+    let groups = events
+        .iter()
+        .find_map(|e| match e {
+            Event::Grouped { groups } => Some(groups.len()),
+            _ => None,
+        })
+        .expect("grouped");
+    // Every group shown once (20 bits of a 1024 × 768 projector each), no second pass.
+    assert_eq!(captured_in(&events, Stage::StructuredLight), 20 * groups);
+    assert_eq!(captured_in(&events, Stage::SecondPass), 0, "{events:?}");
+    let ids: Vec<&str> = up
+        .measured
+        .iter()
+        .map(|m| m.projector.id.as_str())
+        .collect();
+    assert_eq!(ids, ["wall-front", "floor-left", "floor-right"]);
+    let config = Settings::default().decode;
+    let unknown = up.measured[2].corr.reached_unknown_share(&config);
+    println!("floor-right left {:.2}% unknown", 100.0 * unknown);
+    assert!(unknown > roomlight_calib::procedure::BESIDE_UNKNOWN);
+    let placed: Vec<&str> = up.placed.iter().map(|p| p.projector.id.as_str()).collect();
+    assert_eq!(placed, ["wall-front", "floor-left", "floor-right"]);
+    let ids: Vec<u32> = up.placed.iter().flat_map(Placed::ids).collect();
+    assert_eq!(ids, (0..ids.len() as u32).collect::<Vec<_>>());
+    // Against the same decodes segmented all together: the weights sum to one better.
+    let together = roomlight_calib::procedure::place(
+        &setup,
+        &up.measured,
+        None,
+        0,
+        &Settings::default().nodes,
+        &mut |_| {},
+    )
+    .expect("placed");
+    let beside = partition(&room, &up.placed.iter().collect::<Vec<_>>());
+    let all = partition(&room, &together.iter().collect::<Vec<_>>());
+    println!("beside: {beside}\ntogether: {all}");
+    assert!(beside.overlap > 1000, "{beside}");
+    assert!(beside.overlap_within_0_05 >= 0.995, "{beside}");
+    assert!(
+        beside.overlap_within_0_05 > all.overlap_within_0_05,
+        "{beside} against {all}"
+    );
+}
+
+#[test]
 fn a_projector_joining_a_lit_room_decodes_again_only_where_it_is_needed() {
     // The lab at a small camera resolution, wall-front and floor-left brought up and lit at
     // mid grey; then floor-right joins. Its first pass leaves its grazing face unknown (the

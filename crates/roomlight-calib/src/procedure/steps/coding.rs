@@ -9,7 +9,8 @@ impl<R: Rig> Procedure<'_, R> {
     /// those whose footprints do not overlap coded at the same time, each decoding the camera
     /// pixels it lights most, its direct light elsewhere zeroed ([`disown`]). In the order of
     /// `projectors`. A member shown once is shown its inverses too when it leaves too many of
-    /// the camera pixels `needed` marks (all when `None`) unknown.
+    /// the camera pixels `needed` marks (all when `None`) unknown, not counting those a
+    /// blending projector of an earlier group decoded ([`left_by`]).
     pub async fn code(
         &mut self,
         projectors: &[Projector],
@@ -50,6 +51,13 @@ impl<R: Rig> Procedure<'_, R> {
         let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
         for group in &groups {
             let white = group_white(dark, &group.iter().map(|&k| &whites[k]).collect::<Vec<_>>());
+            // Where a blending projector of an earlier group was decoded it takes the light
+            // whatever this group leaves unknown there ([`left_by`]): no inverses for that.
+            let earlier = projectors
+                .iter()
+                .zip(&corrs)
+                .filter_map(|(p, c)| Some((p, c.as_ref()?)));
+            let left = left_by(earlier, needed, dark.pixels.len());
             let decoded = self
                 .code_group(
                     projectors,
@@ -57,7 +65,7 @@ impl<R: Rig> Procedure<'_, R> {
                     group,
                     &gains,
                     (&dark_intensity, &white),
-                    needed,
+                    Some(&left),
                 )
                 .await?;
             for (&k, c) in group.iter().zip(decoded) {

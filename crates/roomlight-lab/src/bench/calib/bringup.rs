@@ -24,6 +24,11 @@ pub(super) fn cold_start(room: &Room) -> Result<()> {
     for l in &lines {
         println!("  {l}");
     }
+    println!(
+        "  partition of unity, {} projectors that blend: {}",
+        cal.blending.len(),
+        pipeline::calibrated_partition(room, &cal)?
+    );
     let (preset, rounds) = converge(room, &cal, &mut noise)?;
     let total = cal.captures + 1 + rounds.settled;
     println!(
