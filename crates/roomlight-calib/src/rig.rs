@@ -38,6 +38,14 @@ pub struct Projector {
     pub role: ProjectorRole,
 }
 
+impl Projector {
+    /// Whether its nodes blend with other projectors' (a standard luminaire): where another
+    /// such projector was decoded, that one can take the light.
+    pub fn blends(&self) -> bool {
+        self.kind == ProjectorKind::Standard && self.role == ProjectorRole::Luminaire
+    }
+}
+
 /// What one projector shows until told otherwise.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Frame {

@@ -528,9 +528,7 @@ pub fn place_calibrated(
     progress: &mut dyn FnMut(Event),
 ) -> Result<Vec<Placed>, CalibError> {
     let incomplete = |m: &Measured| {
-        let blends = m.projector.kind == ProjectorKind::Standard
-            && m.projector.role == ProjectorRole::Luminaire;
-        blends
+        m.projector.blends()
             && m.corr
                 .reached_unknown_share(&settings.decoder(&m.projector))
                 > BESIDE_UNKNOWN

@@ -570,7 +570,7 @@ fn left_by<'a>(
     let mut left = needed.map_or_else(|| vec![true; pixels], <[bool]>::to_vec);
     left.resize(pixels, false);
     for (p, corr) in decoded {
-        if p.kind == ProjectorKind::Standard && p.role == ProjectorRole::Luminaire {
+        if p.blends() {
             for (l, m) in left.iter_mut().zip(&corr.map) {
                 *l &= m.is_none();
             }

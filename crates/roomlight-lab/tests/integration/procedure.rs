@@ -18,6 +18,13 @@ use support::{apart_scene, small_scene};
 
 use crate::support;
 
+/// The lab at a small camera resolution (320 × 240).
+fn small_lab() -> Room {
+    let mut scene = scenes::lab().expect("lab");
+    scene.camera.resolution = [320, 240];
+    Room::build(scene).expect("room")
+}
+
 /// The simulated room as a rig with only `live` projectors, captures exposed through `noise`.
 fn rig<'a>(room: &'a Room, noise: &'a mut CameraNoise, live: &[&str]) -> SimRig<'a> {
     SimRig::new(room, noise)
@@ -366,9 +373,7 @@ fn a_second_pass_decodes_the_labs_grazing_face() {
     // The lab at a small camera resolution with only floor-right live: the floor's reflected
     // light hides the grazing face's code from the first pass (graycode tests: 93.70% within
     // ±1 alone, 99.61% after the second pass).
-    let mut scene = scenes::lab().expect("lab");
-    scene.camera.resolution = [320, 240];
-    let room = Room::build(scene).expect("room");
+    let room = small_lab();
     let mut noise = CameraNoise::with_seed(&room, 7);
     let mut rig = rig(&room, &mut noise, &["floor-right"]);
     let (events, progress) = recorder();
@@ -409,9 +414,7 @@ fn a_bring_up_places_a_projector_that_left_a_face_unknown_beside_the_others() {
     // together. floor-right's first pass leaves its grazing face unknown (the test above),
     // where the other two are decoded: they take the light there, so it is shown neither its
     // inverses nor a second pass, and is placed beside them as a joiner would be.
-    let mut scene = scenes::lab().expect("lab");
-    scene.camera.resolution = [320, 240];
-    let room = Room::build(scene).expect("room");
+    let room = small_lab();
     let setup = setup(&room);
     let mut noise = CameraNoise::with_seed(&room, 43);
     let mut rig = rig(
@@ -474,9 +477,7 @@ fn a_projector_joining_a_lit_room_decodes_again_only_where_it_is_needed() {
     // mid grey; then floor-right joins. Its first pass leaves its grazing face unknown (the
     // test above), but the other two already give all the light there: a second pass would
     // cost its captures and change no weight.
-    let mut scene = scenes::lab().expect("lab");
-    scene.camera.resolution = [320, 240];
-    let room = Room::build(scene).expect("room");
+    let room = small_lab();
     let setup = setup(&room);
     let mut noise = CameraNoise::with_seed(&room, 43);
     let (mut rig, up, claimed) = lit_then_joining(
