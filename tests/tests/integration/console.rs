@@ -558,6 +558,13 @@ async fn a_projector_is_calibrated_again_on_request() {
     sb.add_all_nodes();
     let (app, cancel) = console(&sb, None, dir.path());
     sb.wait_captures(WITHIN, 2).await;
+    // The rounds may run before every node is attached (a CI run asked for p1 first: 404).
+    status_until(&app, sb.status_watch(), |s| {
+        s["projectors"]
+            .as_array()
+            .is_some_and(|p| p.iter().any(|p| p["id"] == "p1" && p["state"] == "live"))
+    })
+    .await;
     let (code, body) = json_of(
         &app,
         bearer("POST", "/api/calibrate", Some(json!({"projector": "p9"}))),
