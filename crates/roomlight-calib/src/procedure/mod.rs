@@ -553,9 +553,7 @@ pub fn place_calibrated(
         &settings.nodes,
         progress,
     )?;
-    let Some(pixels) = rest.first().map(|m| m.corr.map.len()) else {
-        return Ok(placed);
-    };
+    let pixels = rest[0].corr.map.len();
     let mut beside = claimed.map_or_else(|| vec![0.0; pixels], <[f32]>::to_vec);
     for c in placed.iter().filter_map(|p| p.claim.as_ref()) {
         crate::nodes::add_claim(&mut beside, c);

@@ -49,7 +49,7 @@ pub struct Calibrated {
     /// The projectors whose nodes blend with others' (a claim on the camera pixels, not a
     /// whole-frame node), each with its pixels kept black for the target: what the partition
     /// of unity is checked over ([`super::calibrated_partition`]).
-    pub blending: Vec<(String, Vec<bool>)>,
+    pub(crate) blending: Vec<(String, Vec<bool>)>,
     /// The room as configured by hand, and how the procedure measured it.
     setup: Setup,
     settings: Settings,

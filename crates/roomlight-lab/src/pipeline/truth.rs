@@ -168,71 +168,70 @@ impl Truth {
 }
 
 /// The partition of unity of a calibration's blending projectors (their nodes' weights
-/// summed per projector pixel), read through the simulator's true correspondences, as
-/// [`placed_partition`] reads placed projectors.
+/// summed per projector pixel), as [`placed_partition`] reads placed projectors.
 pub fn calibrated_partition(
     room: &Room,
     cal: &Calibrated,
 ) -> Result<roomlight_calib::nodes::Partition> {
-    let mut truth = Vec::with_capacity(cal.blending.len());
-    let mut weights = Vec::with_capacity(cal.blending.len());
-    let mut dark = Vec::with_capacity(cal.blending.len());
+    let mut projectors = Vec::with_capacity(cal.blending.len());
     for (id, excluded) in &cal.blending {
         let k = room.projector(id)?;
-        let mut sum = Vec::new();
-        for r in cal.regions.iter().filter(|r| r.projector == k) {
-            sum.resize(r.weights.len().max(sum.len()), 0.0f32);
-            sum.iter_mut().zip(&r.weights).for_each(|(s, w)| *s += w);
-        }
-        truth.push(room.true_correspondence(k));
-        weights.push(sum);
-        dark.push(excluded.clone());
+        let p = &room.projectors()[k].pinhole;
+        let nodes = cal.regions.iter().filter(|r| r.projector == k);
+        let weights = summed(p.width * p.height, nodes.map(|r| r.weights.as_slice()));
+        projectors.push((k, weights, excluded.clone()));
     }
-    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
-    Ok(roomlight_calib::nodes::partition_of_unity(
-        &truth,
-        &weights,
-        &dark,
-        &roomlight_calib::nodes::dilate(&mask, w, h, 8),
-    ))
+    Ok(through_truth(room, projectors))
 }
 
-/// The partition of unity of placed projectors (each one's nodes summed) through the
-/// simulator's true correspondence, away from the target (its mask dilated by 8 pixels: the
-/// margin luminaires keep black), as the segmentation's is measured. A projector the room does
-/// not have is refused, named.
+/// The partition of unity of placed projectors (each one's nodes summed), as
+/// [`through_truth`] measures it. A projector the room does not have is refused, named.
 pub fn placed_partition(
     room: &Room,
     placed: &[&roomlight_calib::procedure::Placed],
 ) -> Result<roomlight_calib::nodes::Partition> {
     use anyhow::Context;
-    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
-    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
-    let mut truth = Vec::with_capacity(placed.len());
+    let mut projectors = Vec::with_capacity(placed.len());
     for p in placed {
         let k = room
             .projector(&p.projector.id)
             .with_context(|| format!("no projector {} in the room", p.projector.id))?;
-        truth.push(room.true_correspondence(k));
+        let nodes = p.nodes.iter().map(|n| n.weights.as_slice());
+        let weights = summed(p.projector.width * p.projector.height, nodes);
+        projectors.push((k, weights, p.excluded.clone()));
     }
-    let weights: Vec<Vec<f32>> = placed
-        .iter()
-        .map(|p| {
-            let mut sum = vec![0.0f32; (p.projector.width * p.projector.height) as usize];
-            for n in &p.nodes {
-                sum.iter_mut().zip(&n.weights).for_each(|(s, w)| *s += w);
-            }
-            sum
-        })
-        .collect();
-    let dark: Vec<Vec<bool>> = placed.iter().map(|p| p.excluded.clone()).collect();
-    Ok(roomlight_calib::nodes::partition_of_unity(
+    Ok(through_truth(room, projectors))
+}
+
+/// The partition of unity of projectors, each as its room index, its weight per projector
+/// pixel and its pixels kept black, through the simulator's true correspondence, away from the
+/// target (its mask dilated by 8 pixels: the margin luminaires keep black), as the
+/// segmentation's is measured.
+fn through_truth(
+    room: &Room,
+    projectors: Vec<(usize, Vec<f32>, Vec<bool>)>,
+) -> roomlight_calib::nodes::Partition {
+    let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let (w, h) = (room.camera().width as usize, room.camera().height as usize);
+    let (truth, (weights, dark)): (Vec<_>, (Vec<_>, Vec<_>)) = projectors
+        .into_iter()
+        .map(|(k, weights, dark)| (room.true_correspondence(k), (weights, dark)))
+        .unzip();
+    roomlight_calib::nodes::partition_of_unity(
         &truth,
         &weights,
         &dark,
         &roomlight_calib::nodes::dilate(&mask, w, h, 8),
-    ))
+    )
+}
+
+/// Node weights summed per projector pixel (`pixels` of them).
+fn summed<'w>(pixels: u32, nodes: impl Iterator<Item = &'w [f32]>) -> Vec<f32> {
+    let mut sum = vec![0.0f32; pixels as usize];
+    for weights in nodes {
+        sum.iter_mut().zip(weights).for_each(|(s, w)| *s += w);
+    }
+    sum
 }
 
 #[cfg(test)]

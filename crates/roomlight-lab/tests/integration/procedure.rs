@@ -159,7 +159,6 @@ fn check_columns(
     checked
 }
 
-/// Node values of `placed` as frames: node ids in `on` at white, the others at `rest`.
 /// `lit` brought up in the dark and lit at mid grey, then `joiner` live beside them: the rig,
 /// the bring-up, and the share of the light the lit ones give at each camera pixel.
 fn lit_then_joining<'a>(
@@ -179,6 +178,7 @@ fn lit_then_joining<'a>(
     (rig, up, claimed)
 }
 
+/// Node values of `placed` as frames: node ids in `on` at white, the others at `rest`.
 fn frames_of<'p>(placed: &'p [Placed], on: &[u32], rest: LinearRgb) -> Vec<(&'p str, Frame)> {
     placed
         .iter()
