@@ -13,10 +13,12 @@ use std::sync::{Arc, Mutex, PoisonError};
 pub enum Fill {
     /// Every pixel at this code per channel, in [0, 1].
     Uniform([f32; 3]),
-    /// A structured-light pattern of the projector's own resolution.
+    /// A structured-light pattern of the projector's own resolution, over code cells of
+    /// `cell × cell` pixels.
     Structured {
         pattern: roomlight_calib::graycode::Pattern,
         coding: roomlight_calib::graycode::Coding,
+        cell: u32,
     },
 }
 
@@ -47,9 +49,13 @@ impl Pattern {
         let refused = |e: String| crate::AgentError::Protocol(format!("pattern: {e}"));
         let mut codes = match self.fill {
             Fill::Uniform(code) => vec![code; n],
-            Fill::Structured { pattern, coding } => {
+            Fill::Structured {
+                pattern,
+                coding,
+                cell,
+            } => {
                 let manifest =
-                    roomlight_calib::graycode::Manifest::with_coding(width, height, coding)
+                    roomlight_calib::graycode::Manifest::with_cell(width, height, coding, cell)
                         .map_err(|e| refused(e.to_string()))?;
                 check_gray_bit(&manifest, pattern).map_err(refused)?;
                 manifest.pattern_image(pattern).pixels

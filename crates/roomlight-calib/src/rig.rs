@@ -51,14 +51,20 @@ impl Projector {
 pub enum Frame {
     /// Every pixel at this code per channel, in [0, 1] (0: black).
     Uniform([f32; 3]),
-    /// A structured-light pattern of the projector's own resolution.
-    Structured { pattern: Pattern, coding: Coding },
+    /// A structured-light pattern of the projector's own resolution, over code cells of
+    /// `cell × cell` pixels ([`Manifest::with_cell`]).
+    Structured {
+        pattern: Pattern,
+        coding: Coding,
+        cell: u32,
+    },
     /// A structured-light pattern shown only where `shown` (row-major projector pixels) is
     /// true and black elsewhere: a second pass's patterns. Only for rigs that
     /// [`Rig::shows_masks`].
     Masked {
         pattern: Pattern,
         coding: Coding,
+        cell: u32,
         shown: Arc<[bool]>,
     },
     /// Node values (linear light) drawn through the projector's [`Assignment`]; nodes not
@@ -82,16 +88,21 @@ impl Frame {
         let n = (width * height) as usize;
         match self {
             Self::Uniform(code) => Ok(vec![*code; n]),
-            Self::Structured { pattern, coding } => {
-                let manifest = Manifest::with_coding(width, height, *coding)?;
+            Self::Structured {
+                pattern,
+                coding,
+                cell,
+            } => {
+                let manifest = Manifest::with_cell(width, height, *coding, *cell)?;
                 Ok(manifest.pattern_image(*pattern).pixels)
             }
             Self::Masked {
                 pattern,
                 coding,
+                cell,
                 shown,
             } => {
-                let manifest = Manifest::with_coding(width, height, *coding)?;
+                let manifest = Manifest::with_cell(width, height, *coding, *cell)?;
                 Ok(manifest.pattern_image_where(*pattern, shown)?.pixels)
             }
             Self::Nodes(values) => Ok(match assignment {

@@ -184,16 +184,21 @@ pub(super) fn show_pattern(
 ) -> Result<(v1::show::Pattern, Vec<u8>), &'static str> {
     Ok(match frame {
         Frame::Uniform(code) => (uniform(LinearRgb(code.map(f64::from))), Vec::new()),
-        Frame::Structured { pattern, coding } => (structured(*pattern, *coding), Vec::new()),
+        Frame::Structured {
+            pattern,
+            coding,
+            cell,
+        } => (structured(*pattern, *coding, *cell), Vec::new()),
         Frame::Masked {
             pattern,
             coding,
+            cell,
             shown,
         } => {
             if shown.len() != width as usize * height as usize {
                 return Err("a mask of another size");
             }
-            (structured(*pattern, *coding), pack_mask(shown))
+            (structured(*pattern, *coding, *cell), pack_mask(shown))
         }
         Frame::Nodes(values) => (
             v1::show::Pattern::Nodes(v1::NodeValues {
@@ -226,7 +231,7 @@ fn uniform(code: LinearRgb) -> v1::show::Pattern {
     })
 }
 
-fn structured(pattern: Gray, coding: Coding) -> v1::show::Pattern {
+fn structured(pattern: Gray, coding: Coding, cell: u32) -> v1::show::Pattern {
     match pattern {
         Gray::White => uniform(LinearRgb::splat(1.0)),
         Gray::Black => uniform(LinearRgb::ZERO),
@@ -241,6 +246,7 @@ fn structured(pattern: Gray, coding: Coding) -> v1::show::Pattern {
                 Coding::Gray => v1::Coding::Gray,
                 Coding::Xor04 => v1::Coding::Xor04,
             } as i32,
+            cell,
         }),
     }
 }
@@ -274,15 +280,17 @@ mod tests {
         let frame = Frame::Masked {
             pattern: bit,
             coding: Coding::Xor04,
+            cell: 2,
             shown: shown.clone(),
         };
         let (pattern, mask) = show_pattern(&frame, 4, 3).expect("4×3");
-        assert_eq!(pattern, structured(bit, Coding::Xor04));
+        assert_eq!(pattern, structured(bit, Coding::Xor04, 2));
         assert_eq!(mask, pack_mask(&shown));
         assert!(show_pattern(&frame, 5, 3).is_err(), "a 12-pixel mask on 15");
         let white = Frame::Masked {
             pattern: Gray::White,
             coding: Coding::Xor04,
+            cell: 1,
             shown,
         };
         let (pattern, _) = show_pattern(&white, 4, 3).expect("white");

@@ -37,6 +37,7 @@ fn seeds() -> Vec<Vec<u8>> {
                 bit: 1,
                 inverse: true,
                 coding: v1::Coding::Xor04 as i32,
+                cell: 2,
             })),
             mask: vec![0b0000_1001, 0b0000_0010],
         }),

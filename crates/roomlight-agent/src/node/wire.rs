@@ -45,8 +45,16 @@ pub(super) fn pattern_from_wire(
     };
     // A Gray bit the projector does not have is refused here, not acknowledged and then
     // found undrawable.
-    if let (Fill::Structured { pattern, coding }, Some((width, height))) = (fill, resolution) {
-        let manifest = roomlight_calib::graycode::Manifest::with_coding(width, height, coding)
+    if let (
+        Fill::Structured {
+            pattern,
+            coding,
+            cell,
+        },
+        Some((width, height)),
+    ) = (fill, resolution)
+    {
+        let manifest = roomlight_calib::graycode::Manifest::with_cell(width, height, coding, cell)
             .map_err(|e| e.to_string())?;
         crate::hardware::check_gray_bit(&manifest, pattern)?;
     }
@@ -115,6 +123,15 @@ fn gray_from_wire(g: &v1::GrayBit) -> Result<Fill, String> {
     if g.bit >= 32 {
         return Err(format!("Gray bit {}: expected below 32", g.bit));
     }
+    // Absent (0) is the full-resolution code of senders from before cells.
+    let cell = g.cell.max(1);
+    if !cell.is_power_of_two() || cell > roomlight_calib::graycode::MAX_CELL {
+        return Err(format!(
+            "Gray bit cell {}: expected a power of two up to {}",
+            g.cell,
+            roomlight_calib::graycode::MAX_CELL
+        ));
+    }
     Ok(Fill::Structured {
         pattern: Gray::Bit {
             axis,
@@ -122,6 +139,7 @@ fn gray_from_wire(g: &v1::GrayBit) -> Result<Fill, String> {
             inverse: g.inverse,
         },
         coding,
+        cell,
     })
 }
 
@@ -255,6 +273,7 @@ mod tests {
                 bit,
                 inverse: true,
                 coding,
+                cell: 0,
             })
         };
         let row = v1::Axis::Row as i32;
@@ -268,7 +287,8 @@ mod tests {
                         bit: 3,
                         inverse: true
                     },
-                    coding: Coding::Xor04
+                    coding: Coding::Xor04,
+                    cell: 1
                 },
                 mask: None
             }))
@@ -277,6 +297,27 @@ mod tests {
         assert!(read(gray(9, 3, xor)).is_err(), "unknown axis");
         assert!(read(gray(row, 3, 0)).is_err(), "unspecified coding");
         assert!(read(gray(row, 40, xor)).is_err(), "bit 40");
+        // Code cells: absent is 1, a power of two up to MAX_CELL travels, anything else is
+        // refused.
+        let cell = |cell: u32| {
+            read(v1::show::Pattern::Gray(v1::GrayBit {
+                axis: row,
+                bit: 3,
+                inverse: false,
+                coding: xor,
+                cell,
+            }))
+        };
+        assert!(matches!(
+            cell(2),
+            Ok(Wire::Frame(Pattern {
+                fill: Fill::Structured { cell: 2, .. },
+                ..
+            }))
+        ));
+        for bad in [3, 16, u32::MAX] {
+            assert!(cell(bad).is_err_and(|e| e.contains("cell")), "cell {bad}");
+        }
         // A 5×2 projector has 3 column bits and 1 row bit (found by fuzzing: roomlight-calib's
         // coder underflowed on bit 3 of its columns).
         let sized = |p| pattern_from_wire(p, &[], Some((5, 2)));
@@ -339,6 +380,7 @@ mod tests {
             bit: 0,
             inverse: false,
             coding: v1::Coding::Gray as i32,
+            cell: 0,
         });
         let Ok(Wire::Frame(masked)) = pattern_from_wire(bit.clone(), &MASK, Some((5, 2))) else {
             panic!("a masked Gray bit");
@@ -354,7 +396,8 @@ mod tests {
                     bit: 0,
                     inverse: false
                 },
-                coding: Coding::Gray
+                coding: Coding::Gray,
+                cell: 1
             }
         );
         let (m, w) = (

@@ -187,10 +187,7 @@ fn best_on_axis(
 ) -> Option<(u32, f32)> {
     predictions.sort_unstable();
     let centre = *predictions.get(predictions.len() / 2)?;
-    let size = i64::from(match axis {
-        Axis::Column => manifest.width,
-        Axis::Row => manifest.height,
-    });
+    let size = i64::from(manifest.cells(axis));
     let ours: Vec<&Reading> = readings.iter().filter(|r| r.axis == axis).collect();
     let noise = ours.iter().map(|r| r.sigma).sum::<f32>() / ours.len().max(1) as f32;
     let candidates: Vec<(i64, f32)> = ((centre - FILL_RADIUS).max(0)

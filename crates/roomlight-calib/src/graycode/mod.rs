@@ -14,10 +14,12 @@ use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
 mod captures;
+mod cells;
 mod checks;
 mod code;
 mod fill;
 mod groups;
+mod manifest;
 mod resolve;
 mod second_pass;
 #[cfg(test)]
@@ -28,6 +30,7 @@ pub use captures::{Captures, Reduced, brightest, less_black};
 pub use code::{bits_for, gray, gray_inverse};
 use fill::fill_from_neighbours;
 pub use groups::group_disjoint;
+pub use manifest::{MAX_CELL, MAX_SIDE, Manifest};
 use resolve::resolve_pixel;
 pub use second_pass::{
     COVER_SPAN, SECOND_PASS_BRIGHTER, SECOND_PASS_CROWD, SECOND_PASS_GROW, SECOND_PASS_LONGEST,
@@ -85,239 +88,6 @@ pub enum Coding {
     /// and cancels in their difference. Decoding XORs the base bit back out.
     #[default]
     Xor04,
-}
-
-/// The pattern set of one projector resolution: what `patterns.json` holds.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Manifest {
-    /// Projector width.
-    pub width: u32,
-    /// Projector height.
-    pub height: u32,
-    /// How bits become patterns (files without it are plain Gray code).
-    #[serde(default = "gray_coding")]
-    pub coding: Coding,
-    /// Bits for the columns.
-    pub column_bits: u32,
-    /// Bits for the rows.
-    pub row_bits: u32,
-    /// Every pattern, in display order.
-    pub patterns: Vec<PatternFile>,
-}
-
-fn gray_coding() -> Coding {
-    Coding::Gray
-}
-
-/// The largest projector side a pattern set is made for (8K): one pattern of it as an image is
-/// 8192² × 12 bytes = 805 MB, so larger sizes are refused before anything is allocated.
-pub const MAX_SIDE: u32 = 8192;
-
-impl Manifest {
-    /// The pattern set for a `width × height` projector: white, black, then each column bit and
-    /// its inverse from the most significant, then the rows.
-    pub fn new(width: u32, height: u32) -> Result<Self, CalibError> {
-        Self::with_coding(width, height, Coding::default())
-    }
-
-    /// The pattern set with a chosen coding.
-    pub fn with_coding(width: u32, height: u32, coding: Coding) -> Result<Self, CalibError> {
-        if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
-            return Err(CalibError::Invalid {
-                field: "projector resolution",
-                problem: format!("{width}x{height}, expected 1 to {MAX_SIDE} per side (the cap)"),
-            });
-        }
-        let (column_bits, row_bits) = (bits_for(width), bits_for(height));
-        let mut patterns = vec![
-            PatternFile {
-                file: "white.png".into(),
-                pattern: Pattern::White,
-            },
-            PatternFile {
-                file: "black.png".into(),
-                pattern: Pattern::Black,
-            },
-        ];
-        for (axis, bits, name) in [
-            (Axis::Column, column_bits, "col"),
-            (Axis::Row, row_bits, "row"),
-        ] {
-            for bit in 0..bits {
-                for inverse in [false, true] {
-                    let suffix = if inverse { "-inv" } else { "" };
-                    patterns.push(PatternFile {
-                        file: format!("{name}-{bit:02}{suffix}.png"),
-                        pattern: Pattern::Bit { axis, bit, inverse },
-                    });
-                }
-            }
-        }
-        Ok(Self {
-            width,
-            height,
-            coding,
-            column_bits,
-            row_bits,
-            patterns,
-        })
-    }
-
-    /// Checks a manifest read from a file: sizes, bit counts and a complete, unique pattern set.
-    pub fn validate(&self, file: &str) -> Result<(), CalibError> {
-        let expected = Self::with_coding(self.width, self.height, self.coding).map_err(|e| {
-            CalibError::File {
-                file: file.into(),
-                problem: e.to_string(),
-            }
-        })?;
-        if self.column_bits != expected.column_bits || self.row_bits != expected.row_bits {
-            return Err(CalibError::File {
-                file: file.into(),
-                problem: format!(
-                    "column_bits/row_bits are {}/{}, a {}x{} projector needs {}/{}",
-                    self.column_bits,
-                    self.row_bits,
-                    self.width,
-                    self.height,
-                    expected.column_bits,
-                    expected.row_bits
-                ),
-            });
-        }
-        for p in &expected.patterns {
-            let n = self
-                .patterns
-                .iter()
-                .filter(|q| q.pattern == p.pattern)
-                .count();
-            if n != 1 {
-                return Err(CalibError::File {
-                    file: file.into(),
-                    problem: format!("lists {:?} {n} times, expected once", p.pattern),
-                });
-            }
-        }
-        if self.patterns.len() != expected.patterns.len() {
-            return Err(CalibError::File {
-                file: file.into(),
-                problem: format!(
-                    "lists {} patterns, expected {}",
-                    self.patterns.len(),
-                    expected.patterns.len()
-                ),
-            });
-        }
-        let mut names: Vec<&str> = self.patterns.iter().map(|p| p.file.as_str()).collect();
-        names.sort_unstable();
-        if names.windows(2).any(|w| w[0] == w[1])
-            || names
-                .iter()
-                .any(|n| n.contains('/') || n.contains('\\') || n.is_empty())
-        {
-            return Err(CalibError::File {
-                file: file.into(),
-                problem: "file names must be unique plain names".into(),
-            });
-        }
-        Ok(())
-    }
-
-    /// The patterns shown, in display order: every one, or without the inverses when `once`
-    /// ([`Captures::single_shot`]).
-    pub fn shown(&self, once: bool) -> impl Iterator<Item = &PatternFile> {
-        self.patterns
-            .iter()
-            .filter(move |f| !(once && matches!(f.pattern, Pattern::Bit { inverse: true, .. })))
-    }
-
-    /// The code value (0 or 1) of every projector pixel for a pattern.
-    pub fn pattern_values(&self, pattern: Pattern) -> Vec<f32> {
-        let (w, h) = (self.width, self.height);
-        (0..w * h)
-            .map(|i| {
-                let on = match pattern {
-                    Pattern::White => true,
-                    Pattern::Black => false,
-                    Pattern::Bit { axis, bit, inverse } => {
-                        let v = match axis {
-                            Axis::Column => i % w,
-                            Axis::Row => i / w,
-                        };
-                        self.encoded_bit(axis, bit, v) != inverse
-                    }
-                };
-                f32::from(u8::from(on))
-            })
-            .collect()
-    }
-
-    /// The value `bit` of `axis` shows at projector coordinate `v` (before the inverse): the
-    /// Gray code's bit, XOR-ed with the base bit under XOR coding. A bit beyond the axis's
-    /// count (which no pattern of this manifest has) shows dark rather than underflowing.
-    pub fn encoded_bit(&self, axis: Axis, bit: u32, v: u32) -> bool {
-        let bits = match axis {
-            Axis::Column => self.column_bits,
-            Axis::Row => self.row_bits,
-        };
-        if bit >= bits {
-            return false;
-        }
-        let g = |b: u32| (gray(v) >> (bits - 1 - b)) & 1 == 1;
-        match self.base_bit(bits) {
-            Some(base) if base != bit => g(bit) != g(base),
-            _ => g(bit),
-        }
-    }
-
-    /// The bit every other bit is XOR-ed with, for an axis of `bits` bits.
-    pub fn base_bit(&self, bits: u32) -> Option<u32> {
-        match self.coding {
-            Coding::Xor04 if bits >= 3 => Some(bits - 2),
-            _ => None,
-        }
-    }
-
-    /// The pattern with only the projector pixels `shown` marks lit (the others black): the
-    /// second pass of [`Correspondence::second_pass_mask`]. A mask of another size than the
-    /// projector is refused.
-    pub fn pattern_image_where(
-        &self,
-        pattern: Pattern,
-        shown: &[bool],
-    ) -> Result<LinearImage, CalibError> {
-        if shown.len() != (self.width * self.height) as usize {
-            return Err(CalibError::Invalid {
-                field: "pattern mask",
-                problem: format!(
-                    "{} pixels, the projector has {}x{}",
-                    shown.len(),
-                    self.width,
-                    self.height
-                ),
-            });
-        }
-        let mut image = self.pattern_image(pattern);
-        for (px, &on) in image.pixels.iter_mut().zip(shown) {
-            if !on {
-                *px = [0.0; 3];
-            }
-        }
-        Ok(image)
-    }
-
-    /// The pattern as an image (white where on).
-    pub fn pattern_image(&self, pattern: Pattern) -> LinearImage {
-        LinearImage {
-            width: self.width,
-            height: self.height,
-            pixels: self
-                .pattern_values(pattern)
-                .into_iter()
-                .map(|v| [v; 3])
-                .collect(),
-        }
-    }
 }
 
 /// Noise and thresholds of the decoder, in capture units (the sum of the three channels).
@@ -614,6 +384,8 @@ pub(crate) fn decode_captures(
         let clipped = checks::clipped(white_top, config.saturation);
         checks::refuse_saturated(&clipped, lit, &map)?;
     }
+    // Cells to the projector pixels their camera pixels see.
+    cells::to_pixels(manifest, (w as usize, h as usize), &mut map);
     let corr = Correspondence {
         width: w,
         height: h,
@@ -759,7 +531,7 @@ fn decode_pixel(
         return None;
     }
     let (x, y) = (gray_inverse(codes[0]), gray_inverse(codes[1]));
-    if x >= manifest.width || y >= manifest.height {
+    if x >= manifest.cells(Axis::Column) || y >= manifest.cells(Axis::Row) {
         return None;
     }
     let c = worst.min(1.0);

@@ -110,10 +110,7 @@ pub(super) fn resolve_axis(
     near: Option<(i64, i64)>,
 ) -> Option<(u32, f32)> {
     let n = readings.len();
-    let size = match axis {
-        Axis::Column => manifest.width,
-        Axis::Row => manifest.height,
-    };
+    let size = manifest.cells(axis);
     if n == 0 || n > MAX_BITS || ld.is_nan() || ld <= 0.0 || !sigma.is_finite() {
         return None;
     }
@@ -234,10 +231,7 @@ fn enumerate(manifest: &Manifest, axis: Axis, readings: &[&Reading]) -> Option<V
     }
     let bits = readings.len() as u32;
     let base = manifest.base_bit(bits).map(|b| b as usize);
-    let size = match axis {
-        Axis::Column => manifest.width,
-        Axis::Row => manifest.height,
-    };
+    let size = manifest.cells(axis);
     let mut out = Vec::with_capacity(1 << open.len());
     for mask in 0u32..(1 << open.len()) {
         let mut encoded: Vec<bool> = readings

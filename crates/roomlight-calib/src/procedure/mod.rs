@@ -69,6 +69,9 @@ pub struct Settings {
     /// photographic tests it leaves 0.5% more lit pixels unknown and none wrong. Plain Gray
     /// code always shows both.
     pub single_shot: bool,
+    /// Code each projector over cells of projector pixels as large as the camera needs to
+    /// resolve its finest stripes ([`code_cell`]): a bit fewer per axis at each doubling.
+    pub cells: bool,
 }
 
 impl Default for Settings {
@@ -84,6 +87,7 @@ impl Default for Settings {
             nodes: NodeConfig::default(),
             fine_stripes: true,
             single_shot: true,
+            cells: true,
         }
     }
 }
@@ -292,6 +296,8 @@ pub enum ProcedureError {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Decoded {
     pub projector: Projector,
+    /// The pattern set it was coded with (its coding and code cell).
+    pub manifest: Manifest,
     pub corr: Correspondence,
     pub second: Option<SecondPass>,
 }
@@ -300,6 +306,8 @@ pub struct Decoded {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Measured {
     pub projector: Projector,
+    /// The pattern set it was coded with (its coding and code cell).
+    pub manifest: Manifest,
     pub corr: Correspondence,
     pub response: Response,
     pub second: Option<SecondPass>,
@@ -462,15 +470,26 @@ pub fn coding(p: &Projector) -> Coding {
 }
 
 /// Groups of projectors (indices into `whites`) whose footprints do not overlap
-/// ([`group_disjoint`]), from each one's white capture minus `dark`.
+/// ([`group_disjoint`]), from each one's white capture minus `dark` ([`footprints`]).
 pub fn coding_groups(
     projectors: &[Projector],
     dark: &LinearImage,
     whites: &[LinearImage],
     settings: &Settings,
 ) -> Vec<Vec<usize>> {
+    group_disjoint(&footprints(projectors, dark, whites, settings))
+}
+
+/// The camera pixels each projector's white raises above `dark` by more than its footprint
+/// share of its peak ([`Settings::footprint_share`], [`Settings::footprint_share_large`]).
+pub fn footprints(
+    projectors: &[Projector],
+    dark: &LinearImage,
+    whites: &[LinearImage],
+    settings: &Settings,
+) -> Vec<Vec<bool>> {
     let dark = dark.intensity();
-    let footprints: Vec<Vec<bool>> = projectors
+    projectors
         .iter()
         .zip(whites)
         .map(|(p, white)| {
@@ -482,9 +501,45 @@ pub fn coding_groups(
             };
             gain.iter().map(|g| *g > share * peak).collect()
         })
-        .collect();
-    group_disjoint(&footprints)
+        .collect()
 }
+
+/// The code cell of a projector whose footprint covers `footprint` camera pixels
+/// ([`Manifest::cell`]): the smallest power of two (up to [`LARGEST_CELL`]) whose finest
+/// stripes, two cells wide, span at least [`STRIPE_CAMERA_PX`] camera pixels where a camera
+/// pixel sees `s` = √(projector pixels / `footprint`) projector pixels a side (the footprint's
+/// average): cell ≥ `STRIPE_CAMERA_PX` · s / 2. Narrower stripes a lens blurs into grey:
+/// photographs of a projector finer than the camera (the photographic tests, 2.4 projector
+/// pixels a camera pixel) decode 10% of their lit pixels within ±1 at full resolution and 51%
+/// in their cell or beside it over cells of two, against 99.91% over cells of four. Each
+/// doubling saves a bit per axis (2 captures shown once, 4 with inverses); a decode is then
+/// right within [`Manifest::tolerance`], placed within its cell by its neighbours
+/// (`graycode::cells`). No footprint (a projector the camera does not see, refused later): 1.
+pub fn code_cell(p: &Projector, footprint: usize) -> u32 {
+    let pixels = f64::from(p.width) * f64::from(p.height);
+    if footprint == 0 {
+        return 1;
+    }
+    let s = (pixels / footprint as f64).sqrt();
+    let mut cell = 1;
+    while f64::from(cell) < STRIPE_CAMERA_PX * s / 2.0 && cell < LARGEST_CELL {
+        cell *= 2;
+    }
+    cell
+}
+
+/// The largest cell [`code_cell`] gives. XOR-04's base stripes are four cells wide, and the
+/// single shot reads a pattern against half of white's reflected light, which holds less as
+/// the stripes widen: the lab's procedure test at a 320×240 camera (some nine projector pixels
+/// a camera pixel) had wall-front's group shown its inverses after all over cells of 8, and
+/// two groups over cells of 16 (2026-11-29). A footprint foreshortened along one axis takes
+/// its inverses already over cells of 4 (the apart room's right projector, `docs/calibration.md`).
+pub const LARGEST_CELL: u32 = 4;
+
+/// The narrowest stripe, in camera pixels, a code is given ([`code_cell`]): the photographic
+/// tests decode 99.26% of lit pixels within ±1 with their finest stripes 2.5 camera pixels
+/// wide (a 128-pixel projector across 160 camera pixels, 1-pixel blur).
+pub const STRIPE_CAMERA_PX: f64 = 2.5;
 
 /// How much a white raises each camera pixel above `dark` (intensities).
 pub(super) fn gain(white: &LinearImage, dark: &[f32]) -> Vec<f32> {

@@ -139,10 +139,8 @@ impl<'a, R: Rig> Procedure<'a, R> {
                 .map(|(_, d)| (&d.projector, &d.corr));
             let left = left_by(others, needed, decoded[k].corr.map.len());
             let d = &mut decoded[k];
-            let coding = self.settings.coding(&d.projector);
-            let m = Manifest::with_coding(d.projector.width, d.projector.height, coding)?;
             d.second = self
-                .second_pass(&d.projector, &m, &mut d.corr, Some(&left))
+                .second_pass(&d.projector, &d.manifest, &mut d.corr, Some(&left))
                 .await?;
         }
         Ok(decoded)
@@ -186,6 +184,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
         let masked = |pattern| Frame::Masked {
             pattern,
             coding: manifest.coding,
+            cell: manifest.cell,
             shown: Arc::clone(&shown),
         };
         self.rig.show(&[(&p.id, masked(Pattern::White))]).await?;
@@ -264,6 +263,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
         });
         Ok(Measured {
             projector: d.projector,
+            manifest: d.manifest,
             corr: d.corr,
             response,
             second: d.second,

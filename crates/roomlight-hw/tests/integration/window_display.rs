@@ -109,6 +109,7 @@ fn a_pattern_and_node_values_land_on_their_output_pixel_for_pixel() {
             inverse: false,
         },
         coding: Coding::Xor04,
+        cell: 2,
     });
     let expected = as_8bit(&pattern.codes(320, 240).expect("codes"));
     assert!(display.show_pattern(pattern));

@@ -39,20 +39,26 @@ fn image(c: &Capture) -> LinearImage {
     }
 }
 
-/// Accuracy of one decoded projector: (camera pixels it reaches, share within ±1, share of the
-/// decoded pixels off by more than 2).
-fn accuracy(truth: &[Option<u32>], decoded: &Correspondence, width: u32) -> (usize, f64, f64) {
-    accuracy_where(truth, decoded, width, |_| true)
+/// Accuracy of one decoded projector coded over cells with `tolerance`
+/// (`Manifest::tolerance`: 1 for cells of one): (camera pixels it reaches, share within
+/// ±tolerance, share of the decoded pixels off by more than tolerance + 1).
+fn accuracy(
+    truth: &[Option<u32>],
+    decoded: &Correspondence,
+    (width, tolerance): (u32, u32),
+) -> (usize, f64, f64) {
+    accuracy_where(truth, decoded, (width, tolerance), |_| true)
 }
 
-/// [`accuracy`] over the pixels that `count` accepts (reached ones for the share within ±1,
-/// decoded ones for the share off by more than 2).
+/// [`accuracy`] over the pixels that `count` accepts (reached ones for the share within
+/// ±tolerance, decoded ones for the share off by more than tolerance + 1).
 fn accuracy_where(
     truth: &[Option<u32>],
     decoded: &Correspondence,
-    width: u32,
+    (width, tolerance): (u32, u32),
     count: impl Fn(usize) -> bool,
 ) -> (usize, f64, f64) {
+    let tolerance = i64::from(tolerance);
     let off = |t: u32, (x, y): (u32, u32)| {
         (i64::from(x) - i64::from(t % width))
             .abs()
@@ -64,13 +70,13 @@ fn accuracy_where(
             && count(i)
         {
             reached += 1;
-            close += usize::from(d.is_some_and(|d| off(*t, d) <= 1));
+            close += usize::from(d.is_some_and(|d| off(*t, d) <= tolerance));
         }
         if let Some(d) = d
             && count(i)
         {
             n += 1;
-            far += usize::from(t.is_none_or(|t| off(t, *d) > 2));
+            far += usize::from(t.is_none_or(|t| off(t, *d) > tolerance + 1));
         }
     }
     (
@@ -344,16 +350,16 @@ fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64
     let dark = block_on(procedure.dark(&live))?;
     let whites = block_on(procedure.whites(&live))?;
     let groups = coding_groups(&live, &dark, &whites, procedure.settings());
-    let manifests: Vec<Manifest> = live
-        .iter()
-        .map(|p| Manifest::with_coding(p.width, p.height, coding(p)))
-        .collect::<Result<_, _>>()?;
-    let alone: usize = manifests.iter().map(|m| m.patterns.len()).sum();
     let before = procedure.captures();
     let mut decoded = block_on(procedure.code(&live, &dark, &whites, None))?;
     let grouped = procedure.captures();
+    let alone: usize = decoded.iter().map(|d| d.manifest.patterns.len()).sum();
+    let full: usize = live
+        .iter()
+        .map(|p| Manifest::with_coding(p.width, p.height, coding(p)).map(|m| m.patterns.len()))
+        .sum::<Result<_, _>>()?;
     println!(
-        "structured light: {alone} captures one projector at a time with its own white and black; {} with non-overlapping projectors coded together, white and black being the footprint captures ({} groups: {:?}), after {before} footprint captures",
+        "structured light: {alone} captures one projector at a time with its own white and black ({full} with every projector coded at full resolution); {} with non-overlapping projectors coded together, white and black being the footprint captures ({} groups: {:?}), after {before} footprint captures",
         grouped - before,
         groups.len(),
         groups
@@ -362,11 +368,25 @@ fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64
             .collect::<Vec<_>>(),
     );
     println!(
-        "{:<18} {:>9} {:>12} {:>14} {:>10}   within ±1 where its direct light is ≥ 2% of its typical",
-        "projector", "reached", "within ±1", "off by > 2", "decoded",
+        "code cells (projector pixels a side; \"cell ±1\": placed in the true cell or one beside it, within 2·cell − 1 pixels, ±1 for cells of one; \"beyond\": a pixel further): {}",
+        decoded
+            .iter()
+            .map(|d| format!("{} {}", d.projector.id, d.manifest.cell))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    println!(
+        "{:<18} {:>9} {:>10} {:>10} {:>9} {:>9}   within ±1 where its direct light is ≥ 2% of its typical",
+        "projector", "reached", "within ±1", "cell ±1", "beyond", "decoded",
     );
     for d in &decoded {
-        report(room, &d.projector.id, &d.corr, false)?;
+        report(
+            room,
+            &d.projector.id,
+            &d.corr,
+            false,
+            d.manifest.tolerance(),
+        )?;
     }
     // Each member of a shared group alone (as over the wire before): what coding at the same
     // time costs in accuracy.
@@ -378,17 +398,17 @@ fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64
             None,
         ))?;
         for d in &one {
-            report(room, &d.projector.id, &d.corr, true)?;
+            report(room, &d.projector.id, &d.corr, true, d.manifest.tolerance())?;
         }
     }
     let decode_secs = decode_times(&events.lock().unwrap_or_else(PoisonError::into_inner));
     // Second pass (one projector at a time) where the first left enough reached pixels unknown.
     let mut second_captures = 0usize;
-    for (d, m) in decoded.iter_mut().zip(&manifests) {
+    for d in &mut decoded {
         if d.projector.kind != roomlight_calib::rig::ProjectorKind::Standard {
             continue;
         }
-        second_captures += second_pass(room, &mut procedure, d, m)?;
+        second_captures += second_pass(room, &mut procedure, d)?;
     }
     println!(
         "second pass: {second_captures} more captures ({} in all one projector at a time)",
@@ -436,11 +456,18 @@ fn flush(out: &mut Vec<f64>, start: Instant, pending: &mut Vec<Instant>) {
 }
 
 /// One projector's accuracy line (and, with `ROOMLIGHT_DIAG` set, its diagnostic image).
-fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Result<()> {
+fn report(
+    room: &Room,
+    id: &str,
+    decoded: &Correspondence,
+    alone: bool,
+    tolerance: u32,
+) -> Result<()> {
     let k = room.projector(id)?;
     let truth = room.true_correspondence(k);
     let width = room.projectors()[k].pinhole.width;
-    let (reached, close, far) = accuracy(&truth, decoded, width);
+    let (reached, close, _) = accuracy(&truth, decoded, (width, 1));
+    let (_, in_cell, far) = accuracy(&truth, decoded, (width, tolerance));
     // Of the decoded pixels off by more than 2, the share the simulator says this projector
     // does not reach directly at all (a defocused projector's blur reaches beyond its pinhole
     // footprint).
@@ -457,7 +484,7 @@ fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Resul
     // the right answer.
     let (factor, typical) = direct_signal(room, k);
     let (reached_lit, close_lit, _) =
-        accuracy_where(&truth, decoded, width, |i| factor[i] >= 0.02 * typical);
+        accuracy_where(&truth, decoded, (width, 1), |i| factor[i] >= 0.02 * typical);
     if let Some(dir) = std::env::var_os("ROOMLIGHT_DIAG") {
         diagnose(room, k, &truth, decoded, std::path::Path::new(&dir))?;
     }
@@ -468,7 +495,7 @@ fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Resul
         ""
     };
     println!(
-        "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}% {:>12.2}% of {:>7}{kind}",
+        "{:<18} {:>9} {:>9.2}% {:>9.2}% {:>8.3}% {:>8.1}% {:>12.2}% of {:>7}{kind}",
         if alone {
             format!("{} alone", p.name)
         } else {
@@ -476,6 +503,7 @@ fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Resul
         },
         reached,
         100.0 * close,
+        100.0 * in_cell,
         100.0 * far,
         100.0 * decoded.decoded_share(),
         100.0 * close_lit,
@@ -483,7 +511,8 @@ fn report(room: &Room, id: &str, decoded: &Correspondence, alone: bool) -> Resul
     );
     if p.kind == ProjectorKind::LargeAperture {
         let focus = in_focus(room, k);
-        let (sharp, close_sharp, far_sharp) = accuracy_where(&truth, decoded, width, |i| focus[i]);
+        let (sharp, close_sharp, far_sharp) =
+            accuracy_where(&truth, decoded, (width, 1), |i| focus[i]);
         println!(
             "{:<18} in focus (its blur within ±1 projector pixel): {sharp} camera pixels ({:.1}% of those it reaches), {:.2}% within ±1, {:.3}% of those decoded off by more than 2",
             "",
@@ -591,11 +620,10 @@ fn second_pass(
     room: &Room,
     procedure: &mut Procedure<'_, SimRig<'_>>,
     d: &mut Decoded,
-    m: &Manifest,
 ) -> Result<usize> {
     let config = procedure.settings().decode;
     let name = d.projector.id.clone();
-    let first = &mut d.corr;
+    let (first, m) = (&mut d.corr, &d.manifest);
     let left = first
         .reached_unknown(&config)
         .iter()
@@ -612,7 +640,8 @@ fn second_pass(
     };
     let k = room.projector(&name)?;
     let truth = room.true_correspondence(k);
-    let (reached, close, far) = accuracy(&truth, first, m.width);
+    let (reached, close, _) = accuracy(&truth, first, (m.width, 1));
+    let (_, in_cell, far) = accuracy(&truth, first, (m.width, m.tolerance()));
     // How much direct light the pixels still unknown get.
     let (factor, typical) = direct_signal(room, k);
     let mut missed: Vec<f32> = (0..truth.len())
@@ -622,10 +651,11 @@ fn second_pass(
     missed.sort_by(f32::total_cmp);
     let under = |share: f32| missed.iter().filter(|m| **m < share).count();
     println!(
-        "{:<18} {:>9} {:>11.2}% {:>13.3}% {:>9.1}%   second pass: {left} reached pixels unknown ({:.2}% of {decoded_before}), {:.1}% of the frame shown, exposure ×{:.1}, {} captures, {} pixels added, {:.2} s with rendering",
+        "{:<18} {:>9} {:>9.2}% {:>9.2}% {:>8.3}% {:>8.1}%   second pass: {left} reached pixels unknown ({:.2}% of {decoded_before}), {:.1}% of the frame shown, exposure ×{:.1}, {} captures, {} pixels added, {:.2} s with rendering",
         format!("{name} +2nd"),
         reached,
         100.0 * close,
+        100.0 * in_cell,
         100.0 * far,
         100.0 * first.decoded_share(),
         100.0 * left as f64 / decoded_before.max(1) as f64,

@@ -4,7 +4,6 @@
 //! pass, partition of unity, attenuation, and a projector joining a lit room hot.
 
 use roomlight_calib::charts::SampleConfig;
-use roomlight_calib::graycode::Correspondence;
 use roomlight_calib::nodes::{Partition, add_claim};
 use roomlight_calib::procedure::{
     BringUp, Decoded, Event, Placed, Procedure, Settings, Setup, Stage,
@@ -14,6 +13,7 @@ use roomlight_core::LinearRgb;
 use roomlight_lab::pipeline::{SimRig, chart_corners};
 use roomlight_sim::{CameraNoise, Room, scenes};
 use std::sync::{Arc, Mutex};
+use support::accuracy::{accuracy, accuracy_where, assert_accurate};
 use support::{apart_scene, small_scene};
 
 use crate::support;
@@ -54,61 +54,6 @@ fn captured_in(events: &[Event], stage: Stage) -> usize {
         .iter()
         .filter(|e| **e == Event::Captured { stage })
         .count()
-}
-
-/// (share of reached pixels decoded within ±1, share of decoded pixels off by more than 2,
-/// pixels reached), against the simulator's true correspondence.
-fn accuracy(room: &Room, k: usize, decoded: &Correspondence) -> (f64, f64, usize) {
-    accuracy_where(room, k, decoded, |_| true)
-}
-
-/// [`accuracy`] over the camera pixels `count` accepts.
-fn accuracy_where(
-    room: &Room,
-    k: usize,
-    decoded: &Correspondence,
-    count: impl Fn(usize) -> bool,
-) -> (f64, f64, usize) {
-    let truth = room.true_correspondence(k);
-    let pw = room.projectors()[k].pinhole.width;
-    let off = |t: u32, (x, y): (u32, u32)| {
-        (i64::from(x) - i64::from(t % pw))
-            .abs()
-            .max((i64::from(y) - i64::from(t / pw)).abs())
-    };
-    let (mut reached, mut close, mut n, mut far) = (0usize, 0usize, 0usize, 0usize);
-    for (i, (t, d)) in truth.iter().zip(&decoded.map).enumerate() {
-        if !count(i) {
-            continue;
-        }
-        if let Some(t) = t {
-            reached += 1;
-            close += usize::from(d.is_some_and(|d| off(*t, d) <= 1));
-        }
-        if let Some(d) = d {
-            n += 1;
-            far += usize::from(t.is_none_or(|t| off(t, *d) > 2));
-        }
-    }
-    (
-        close as f64 / reached.max(1) as f64,
-        far as f64 / n.max(1) as f64,
-        reached,
-    )
-}
-
-fn assert_accurate(room: &Room, id: &str, corr: &Correspondence) {
-    let k = room.projector(id).expect("projector");
-    let (close, far, reached) = accuracy(room, k, corr);
-    println!(
-        "{id}: {reached} pixels reached, {:.2}% within ±1, {:.3}% off by > 2",
-        100.0 * close,
-        100.0 * far
-    );
-    // The bar the graycode tests hold the same projectors to when decoded alone.
-    assert!(reached > 1000, "{id} reaches {reached} pixels");
-    assert!(close >= 0.98, "{id}: {:.2}% within ±1", 100.0 * close);
-    assert!(far <= 0.001, "{id}: {:.3}% off by more than 2", 100.0 * far);
 }
 
 /// The partition of unity of placed standard luminaires through the true correspondence,
@@ -159,18 +104,19 @@ fn check_columns(
     checked
 }
 
-/// `lit` brought up in the dark and lit at mid grey, then `joiner` live beside them: the rig,
-/// the bring-up, and the share of the light the lit ones give at each camera pixel.
+/// `lit` brought up in the dark (with `settings`) and lit at mid grey, then `joiner` live
+/// beside them: the rig, the bring-up, and the share of the light the lit ones give at each
+/// camera pixel.
 fn lit_then_joining<'a>(
     room: &'a Room,
     noise: &'a mut CameraNoise,
-    setup: &Setup,
+    (setup, settings): (&Setup, Settings),
     lit: &[&str],
     joiner: &str,
 ) -> (SimRig<'a>, BringUp, Vec<f32>) {
     let mut rig = rig(room, noise, lit);
-    let up = block_on(Procedure::new(&mut rig, Settings::default(), |_| {}).bring_up(setup))
-        .expect("bring-up");
+    let up =
+        block_on(Procedure::new(&mut rig, settings, |_| {}).bring_up(setup)).expect("bring-up");
     block_on(rig.show(&frames_of(&up.placed, &[], LinearRgb::splat(0.5)))).expect("lit");
     rig.go_live(joiner).expect("joiner");
     let pixels = room.camera().width as usize * room.camera().height as usize;
@@ -248,7 +194,7 @@ fn bring_up_decodes_segments_and_measures_the_small_room() {
         .iter()
         .filter(|m| m.projector.kind == ProjectorKind::Standard)
     {
-        assert_accurate(&room, &m.projector.id, &m.corr);
+        assert_accurate(&room, &m.projector.id, &m.corr, m.manifest.tolerance());
     }
     // Every projector's hidden gamma (right's is [2.0, 2.2, 2.4]), from the ramp levels the
     // three showed at once (one capture a level): the small room's footprints overlap.
@@ -327,7 +273,16 @@ fn projectors_whose_footprints_do_not_overlap_are_coded_in_one_pass() {
     let mut noise = CameraNoise::with_seed(&room, 31);
     let mut rig = rig(&room, &mut noise, &["left", "right"]);
     let (events, progress) = recorder();
-    let mut procedure = Procedure::new(&mut rig, Settings::default(), progress);
+    // At full resolution. Right lights its wall at a grazing angle, so one axis is far more
+    // foreshortened than the other; cells sized from its footprint's average (4) leave 3.9%
+    // of its reached pixels unknown shown once (none at full resolution in this sharp
+    // simulated camera), and the group then takes its inverses: 26 captures instead of 13.
+    // Cells per axis would fit it; they are not done (2026-11-29).
+    let settings = Settings {
+        cells: false,
+        ..Settings::default()
+    };
+    let mut procedure = Procedure::new(&mut rig, settings, progress);
     let (live, decoded) = structured_light(&mut procedure);
     let events = events.lock().expect("events").clone();
     assert!(
@@ -337,31 +292,26 @@ fn projectors_whose_footprints_do_not_overlap_are_coded_in_one_pass() {
         "{events:?}"
     );
     for d in &decoded {
-        assert_accurate(&room, &d.projector.id, &d.corr);
+        assert_accurate(&room, &d.projector.id, &d.corr, d.manifest.tolerance());
     }
     // One pattern set for both instead of one each (their bit patterns, without inverses as
     // both are XOR-coded: white and black are the dark and footprint captures).
     let coded = captured_in(&events, Stage::StructuredLight);
-    let settings = Settings::default();
     let alone: usize = live
         .iter()
-        .map(|p| {
+        .zip(&decoded)
+        .map(|(p, d)| {
             assert!(settings.shows_once(p), "{} is shown once", p.id);
-            roomlight_calib::graycode::Manifest::with_coding(
-                p.width,
-                p.height,
-                roomlight_calib::procedure::coding(p),
-            )
-            .expect("manifest")
-            .patterns
-            .iter()
-            .filter(|f| {
-                matches!(
-                    f.pattern,
-                    roomlight_calib::graycode::Pattern::Bit { inverse: false, .. }
-                )
-            })
-            .count()
+            d.manifest
+                .patterns
+                .iter()
+                .filter(|f| {
+                    matches!(
+                        f.pattern,
+                        roomlight_calib::graycode::Pattern::Bit { inverse: false, .. }
+                    )
+                })
+                .count()
         })
         .sum();
     println!("structured light: {coded} captures together, {alone} one at a time");
@@ -386,7 +336,12 @@ fn a_second_pass_decodes_the_labs_grazing_face() {
         captured_in(&events.lock().expect("events"), Stage::SecondPass),
         pass.captures
     );
-    assert_accurate(&room, "floor-right", &decoded[0].corr);
+    assert_accurate(
+        &room,
+        "floor-right",
+        &decoded[0].corr,
+        decoded[0].manifest.tolerance(),
+    );
     // A rig that cannot show images skips it.
     rig.set_shows_masks(false);
     let mut procedure = Procedure::new(&mut rig, Settings::default(), |_| {});
@@ -423,18 +378,30 @@ fn a_bring_up_places_a_projector_that_left_a_face_unknown_beside_the_others() {
         &["wall-front", "floor-left", "floor-right"],
     );
     let (events, progress) = recorder();
-    let up = block_on(Procedure::new(&mut rig, Settings::default(), progress).bring_up(&setup))
-        .expect("bring-up");
+    // At full resolution: this 320 × 240 camera sees some nine projector pixels a side in each
+    // of its own, more than cells of 4 (the largest) resolve in a single shot, so over cells
+    // wall-front's group takes its inverses (no earlier projector decoded beside it), which is
+    // not what this test is about. Cells are tested at the lab's own camera (`roomlight bench
+    // calib`), on the apart room below and on photographs (roomlight-calib).
+    let settings = Settings {
+        cells: false,
+        ..Settings::default()
+    };
+    let up =
+        block_on(Procedure::new(&mut rig, settings, progress).bring_up(&setup)).expect("bring-up");
     let events = events.lock().expect("events").clone();
     let groups = events
         .iter()
         .find_map(|e| match e {
-            Event::Grouped { groups } => Some(groups.len()),
+            Event::Grouped { groups } => Some(groups.clone()),
             _ => None,
         })
         .expect("grouped");
     // Every group shown once (20 bits of a 1024 × 768 projector each), no second pass.
-    assert_eq!(captured_in(&events, Stage::StructuredLight), 20 * groups);
+    assert_eq!(
+        captured_in(&events, Stage::StructuredLight),
+        20 * groups.len()
+    );
     assert_eq!(captured_in(&events, Stage::SecondPass), 0, "{events:?}");
     let ids: Vec<&str> = up
         .measured
@@ -480,23 +447,27 @@ fn a_projector_joining_a_lit_room_decodes_again_only_where_it_is_needed() {
     let room = small_lab();
     let setup = setup(&room);
     let mut noise = CameraNoise::with_seed(&room, 43);
+    // At full resolution, as the bring-up test above and for the same reason: this camera
+    // sees more projector pixels in one of its own than cells of 4 resolve.
+    let full = Settings {
+        cells: false,
+        ..Settings::default()
+    };
     let (mut rig, up, claimed) = lit_then_joining(
         &room,
         &mut noise,
-        &setup,
+        (&setup, full),
         &["wall-front", "floor-left"],
         "floor-right",
     );
     let first = up.placed.iter().map(|p| p.nodes.len() as u32).sum();
     let (events, progress) = recorder();
-    let joined = block_on(
-        Procedure::new(&mut rig, Settings::default(), progress).join(
-            &setup,
-            "floor-right",
-            Some(&claimed),
-            first,
-        ),
-    )
+    let joined = block_on(Procedure::new(&mut rig, full, progress).join(
+        &setup,
+        "floor-right",
+        Some(&claimed),
+        first,
+    ))
     .expect("join");
     let events = events.lock().expect("events").clone();
     assert_eq!(captured_in(&events, Stage::SecondPass), 0, "{events:?}");
@@ -512,7 +483,8 @@ fn a_projector_joining_a_lit_room_decodes_again_only_where_it_is_needed() {
     // Decoded where it is needed, and the room's weights still sum to one.
     let needed = roomlight_calib::procedure::needed(&claimed);
     let k = room.projector("floor-right").expect("floor-right");
-    let (close, far, reached) = accuracy_where(&room, k, corr, |i| needed[i]);
+    let tolerance = joined.measured.manifest.tolerance();
+    let (close, far, reached) = accuracy_where(&room, k, corr, tolerance, |i| needed[i]);
     println!(
         "floor-right where needed: {reached} pixels reached, {:.2}% within ±1, {:.3}% off by > 2",
         100.0 * close,
@@ -535,7 +507,7 @@ fn a_projector_joining_a_lit_room_decodes_again_only_where_it_is_needed() {
         roomlight_calib::procedure::coding(&fuller.projector),
     )
     .expect("manifest");
-    let mut procedure = Procedure::new(&mut rig, Settings::default().lit_room(), |_| {});
+    let mut procedure = Procedure::new(&mut rig, full.lit_room(), |_| {});
     let pass = block_on(procedure.second_pass(
         &fuller.projector.clone(),
         &manifest,
@@ -561,7 +533,7 @@ fn a_projector_joining_a_lit_room_decodes_again_only_where_it_is_needed() {
             .filter(|p| p.claim.is_some())
             .collect::<Vec<_>>(),
     );
-    let (close_with, ..) = accuracy_where(&room, k, &fuller.corr, |i| needed[i]);
+    let (close_with, ..) = accuracy_where(&room, k, &fuller.corr, tolerance, |i| needed[i]);
     println!(
         "with the second pass ({} captures): {:.2}% within ±1 where needed; {with_pass}",
         pass.captures,
@@ -605,7 +577,12 @@ fn a_projector_joins_hot_beside_a_lit_one() {
         ),
     )
     .expect("join");
-    assert_accurate(&room, "right", &joined.measured.corr);
+    assert_accurate(
+        &room,
+        "right",
+        &joined.measured.corr,
+        joined.measured.manifest.tolerance(),
+    );
     assert_eq!(joined.placed.nodes[0].id, first);
     // No footprint grouping for one projector: its white is the top of its ramp.
     let events = events.lock().expect("events").clone();
@@ -714,32 +691,53 @@ fn a_single_shot_beside_lit_projectors_is_never_wrong_where_it_clips() {
     let room = Room::build(scenes::small().expect("small")).expect("room");
     let setup = setup(&room);
     let mut noise = CameraNoise::with_seed(&room, 41);
-    let (mut rig, _, claimed) =
-        lit_then_joining(&room, &mut noise, &setup, &["left", "area"], "right");
-    let needed = roomlight_calib::procedure::needed(&claimed);
-    let mut procedure = Procedure::new(&mut rig, Settings::default(), |_| {});
-    let right: Vec<Projector> = procedure
-        .rig()
-        .projectors()
-        .into_iter()
-        .filter(|p| p.id == "right")
-        .collect();
-    assert!(Settings::default().shows_once(&right[0]));
-    let decoded = block_on(async {
-        let dark = procedure.dark(&right).await?;
-        let whites = procedure.whites(&right).await?;
-        procedure
-            .structured_light(&right, &dark, &whites, Some(&needed))
-            .await
-    })
-    .expect("decoded");
-    let k = room.projector("right").expect("right");
-    let (close, far, reached) = accuracy(&room, k, &decoded[0].corr);
-    println!(
-        "right shown once beside lit projectors: {reached} reached, {:.2}% within ±1, {:.3}% off by > 2",
-        100.0 * close,
-        100.0 * far
+    let (mut rig, _, claimed) = lit_then_joining(
+        &room,
+        &mut noise,
+        (&setup, Settings::default()),
+        &["left", "area"],
+        "right",
     );
-    assert!(far < 1e-12, "{far} off by more than 2");
-    assert!(close >= 0.98, "{close}");
+    let needed = roomlight_calib::procedure::needed(&claimed);
+    let k = room.projector("right").expect("right");
+    // At full resolution never wrong; over the cells of 4 its footprint gets (the default),
+    // measured (2026-11-29): 2 of 7480 decoded pixels 25 rows off, at a quarter confidence,
+    // within the 0.1% of gross errors.
+    for (cells, most) in [(false, 0.0), (true, 0.001)] {
+        let settings = Settings {
+            cells,
+            ..Settings::default()
+        };
+        let mut procedure = Procedure::new(&mut rig, settings, |_| {});
+        let right: Vec<Projector> = procedure
+            .rig()
+            .projectors()
+            .into_iter()
+            .filter(|p| p.id == "right")
+            .collect();
+        assert!(settings.shows_once(&right[0]));
+        let decoded = block_on(async {
+            let dark = procedure.dark(&right).await?;
+            let whites = procedure.whites(&right).await?;
+            procedure
+                .structured_light(&right, &dark, &whites, Some(&needed))
+                .await
+        })
+        .expect("decoded");
+        let tolerance = decoded[0].manifest.tolerance();
+        let (close, far, reached) = accuracy(&room, k, &decoded[0].corr, tolerance);
+        println!(
+            "right shown once beside lit projectors, cells {}: {reached} reached, {:.2}% within ±{tolerance}, {:.3}% off by > {}",
+            decoded[0].manifest.cell,
+            100.0 * close,
+            100.0 * far,
+            tolerance + 1
+        );
+        assert!(
+            far <= most,
+            "cells {cells}: {far} off by more than {}",
+            tolerance + 1
+        );
+        assert!(close >= 0.98, "{close}");
+    }
 }

@@ -250,12 +250,13 @@ async fn projectors_with_disjoint_footprints_joining_together_are_coded_at_the_s
     );
     // Together saves at least one set of structured light: the smaller projector's bit
     // patterns, shown once in a dark room (white and black are the footprint captures, one
-    // per projector either way).
+    // per projector either way), counted over cells of two (the fewer bits, whichever cell
+    // the procedure chose).
     let patterns = apart_scene()
         .projectors
         .iter()
         .map(|p| {
-            Manifest::with_coding(p.resolution[0], p.resolution[1], Coding::Xor04)
+            Manifest::with_cell(p.resolution[0], p.resolution[1], Coding::Xor04, 2)
                 .expect("manifest")
                 .patterns
                 .iter()

@@ -18,11 +18,20 @@ impl<R: Rig> Procedure<'_, R> {
         whites: &[LinearImage],
         needed: Option<&[bool]>,
     ) -> Result<Vec<Decoded>, ProcedureError> {
+        let footprints = footprints(projectors, dark, whites, &self.settings);
         let manifests: Vec<Manifest> = projectors
             .iter()
-            .map(|p| Manifest::with_coding(p.width, p.height, self.settings.coding(p)))
+            .zip(&footprints)
+            .map(|(p, f)| {
+                let cell = if self.settings.cells {
+                    code_cell(p, f.iter().filter(|&&lit| lit).count())
+                } else {
+                    1
+                };
+                Manifest::with_cell(p.width, p.height, self.settings.coding(p), cell)
+            })
             .collect::<Result<_, _>>()?;
-        let groups = coding_groups(projectors, dark, whites, &self.settings);
+        let groups = group_disjoint(&footprints);
         let once: Vec<bool> = projectors
             .iter()
             .map(|p| self.settings.shows_once(p))
@@ -74,10 +83,12 @@ impl<R: Rig> Procedure<'_, R> {
         }
         Ok(projectors
             .iter()
+            .zip(manifests)
             .zip(corrs)
-            .filter_map(|(p, corr)| {
+            .filter_map(|((p, manifest), corr)| {
                 corr.map(|corr| Decoded {
                     projector: p.clone(),
+                    manifest,
                     corr,
                     second: None,
                 })
@@ -217,6 +228,7 @@ impl<R: Rig> Procedure<'_, R> {
                         Some(&pattern) => Frame::Structured {
                             pattern: if inverse { inverted(pattern) } else { pattern },
                             coding: manifests[k].coding,
+                            cell: manifests[k].cell,
                         },
                         None => Frame::BLACK,
                     };

@@ -210,7 +210,7 @@ fn shadowed_at(i: usize, cw: usize) -> bool {
 pub struct Tally {
     /// Directly lit camera pixels.
     pub lit: usize,
-    /// Share of them decoded within ±1 projector pixel.
+    /// Share of them decoded within ±1 projector pixel (or the tolerance of [`tally_within`]).
     pub close: f64,
     /// Share of them decoded more than 3 projector pixels off.
     pub gross: f64,
@@ -224,6 +224,13 @@ pub struct Tally {
 
 /// Tallies `decoded` against the photographs' truth.
 pub fn tally(photos: &Photographs, decoded: &Correspondence) -> Tally {
+    tally_within(photos, decoded, 1.0)
+}
+
+/// [`tally`] with "close" meaning within `tolerance` projector pixels per axis (the true code
+/// cell or the one beside it, for a pattern set over cells: `Manifest::tolerance`) and
+/// "gross" more than 2 beyond it (as more than 3 is for ±1).
+pub fn tally_within(photos: &Photographs, decoded: &Correspondence, tolerance: f32) -> Tally {
     let off = |(tx, ty): (f32, f32), (x, y): (u32, u32)| {
         (x as f32 - tx.floor())
             .abs()
@@ -235,7 +242,7 @@ pub fn tally(photos: &Photographs, decoded: &Correspondence) -> Tally {
         match (t, d) {
             (None, Some(d)) => {
                 unlit_decoded += 1;
-                unlit_gross += usize::from(off(*p, *d) > 3.0);
+                unlit_gross += usize::from(off(*p, *d) > tolerance + 2.0);
             }
             (None, None) => {}
             (Some(_), None) => {
@@ -245,9 +252,9 @@ pub fn tally(photos: &Photographs, decoded: &Correspondence) -> Tally {
             (Some(t), Some(d)) => {
                 lit += 1;
                 let e = off(*t, *d);
-                if e <= 1.0 {
+                if e <= tolerance {
                     close += 1;
-                } else if e > 3.0 {
+                } else if e > tolerance + 2.0 {
                     gross += 1;
                 }
             }

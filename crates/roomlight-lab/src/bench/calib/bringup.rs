@@ -186,7 +186,13 @@ pub(super) fn hot_join(room: &Room) -> Result<()> {
         breakdown.join(", "),
         joined.placed.nodes.len()
     );
-    report(room, &joiner, &joined.measured.corr, false)?;
+    report(
+        room,
+        &joiner,
+        &joined.measured.corr,
+        false,
+        joined.measured.manifest.tolerance(),
+    )?;
     let blended: Vec<&Placed> = up
         .placed
         .iter()

@@ -1,8 +1,11 @@
 //! What the lab's calibration tests share, in process (`procedure.rs`) and over the wire
-//! (`wire_calibration.rs`): the rooms they calibrate, so both measure the same scene. It must
-//! not know how a test drives the procedure.
+//! (`wire_calibration.rs`): the rooms they calibrate, so both measure the same scene, and how a
+//! decode is scored against the truth (`accuracy`). It must not know how a test drives the
+//! procedure.
 
 use roomlight_sim::{Scene, scenes};
+
+pub mod accuracy;
 
 /// The small room seen by a 640×480 camera (enough pixels per patch).
 pub fn small_scene() -> Scene {
