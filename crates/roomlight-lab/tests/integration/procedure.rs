@@ -302,16 +302,7 @@ fn projectors_whose_footprints_do_not_overlap_are_coded_in_one_pass() {
         .zip(&decoded)
         .map(|(p, d)| {
             assert!(settings.shows_once(p), "{} is shown once", p.id);
-            d.manifest
-                .patterns
-                .iter()
-                .filter(|f| {
-                    matches!(
-                        f.pattern,
-                        roomlight_calib::graycode::Pattern::Bit { inverse: false, .. }
-                    )
-                })
-                .count()
+            (d.manifest.column_bits + d.manifest.row_bits) as usize
         })
         .sum();
     println!("structured light: {coded} captures together, {alone} one at a time");

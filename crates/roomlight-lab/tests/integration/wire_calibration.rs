@@ -250,23 +250,20 @@ async fn projectors_with_disjoint_footprints_joining_together_are_coded_at_the_s
     );
     // Together saves at least one set of structured light: the smaller projector's bit
     // patterns, shown once in a dark room (white and black are the footprint captures, one
-    // per projector either way), counted over cells of two (the fewer bits, whichever cell
-    // the procedure chose).
+    // per projector either way), counted over the largest cells (the fewest bits, whichever
+    // cell the procedure chose).
     let patterns = apart_scene()
         .projectors
         .iter()
         .map(|p| {
-            Manifest::with_cell(p.resolution[0], p.resolution[1], Coding::Xor04, 2)
-                .expect("manifest")
-                .patterns
-                .iter()
-                .filter(|f| {
-                    matches!(
-                        f.pattern,
-                        roomlight_calib::graycode::Pattern::Bit { inverse: false, .. }
-                    )
-                })
-                .count() as u64
+            let m = Manifest::with_cell(
+                p.resolution[0],
+                p.resolution[1],
+                Coding::Xor04,
+                roomlight_calib::procedure::LARGEST_CELL,
+            )
+            .expect("manifest");
+            u64::from(m.column_bits + m.row_bits)
         })
         .min()
         .expect("projectors");
