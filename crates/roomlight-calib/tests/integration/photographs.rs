@@ -93,10 +93,9 @@ fn a_projector_finer_than_the_camera_decodes_over_the_cells_it_resolves() {
         println!("cells of {cell}: {t:?}");
         (m, t, photos, d)
     };
-    let (full, at_full, ..) = decoded(1);
+    let (full, at_full, photos, _) = decoded(1);
     let (_, at_two, ..) = decoded(2);
     // The rule, on this footprint: the camera pixels the projector lights directly.
-    let (.., photos, _) = decoded(1);
     let footprint = photos.truth.iter().flatten().count();
     let p = Projector {
         id: "fine".into(),
