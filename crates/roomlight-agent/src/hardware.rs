@@ -14,11 +14,12 @@ pub enum Fill {
     /// Every pixel at this code per channel, in [0, 1].
     Uniform([f32; 3]),
     /// A structured-light pattern of the projector's own resolution, over code cells of
-    /// `cell × cell` pixels.
+    /// `cell × cell` pixels, its stripes white or in one primary.
     Structured {
         pattern: roomlight_calib::graycode::Pattern,
         coding: roomlight_calib::graycode::Coding,
         cell: u32,
+        primary: Option<roomlight_calib::graycode::Primary>,
     },
 }
 
@@ -53,12 +54,17 @@ impl Pattern {
                 pattern,
                 coding,
                 cell,
+                primary,
             } => {
                 let manifest =
                     roomlight_calib::graycode::Manifest::with_cell(width, height, coding, cell)
                         .map_err(|e| refused(e.to_string()))?;
                 check_gray_bit(&manifest, pattern).map_err(refused)?;
-                manifest.pattern_image(pattern).pixels
+                let mut codes = manifest.pattern_image(pattern).pixels;
+                if let Some(primary) = primary {
+                    primary.tint(&mut codes);
+                }
+                codes
             }
         };
         if let Some(mask) = &self.mask {

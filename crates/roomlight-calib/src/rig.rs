@@ -4,7 +4,7 @@
 //! ([`crate::procedure`]) is written once against it. This module knows patterns, node
 //! drawings and images; it must not know processes, networks, runtimes or the simulator.
 
-use crate::graycode::{Coding, Manifest, Pattern};
+use crate::graycode::{Coding, Manifest, Pattern, Primary};
 use crate::image_io::LinearImage;
 use crate::response::Response;
 use roomlight_core::LinearRgb;
@@ -52,11 +52,13 @@ pub enum Frame {
     /// Every pixel at this code per channel, in [0, 1] (0: black).
     Uniform([f32; 3]),
     /// A structured-light pattern of the projector's own resolution, over code cells of
-    /// `cell × cell` pixels ([`Manifest::with_cell`]).
+    /// `cell × cell` pixels ([`Manifest::with_cell`]), its stripes white or in one `primary`
+    /// (groups coded at once in different colours, [`crate::graycode::Unmixing`]).
     Structured {
         pattern: Pattern,
         coding: Coding,
         cell: u32,
+        primary: Option<Primary>,
     },
     /// A structured-light pattern shown only where `shown` (row-major projector pixels) is
     /// true and black elsewhere: a second pass's patterns. Only for rigs that
@@ -92,9 +94,14 @@ impl Frame {
                 pattern,
                 coding,
                 cell,
+                primary,
             } => {
                 let manifest = Manifest::with_cell(width, height, *coding, *cell)?;
-                Ok(manifest.pattern_image(*pattern).pixels)
+                let mut codes = manifest.pattern_image(*pattern).pixels;
+                if let Some(primary) = primary {
+                    primary.tint(&mut codes);
+                }
+                Ok(codes)
             }
             Self::Masked {
                 pattern,

@@ -286,6 +286,10 @@ enum BenchCommand {
         /// Only the large aperture's light-weighted centroids (a minute or two on the lab).
         #[arg(long)]
         area_only: bool,
+        /// Code up to three groups of projectors at once, each in its own primary, instead of
+        /// one group at a time in white (fewer captures, thinner decodes; to compare).
+        #[arg(long)]
+        primaries: bool,
     },
     // Its help says the sizes it runs, from the constants it runs them from.
     #[command(about = net_about(), long_about = None)]
@@ -481,7 +485,11 @@ fn bench(args: BenchArgs) -> Result<()> {
         Some(BenchCommand::Net { quick, json }) => {
             bench::net::run(quick, json.as_deref()).map(|_| ())
         }
-        Some(BenchCommand::Calib { quick, area_only }) => bench::calib::run(quick, area_only),
+        Some(BenchCommand::Calib {
+            quick,
+            area_only,
+            primaries,
+        }) => bench::calib::run(quick, area_only, primaries),
         Some(BenchCommand::Console { nodes, rounds }) => {
             bench::console::run(nodes, rounds).map(|_| ())
         }

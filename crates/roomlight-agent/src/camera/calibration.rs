@@ -167,6 +167,9 @@ fn log_event(event: Event) {
         Event::Stage { stage, captures } => tracing::info!(?stage, captures, "calibration step"),
         Event::Captured { .. } => {}
         Event::Grouped { groups } => tracing::info!(?groups, "coded at the same time"),
+        Event::Primaries { sets } => {
+            tracing::info!(?sets, "groups coded at the same time in their primaries")
+        }
         Event::Decoded { projector, share } => {
             tracing::info!(%projector, decoded = format!("{:.1}%", 100.0 * share), "structured light decoded")
         }

@@ -9,7 +9,7 @@ use super::Shared;
 use super::capture::Captures;
 use super::registry::Outbox;
 use crate::hardware::{Assignment, Camera};
-use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray, Primary};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::rig::{
     CameraLimits, Frame, Projector, ProjectorKind, ProjectorRole, Rig, RigError,
@@ -188,7 +188,8 @@ pub(super) fn show_pattern(
             pattern,
             coding,
             cell,
-        } => (structured(*pattern, *coding, *cell), Vec::new()),
+            primary,
+        } => (structured(*pattern, *coding, *cell, *primary), Vec::new()),
         Frame::Masked {
             pattern,
             coding,
@@ -198,7 +199,7 @@ pub(super) fn show_pattern(
             if shown.len() != width as usize * height as usize {
                 return Err("a mask of another size");
             }
-            (structured(*pattern, *coding, *cell), pack_mask(shown))
+            (structured(*pattern, *coding, *cell, None), pack_mask(shown))
         }
         Frame::Nodes(values) => (
             v1::show::Pattern::Nodes(v1::NodeValues {
@@ -231,9 +232,17 @@ fn uniform(code: LinearRgb) -> v1::show::Pattern {
     })
 }
 
-fn structured(pattern: Gray, coding: Coding, cell: u32) -> v1::show::Pattern {
+fn structured(
+    pattern: Gray,
+    coding: Coding,
+    cell: u32,
+    primary: Option<Primary>,
+) -> v1::show::Pattern {
     match pattern {
-        Gray::White => uniform(LinearRgb::splat(1.0)),
+        Gray::White => uniform(match primary {
+            Some(p) => LinearRgb(p.white().map(f64::from)),
+            None => LinearRgb::splat(1.0),
+        }),
         Gray::Black => uniform(LinearRgb::ZERO),
         Gray::Bit { axis, bit, inverse } => v1::show::Pattern::Gray(v1::GrayBit {
             axis: match axis {
@@ -247,6 +256,12 @@ fn structured(pattern: Gray, coding: Coding, cell: u32) -> v1::show::Pattern {
                 Coding::Xor04 => v1::Coding::Xor04,
             } as i32,
             cell,
+            primary: match primary {
+                None => v1::Primary::All,
+                Some(Primary::Red) => v1::Primary::Red,
+                Some(Primary::Green) => v1::Primary::Green,
+                Some(Primary::Blue) => v1::Primary::Blue,
+            } as i32,
         }),
     }
 }
@@ -267,6 +282,31 @@ mod tests {
         assert_eq!(pack_mask(&[true; 8]), vec![0xff]);
     }
 
+    /// A structured frame in one primary travels with it (the node draws that primary
+    /// alone), and its white as that primary's uniform code.
+    #[test]
+    fn a_frame_in_a_primary_is_sent_with_it() {
+        let bit = Gray::Bit {
+            axis: Axis::Column,
+            bit: 0,
+            inverse: false,
+        };
+        let frame = Frame::Structured {
+            pattern: bit,
+            coding: Coding::Xor04,
+            cell: 1,
+            primary: Some(Primary::Blue),
+        };
+        let (pattern, mask) = show_pattern(&frame, 4, 3).expect("4×3");
+        assert!(mask.is_empty());
+        let v1::show::Pattern::Gray(g) = pattern else {
+            panic!("a Gray bit: {pattern:?}");
+        };
+        assert_eq!(g.primary, v1::Primary::Blue as i32);
+        let white = structured(Gray::White, Coding::Xor04, 1, Some(Primary::Green));
+        assert_eq!(white, uniform(LinearRgb([0.0, 1.0, 0.0])));
+    }
+
     /// A second pass's frame travels as its pattern plus the packed mask; one drawn for another
     /// size is refused before anything is sent.
     #[test]
@@ -284,7 +324,7 @@ mod tests {
             shown: shown.clone(),
         };
         let (pattern, mask) = show_pattern(&frame, 4, 3).expect("4×3");
-        assert_eq!(pattern, structured(bit, Coding::Xor04, 2));
+        assert_eq!(pattern, structured(bit, Coding::Xor04, 2, None));
         assert_eq!(mask, pack_mask(&shown));
         assert!(show_pattern(&frame, 5, 3).is_err(), "a 12-pixel mask on 15");
         let white = Frame::Masked {

@@ -38,6 +38,7 @@ fn seeds() -> Vec<Vec<u8>> {
                 inverse: true,
                 coding: v1::Coding::Xor04 as i32,
                 cell: 2,
+                primary: v1::Primary::Green as i32,
             })),
             mask: vec![0b0000_1001, 0b0000_0010],
         }),

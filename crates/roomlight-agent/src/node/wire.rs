@@ -50,6 +50,7 @@ pub(super) fn pattern_from_wire(
             pattern,
             coding,
             cell,
+            ..
         },
         Some((width, height)),
     ) = (fill, resolution)
@@ -104,7 +105,7 @@ fn uniform_from_wire(u: &v1::Uniform) -> Result<Fill, String> {
 }
 
 fn gray_from_wire(g: &v1::GrayBit) -> Result<Fill, String> {
-    use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+    use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray, Primary};
     let axis = match v1::Axis::try_from(g.axis) {
         Ok(v1::Axis::Column) => Axis::Column,
         Ok(v1::Axis::Row) => Axis::Row,
@@ -132,6 +133,18 @@ fn gray_from_wire(g: &v1::GrayBit) -> Result<Fill, String> {
             roomlight_calib::graycode::MAX_CELL
         ));
     }
+    let primary = match v1::Primary::try_from(g.primary) {
+        Ok(v1::Primary::All) => None,
+        Ok(v1::Primary::Red) => Some(Primary::Red),
+        Ok(v1::Primary::Green) => Some(Primary::Green),
+        Ok(v1::Primary::Blue) => Some(Primary::Blue),
+        Err(_) => {
+            return Err(format!(
+                "Gray bit primary {}: expected all, red, green or blue",
+                g.primary
+            ));
+        }
+    };
     Ok(Fill::Structured {
         pattern: Gray::Bit {
             axis,
@@ -140,6 +153,7 @@ fn gray_from_wire(g: &v1::GrayBit) -> Result<Fill, String> {
         },
         coding,
         cell,
+        primary,
     })
 }
 
@@ -274,6 +288,7 @@ mod tests {
                 inverse: true,
                 coding,
                 cell: 0,
+                primary: 0,
             })
         };
         let row = v1::Axis::Row as i32;
@@ -288,7 +303,8 @@ mod tests {
                         inverse: true
                     },
                     coding: Coding::Xor04,
-                    cell: 1
+                    cell: 1,
+                    primary: None
                 },
                 mask: None
             }))
@@ -306,6 +322,7 @@ mod tests {
                 inverse: false,
                 coding: xor,
                 cell,
+                primary: 0,
             }))
         };
         assert!(matches!(
@@ -317,6 +334,51 @@ mod tests {
         ));
         for bad in [3, 16, u32::MAX] {
             assert!(cell(bad).is_err_and(|e| e.contains("cell")), "cell {bad}");
+        }
+        // Primaries: absent is white stripes, red, green and blue travel and tint the codes,
+        // anything else is refused.
+        let primary = |primary: i32| {
+            pattern_from_wire(
+                v1::show::Pattern::Gray(v1::GrayBit {
+                    axis: row,
+                    bit: 0,
+                    inverse: false,
+                    coding: xor,
+                    cell: 1,
+                    primary,
+                }),
+                &[],
+                Some((8, 8)),
+            )
+        };
+        use roomlight_calib::graycode::Primary;
+        for (wire, expected) in [
+            (v1::Primary::All, None),
+            (v1::Primary::Red, Some(Primary::Red)),
+            (v1::Primary::Green, Some(Primary::Green)),
+            (v1::Primary::Blue, Some(Primary::Blue)),
+        ] {
+            let Ok(Wire::Frame(p)) = primary(wire as i32) else {
+                panic!("primary {wire:?}");
+            };
+            assert!(matches!(p.fill, Fill::Structured { primary, .. } if primary == expected));
+            let codes = p.codes(8, 8).expect("codes");
+            assert!(
+                codes.iter().any(|c| c.iter().any(|&v| v > 0.0)),
+                "{wire:?} lit"
+            );
+            for c in codes {
+                for (channel, v) in c.into_iter().enumerate() {
+                    let lit = expected.is_none_or(|e| e.channel() == channel);
+                    assert!(lit || v == 0.0, "{wire:?}: channel {channel} at {v}");
+                }
+            }
+        }
+        for bad in [4, -1, i32::MAX] {
+            assert!(
+                primary(bad).is_err_and(|e| e.contains("primary")),
+                "primary {bad}"
+            );
         }
         // A 5×2 projector has 3 column bits and 1 row bit (found by fuzzing: roomlight-calib's
         // coder underflowed on bit 3 of its columns).
@@ -381,6 +443,7 @@ mod tests {
             inverse: false,
             coding: v1::Coding::Gray as i32,
             cell: 0,
+            primary: 0,
         });
         let Ok(Wire::Frame(masked)) = pattern_from_wire(bit.clone(), &MASK, Some((5, 2))) else {
             panic!("a masked Gray bit");
@@ -397,7 +460,8 @@ mod tests {
                     inverse: false
                 },
                 coding: Coding::Gray,
-                cell: 1
+                cell: 1,
+                primary: None
             }
         );
         let (m, w) = (

@@ -17,6 +17,7 @@ mod captures;
 mod cells;
 mod checks;
 mod code;
+mod colour;
 mod fill;
 mod groups;
 mod manifest;
@@ -28,6 +29,7 @@ pub(crate) mod synthetic;
 use captures::Pair;
 pub use captures::{Captures, Reduced, brightest, less_black};
 pub use code::{bits_for, gray, gray_inverse};
+pub use colour::{MAX_DISTURBANCE, MAX_NOISE_GAIN, PRESENT_SHARE, Primary, Unmixing};
 use fill::fill_from_neighbours;
 pub use groups::group_disjoint;
 pub use manifest::{MAX_CELL, MAX_SIDE, Manifest};
@@ -144,6 +146,20 @@ impl DecodeConfig {
         Self {
             noise_floor: self.noise_floor / f,
             shot_noise: self.shot_noise / f.sqrt(),
+            ..self
+        }
+    }
+}
+
+impl DecodeConfig {
+    /// The same decoder for one group's shares of captures shown in its primary
+    /// ([`Unmixing`]): a share reads about one camera channel's noise where an intensity sums
+    /// three channels', up to [`MAX_NOISE_GAIN`] times that where crosstalk is unmixed. The
+    /// floor, three channels' read noise, scales by `MAX_NOISE_GAIN / √3`; shot noise, which
+    /// grows with the light read whatever the channels, stays.
+    pub fn in_one_primary(self) -> Self {
+        Self {
+            noise_floor: self.noise_floor * MAX_NOISE_GAIN / 3.0f32.sqrt(),
             ..self
         }
     }

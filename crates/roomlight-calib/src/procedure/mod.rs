@@ -15,7 +15,8 @@ use crate::charts::{
     ChartCorners, PatchSample, PatchStatus, SampleConfig, sample_charts, sample_region,
 };
 use crate::graycode::{
-    Coding, Correspondence, DecodeConfig, Manifest, SecondPass, SecondPassPlan, group_disjoint,
+    Coding, Correspondence, DecodeConfig, Manifest, Primary, SecondPass, SecondPassPlan, Unmixing,
+    group_disjoint,
 };
 use crate::image_io::LinearImage;
 use crate::nodes::{NodeConfig, charts_lit, segment_beside, whole_frame};
@@ -72,6 +73,14 @@ pub struct Settings {
     /// Code each projector over cells of projector pixels as large as the camera needs to
     /// resolve its finest stripes ([`code_cell`]): a bit fewer per axis at each doubling.
     pub cells: bool,
+    /// Code up to three groups of projectors at the same time whatever their footprints,
+    /// each in its own primary, told apart by the camera's colour
+    /// ([`crate::graycode::Unmixing`]): a set of three takes its slots once (every member's
+    /// pairs), plus a capture of each group's primary white. Off by default: on the lab it
+    /// brings the bring-up from 158 captures to 116, but one primary carries a third of
+    /// white's light, the floor projectors decode 2–3% fewer of their pixels, and the demo's
+    /// charts end 0.2–0.75 ΔE00 worse (docs/results.md, 2026-12-03).
+    pub primaries: bool,
 }
 
 impl Default for Settings {
@@ -88,6 +97,7 @@ impl Default for Settings {
             fine_stripes: true,
             single_shot: true,
             cells: true,
+            primaries: false,
         }
     }
 }
@@ -259,6 +269,11 @@ pub enum Event {
     Captured { stage: Stage },
     /// The projectors coded at the same time, group by group.
     Grouped { groups: Vec<Vec<String>> },
+    /// Groups coded at the same time in their primaries, set by set (only when some set has
+    /// more than one group).
+    Primaries {
+        sets: Vec<Vec<(Primary, Vec<String>)>>,
+    },
     /// A projector's structured light decoded (share of camera pixels).
     Decoded { projector: String, share: f64 },
     /// A second pass over what the first left unknown.

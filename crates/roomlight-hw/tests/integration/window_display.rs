@@ -3,7 +3,7 @@
 //! Each test starts its own Xvfb (and fails, saying `.ci/run` installs it, when there is none).
 
 use roomlight_agent::hardware::{Assignment, Display, Fill, Pattern};
-use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray};
+use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray, Primary};
 use roomlight_calib::response::Response;
 use roomlight_core::LinearRgb;
 use roomlight_hw::frame::to_8bit;
@@ -110,8 +110,13 @@ fn a_pattern_and_node_values_land_on_their_output_pixel_for_pixel() {
         },
         coding: Coding::Xor04,
         cell: 2,
+        primary: Some(Primary::Green),
     });
     let expected = as_8bit(&pattern.codes(320, 240).expect("codes"));
+    // Stripes in green alone (a group coded in colour beside others): red and blue black.
+    assert!(expected.chunks(3).all(|px| px[0] == 0 && px[2] == 0));
+    assert!(expected.chunks(3).any(|px| px[1] == 255));
+    assert!(expected.chunks(3).any(|px| px[1] == 0));
     assert!(display.show_pattern(pattern));
     rt.block_on(display.flush());
     // The frame is on the screen once flush resolves: no waiting here.

@@ -115,8 +115,13 @@ fn scene(quick: bool) -> Result<roomlight_sim::Scene> {
 }
 
 /// The calibration bench on the lab (or the small room, `quick`); `area_only`: only the large
-/// aperture's light-weighted centroids.
-pub fn run(quick: bool, area_only: bool) -> Result<()> {
+/// aperture's light-weighted centroids; `primaries`: up to three groups coded at once in
+/// their primaries ([`Settings::primaries`]), to compare with the default.
+pub fn run(quick: bool, area_only: bool, primaries: bool) -> Result<()> {
+    let settings = Settings {
+        primaries,
+        ..Settings::default()
+    };
     let t0 = Instant::now();
     let room = Room::build(scene(quick)?).context("building the room")?;
     println!(
@@ -133,11 +138,11 @@ pub fn run(quick: bool, area_only: bool) -> Result<()> {
         return Ok(());
     }
     if std::env::var_os("ROOMLIGHT_JOIN_ONLY").is_some() {
-        return bringup::hot_join(&room);
+        return bringup::hot_join(&room, settings);
     }
-    bringup::cold_start(&room)?;
-    bringup::hot_join(&room)?;
-    let (decoded_all, decode_secs) = structured_light(&room)?;
+    bringup::cold_start(&room, settings)?;
+    bringup::hot_join(&room, settings)?;
+    let (decoded_all, decode_secs) = structured_light(&room, settings)?;
     for k in 0..room.projectors().len() {
         if room.projectors()[k].kind == ProjectorKind::LargeAperture {
             area::centroids(&room, k)?;
@@ -333,12 +338,15 @@ fn decode_speed() -> Result<()> {
 /// room (its footprints, the groups coded together, then each member of a shared group alone
 /// for comparison, then the second passes), measured against the simulator's truth. Returns
 /// each projector's final correspondence and the decode time per projector.
-fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64>)> {
+fn structured_light(
+    room: &Room,
+    settings: Settings,
+) -> Result<(Vec<Option<Correspondence>>, Vec<f64>)> {
     let mut noise = CameraNoise::new(room);
     let mut rig = SimRig::new(room, &mut noise);
     let events: Arc<Mutex<Vec<(Instant, Event)>>> = Arc::default();
     let sink = events.clone();
-    let mut procedure = Procedure::new(&mut rig, Settings::default(), move |e| {
+    let mut procedure = Procedure::new(&mut rig, settings, move |e| {
         sink.lock()
             .unwrap_or_else(PoisonError::into_inner)
             .push((Instant::now(), e));
@@ -367,6 +375,29 @@ fn structured_light(room: &Room) -> Result<(Vec<Option<Correspondence>>, Vec<f64
             .map(|g| g.iter().map(|&k| live[k].id.as_str()).collect::<Vec<_>>())
             .collect::<Vec<_>>(),
     );
+    let primaries = events
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .iter()
+        .find_map(|(_, e)| match e {
+            Event::Primaries { sets } => Some(sets.clone()),
+            _ => None,
+        });
+    if let Some(sets) = primaries {
+        println!(
+            "  the groups coded in their primaries, up to three at once (each set after a capture of each group at its primary's white): {}",
+            sets.iter()
+                .map(|set| {
+                    let groups: Vec<String> = set
+                        .iter()
+                        .map(|(primary, ids)| format!("{primary:?} {}", ids.join("+")))
+                        .collect();
+                    format!("[{}]", groups.join(", "))
+                })
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
+    }
     println!(
         "code cells (projector pixels a side; \"cell ±1\": placed in the true cell or one beside it, within 2·cell − 1 pixels, ±1 for cells of one; \"beyond\": a pixel further): {}",
         decoded

@@ -36,13 +36,19 @@ impl<R: Rig> Procedure<'_, R> {
             .iter()
             .map(|p| self.settings.shows_once(p))
             .collect();
-        let planned = groups
+        let sets = coding_sets(&groups, self.settings.primaries);
+        let planned = sets
             .iter()
-            .map(|g| {
-                g.iter()
-                    .map(|&k| bit_patterns(&manifests[k], once[k]).len())
-                    .max()
-                    .unwrap_or(0)
+            .map(|set| {
+                let whites = if set.len() > 1 { set.len() } else { 0 };
+                let once = shown_once(&once, set.len());
+                let slots_of = |g: &[usize]| {
+                    g.iter()
+                        .map(|&k| bit_patterns(&manifests[k], once[k]).len())
+                        .max()
+                        .unwrap_or(0)
+                };
+                whites + set.iter().map(|&g| slots_of(&groups[g])).max().unwrap_or(0)
             })
             .sum();
         self.report(Event::Stage {
@@ -55,30 +61,48 @@ impl<R: Rig> Procedure<'_, R> {
                 .map(|g| g.iter().map(|&k| projectors[k].id.clone()).collect())
                 .collect(),
         });
+        if sets.iter().any(|set| set.len() > 1) {
+            self.report(Event::Primaries {
+                sets: sets
+                    .iter()
+                    .map(|set| {
+                        set.iter()
+                            .zip(Primary::ALL)
+                            .map(|(&g, primary)| {
+                                let ids = groups[g].iter().map(|&k| projectors[k].id.clone());
+                                (primary, ids.collect())
+                            })
+                            .collect()
+                    })
+                    .collect(),
+            });
+        }
         let dark_intensity = dark.intensity();
         let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
         let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
-        for group in &groups {
-            let white = group_white(dark, &group.iter().map(|&k| &whites[k]).collect::<Vec<_>>());
-            // Where a blending projector of an earlier group was decoded it takes the light
-            // whatever this group leaves unknown there ([`left_by`]): no inverses for that.
+        for set in &sets {
+            // Where a blending projector of an earlier set was decoded it takes the light
+            // whatever this set leaves unknown there ([`left_by`]): no inverses for that.
             let earlier = projectors
                 .iter()
                 .zip(&corrs)
                 .filter_map(|(p, c)| Some((p, c.as_ref()?)));
             let left = left_by(earlier, needed, dark.pixels.len());
+            let members: Vec<&[usize]> = set.iter().map(|&g| groups[g].as_slice()).collect();
             let decoded = self
-                .code_group(
+                .code_set(
                     projectors,
                     (&manifests, &once),
-                    group,
+                    &members,
                     &gains,
-                    (&dark_intensity, &white),
+                    (dark, &dark_intensity, whites),
                     Some(&left),
                 )
                 .await?;
-            for (&k, c) in group.iter().zip(decoded) {
-                corrs[k] = Some(c);
+            for (group, group_corrs) in members.iter().zip(decoded) {
+                for (&k, c) in group.iter().zip(group_corrs) {
+                    corrs[k] = Some(c);
+                }
             }
         }
         Ok(projectors
@@ -96,108 +120,196 @@ impl<R: Rig> Procedure<'_, R> {
             .collect())
     }
 
-    /// Shows one group's bit patterns slot by slot (member `k` its own bit pattern `j`, black
-    /// once it has no more), captures each, leaves the members black and decodes each. The
-    /// manifests' white and black are not shown again: they are the group's white
-    /// ([`group_white`]) and the dark capture (`dark`, its intensity), captured before in the
-    /// same state of the room. Each capture is reduced as it arrives to its intensity less
-    /// dark's, all the decoder reads of it ([`less_black`]): 3.1 MB instead of 9.4 for the
-    /// lab's camera, some 44 per group.
-    async fn code_group(
+    /// Shows one set of groups' bit patterns slot by slot (member `k` its own bit pattern
+    /// `j`, black once it has no more), captures each, leaves the members black and decodes
+    /// each. A set of one group shows white stripes; its white is the group's
+    /// ([`group_white`]) and black the dark capture (`dark`), captured before in the same
+    /// state of the room. A set of two or three groups, whose footprints may overlap, shows
+    /// each group's stripes in its own primary ([`Primary::ALL`], in order), after one capture
+    /// of each group at its primary's white: those tell the groups apart at every camera pixel
+    /// ([`Unmixing`]), and each group then decodes from its own share of every capture, its
+    /// primary's white standing for white. Each capture is reduced as it arrives to what the
+    /// decoder reads of it ([`less_black`], or each group's share): 3.1 MB a group instead of
+    /// 9.4 for the lab's camera. Per group, its members' correspondences.
+    async fn code_set(
         &mut self,
         projectors: &[Projector],
         (manifests, once): (&[Manifest], &[bool]),
-        group: &[usize],
+        set: &[&[usize]],
         gains: &[Vec<f32>],
-        (dark, white): (&[f32], &LinearImage),
+        (dark, dark_intensity, whites): (&LinearImage, &[f32], &[LinearImage]),
         needed: Option<&[bool]>,
-    ) -> Result<Vec<Correspondence>, ProcedureError> {
+    ) -> Result<Vec<Vec<Correspondence>>, ProcedureError> {
+        let once = shown_once(once, set.len());
+        let once = once.as_slice();
         let bits: Vec<Vec<Pattern>> = manifests
             .iter()
             .zip(once)
             .map(|(m, &once)| bit_patterns(m, once))
             .collect();
-        let longest = group.iter().map(|&k| bits[k].len()).max().unwrap_or(0);
-        // A group shown once (every member XOR-coded) is exposed longer where its white leaves
-        // room below the ceiling (its 99.9th percentile at 80% of it, as a second pass's), up
-        // to SINGLE_SHOT_EXPOSURE and the camera's longest; a group with inverses at the
-        // normal exposure.
-        let exposure = if group.iter().all(|&k| once[k]) {
-            let limits = self.rig.camera();
-            let everywhere = vec![true; white.pixels.len()];
-            let longest = SINGLE_SHOT_EXPOSURE.min(limits.longest_exposure);
-            second_pass_exposure(white, &everywhere, limits.saturation, longest)
+        let members: Vec<Projector> = set
+            .iter()
+            .flat_map(|g| g.iter().map(|&k| projectors[k].clone()))
+            .collect();
+        let saturation = self.rig.camera().saturation;
+        let longest_exposure = self.rig.camera().longest_exposure;
+        let everywhere = vec![true; dark.pixels.len()];
+        let all_once = set.iter().all(|g| g.iter().all(|&k| once[k]));
+        // Per group: its white's intensity and the primary it is shown in; the set's white.
+        let (reduction, group_whites, white, exposure) = if let [group] = set {
+            let white = group_white(dark, &group.iter().map(|&k| &whites[k]).collect::<Vec<_>>());
+            // A group shown once (every member XOR-coded) is exposed longer where its white
+            // leaves room below the ceiling (its 99.9th percentile at 80% of it, as a second
+            // pass's), up to SINGLE_SHOT_EXPOSURE and the camera's longest; a group with
+            // inverses at the normal exposure.
+            let exposure = if all_once {
+                let longest = SINGLE_SHOT_EXPOSURE.min(longest_exposure);
+                second_pass_exposure(&white, &everywhere, saturation, longest)
+            } else {
+                1.0
+            };
+            let reduction = Reduction::Intensity(dark_intensity.to_vec());
+            (reduction, vec![(white.intensity(), None)], white, exposure)
         } else {
-            1.0
+            let mut primary_whites = Vec::with_capacity(set.len());
+            for (group, primary) in set.iter().zip(Primary::ALL) {
+                let frames: Vec<(&str, Frame)> = group
+                    .iter()
+                    .map(|&k| (projectors[k].id.as_str(), Frame::Uniform(primary.white())))
+                    .collect();
+                self.rig.show(&frames).await?;
+                let image = self.capture(Stage::StructuredLight, 1.0).await?;
+                image.expect_size(dark.width, dark.height, "a primary's white")?;
+                primary_whites.push(image);
+                self.black(&members).await?;
+            }
+            let unmixing = Unmixing::new(dark, &primary_whites.iter().collect::<Vec<_>>())?;
+            let white = group_white(dark, &primary_whites.iter().collect::<Vec<_>>());
+            drop(primary_whites);
+            // One primary is about a third of white: a set is exposed longer where its white
+            // (every group at its primary) leaves room, up to PRIMARIES_EXPOSURE, pairs too
+            // (they are then decoded as exposed longer).
+            let longest = PRIMARIES_EXPOSURE.min(longest_exposure);
+            let exposure = second_pass_exposure(&white, &everywhere, saturation, longest);
+            let group_whites = (0..set.len())
+                .map(|g| {
+                    let rise = unmixing.rise(g).iter().zip(dark_intensity);
+                    let white: Vec<f32> = rise.map(|(r, d)| d + r).collect();
+                    (white, Some(Primary::ALL[g]))
+                })
+                .collect();
+            let reduction = Reduction::Primaries {
+                unmixing,
+                dark: dark.clone(),
+            };
+            (reduction, group_whites, white, exposure)
+        };
+        let shown: Vec<Shown<'_>> = set
+            .iter()
+            .zip(&group_whites)
+            .map(|(g, (_, primary))| (*g, *primary))
+            .collect();
+        let slots = |only_once: bool| {
+            set.iter()
+                .flat_map(|g| g.iter())
+                .filter(|&&k| !only_once || once[k])
+                .map(|&k| bits[k].len())
+                .max()
+                .unwrap_or(0)
         };
         let captures = self
             .capture_slots(
                 projectors,
                 (manifests, &bits),
-                group,
+                (&shown, once),
                 exposure,
-                (dark, white),
+                &reduction,
                 false,
             )
             .await?;
-        let members: Vec<Projector> = group.iter().map(|&k| projectors[k].clone()).collect();
         self.black(&members).await?;
-        let saturation = self.rig.camera().saturation;
-        let jobs: Vec<Job> = group
+        let white_top = brightest(&white);
+        let mut sets: Vec<(Vec<Job>, GroupCaptures)> = set
             .iter()
-            .zip(owned_pixels(group, gains))
-            .map(|(&k, ours)| {
-                let p = &projectors[k];
-                // Clipping here is planned around by the second passes, not refused; where
-                // it clips is the camera's ceiling (a single shot reads those pixels apart).
-                let config = DecodeConfig {
-                    refuse_saturated: false,
-                    saturation,
-                    ..self.settings.decoder(p)
+            .zip(group_whites)
+            .zip(captures)
+            .map(|((group, (white, primary)), bits)| {
+                let jobs = group
+                    .iter()
+                    .zip(owned_pixels(group, gains))
+                    .map(|(&k, ours)| {
+                        let p = &projectors[k];
+                        // Clipping here is planned around by the second passes, not
+                        // refused; where it clips is the camera's ceiling (a single shot
+                        // reads those pixels apart).
+                        let config = DecodeConfig {
+                            refuse_saturated: false,
+                            saturation,
+                            ..self.settings.decoder(p)
+                        };
+                        let config = match primary {
+                            Some(_) => config.in_one_primary(),
+                            None => config,
+                        };
+                        (p.clone(), manifests[k].clone(), config, ours, once[k])
+                    })
+                    .collect();
+                let captures = GroupCaptures {
+                    size: (dark.width, dark.height),
+                    exposure,
+                    white,
+                    white_top: white_top.clone(),
+                    dark: dark_intensity.to_vec(),
+                    bits,
+                    inverses: None,
                 };
-                (p.clone(), manifests[k].clone(), config, ours, once[k])
+                (jobs, captures)
             })
             .collect();
-        let group_captures = GroupCaptures {
-            size: (white.width, white.height),
-            exposure,
-            white: white.intensity(),
-            white_top: brightest(white),
-            dark: dark.to_vec(),
-            bits: captures,
-            inverses: None,
-        };
-        let (mut corrs, mut group_captures) =
-            self.decode_group(jobs.clone(), group_captures).await?;
+        let mut corrs = Vec::with_capacity(sets.len());
+        for (jobs, captures) in std::mem::take(&mut sets) {
+            let (c, captures) = self.decode_group(jobs.clone(), captures).await?;
+            corrs.push(c);
+            sets.push((jobs, captures));
+        }
         // Shown once, a member that left many reached pixels unknown where it is needed (the
         // noisier differences, on dim parts of a footprint with bright ones) is shown its
-        // inverses after all, with the whole group, and every member decoded from the pairs.
-        let weak = jobs
-            .iter()
-            .zip(&corrs)
-            .any(|((.., config, _, once), corr)| {
+        // inverses after all, with every member of the set shown once, and those decoded from
+        // the pairs.
+        let weak = sets.iter().zip(&corrs).any(|((jobs, _), corrs)| {
+            jobs.iter().zip(corrs).any(|((.., config, _, once), corr)| {
                 *once && corr.reached_unknown_share_in(config, needed) > PAIRS_AFTER_SINGLE
-            });
+            })
+        });
         if weak {
             self.report(Event::Stage {
                 stage: Stage::StructuredLight,
-                captures: longest,
+                captures: slots(true),
             });
             let inverses = self
                 .capture_slots(
                     projectors,
                     (manifests, &bits),
-                    group,
+                    (&shown, once),
                     exposure,
-                    (dark, white),
+                    &reduction,
                     true,
                 )
                 .await?;
             self.black(&members).await?;
-            group_captures.inverses = Some(inverses);
-            corrs = self.decode_group(jobs, group_captures).await?.0;
+            for (((jobs, captures), inverses), corrs) in
+                sets.into_iter().zip(inverses).zip(&mut corrs)
+            {
+                if jobs.iter().any(|(.., once)| *once) {
+                    let captures = GroupCaptures {
+                        inverses: Some(inverses),
+                        ..captures
+                    };
+                    *corrs = self.decode_group(jobs, captures).await?.0;
+                }
+            }
         }
-        for (p, corr) in members.iter().zip(&corrs) {
+        for (p, corr) in members.iter().zip(corrs.iter().flatten()) {
             self.report(Event::Decoded {
                 projector: p.id.clone(),
                 share: corr.decoded_share(),
@@ -206,29 +318,41 @@ impl<R: Rig> Procedure<'_, R> {
         Ok(corrs)
     }
 
-    /// Shows a group's bit patterns slot by slot (member `k` its pattern `j`, or its inverse
-    /// when `inverse`; black once it has no more) and captures each at `exposure`, reduced to
-    /// its intensity less dark.
+    /// Shows a set's bit patterns slot by slot (member `k` its pattern `j` in its group's
+    /// primary, or its inverse when `inverse`, which only members shown once are shown; black
+    /// once it has no more) and captures each at `exposure`, reduced to what each group reads
+    /// of it ([`Reduction`]): per group, its slots (as many as its members have patterns).
     async fn capture_slots(
         &mut self,
         projectors: &[Projector],
         (manifests, bits): (&[Manifest], &[Vec<Pattern>]),
-        group: &[usize],
+        (set, once): (&[Shown<'_>], &[bool]),
         exposure: f32,
-        (dark, white): (&[f32], &LinearImage),
+        reduction: &Reduction,
         inverse: bool,
-    ) -> Result<Vec<Vec<f32>>, ProcedureError> {
-        let longest = group.iter().map(|&k| bits[k].len()).max().unwrap_or(0);
-        let mut captures = Vec::with_capacity(longest);
-        for j in 0..longest {
-            let frames: Vec<(&str, Frame)> = group
+    ) -> Result<Vec<Vec<Vec<f32>>>, ProcedureError> {
+        let shows = |k: usize| !inverse || once[k];
+        let slots_of = |group: &[usize]| {
+            group
                 .iter()
-                .map(|&k| {
-                    let frame = match bits[k].get(j) {
+                .filter(|&&k| shows(k))
+                .map(|&k| bits[k].len())
+                .max()
+                .unwrap_or(0)
+        };
+        let longest = set.iter().map(|(g, _)| slots_of(g)).max().unwrap_or(0);
+        let mut captures: Vec<Vec<Vec<f32>>> = set.iter().map(|_| Vec::new()).collect();
+        for j in 0..longest {
+            let frames: Vec<(&str, Frame)> = set
+                .iter()
+                .flat_map(|&(group, primary)| group.iter().map(move |&k| (k, primary)))
+                .map(|(k, primary)| {
+                    let frame = match bits[k].get(j).filter(|_| shows(k)) {
                         Some(&pattern) => Frame::Structured {
                             pattern: if inverse { inverted(pattern) } else { pattern },
                             coding: manifests[k].coding,
                             cell: manifests[k].cell,
+                            primary,
                         },
                         None => Frame::BLACK,
                     };
@@ -238,8 +362,13 @@ impl<R: Rig> Procedure<'_, R> {
             self.rig.show(&frames).await?;
             let image = self.capture(Stage::StructuredLight, exposure).await?;
             let slot = format!("structured-light capture {} of {longest}", j + 1);
-            image.expect_size(white.width, white.height, &slot)?;
-            captures.push(less_black(&image, dark));
+            let reduced = reduction.reduce(&image, &slot)?;
+            for ((captures, plane), (group, _)) in captures.iter_mut().zip(reduced).zip(set) {
+                // A group whose patterns have all been shown keeps no more planes.
+                if j < slots_of(group) {
+                    captures.push(plane);
+                }
+            }
         }
         Ok(captures)
     }
@@ -282,6 +411,70 @@ impl<R: Rig> Procedure<'_, R> {
 /// nearly did lost its sign (the lab's floor-right: 0.32% of its decoded pixels off by more
 /// than 2; the texture projector, at full power, not seen at all).
 const SINGLE_SHOT_EXPOSURE: f32 = 2.0;
+
+/// The longest a set of groups coded at once in their primaries is exposed, a multiple of the
+/// normal exposure: one primary gives about a third of white's light, so three times
+/// [`SINGLE_SHOT_EXPOSURE`], where the set's white leaves the room below the ceiling.
+const PRIMARIES_EXPOSURE: f32 = 3.0 * SINGLE_SHOT_EXPOSURE;
+
+/// Which members of a set of `groups` are shown once: those `once` marks in a set of one; none
+/// in a set coded in primaries. One primary carries about a third of white's light, and a
+/// single shot's difference (2·pattern − white) is noisier than a pair's: shown once, the
+/// lab's projectors decoded 2–5% fewer of their reached pixels in primaries than in white
+/// (wall-right 95.18% within ±1 against 99.44%; with pairs 98.02%), the rest left unknown,
+/// and the demo's charts lost a ΔE00 (neutral 2.09 → 3.17; with pairs 2.52), 2026-12-03.
+fn shown_once(once: &[bool], groups: usize) -> Vec<bool> {
+    if groups > 1 {
+        vec![false; once.len()]
+    } else {
+        once.to_vec()
+    }
+}
+
+/// Groups of projectors whose footprints do not overlap (indices into `groups`) coded at the
+/// same time: up to three a set, each in its own primary, when `primaries`; otherwise, or
+/// where only one group is left, one a set, in white.
+fn coding_sets(groups: &[Vec<usize>], primaries: bool) -> Vec<Vec<usize>> {
+    let per_set = if primaries { Primary::ALL.len() } else { 1 };
+    let indices: Vec<usize> = (0..groups.len()).collect();
+    indices.chunks(per_set).map(<[usize]>::to_vec).collect()
+}
+
+/// A group of a set as it is shown: its members, and its primary (`None`: white).
+type Shown<'a> = (&'a [usize], Option<Primary>);
+
+/// How a capture of a set is reduced to what each of its groups' decoders read.
+enum Reduction {
+    /// One group in white: its intensity less dark's ([`less_black`]).
+    Intensity(Vec<f32>),
+    /// Groups in their primaries: each group's share less dark, in intensity ([`Unmixing`]).
+    Primaries {
+        unmixing: Unmixing,
+        dark: LinearImage,
+    },
+}
+
+impl Reduction {
+    /// `image` as each group reads it; one of another size is refused, named by `what`.
+    fn reduce(&self, image: &LinearImage, what: &str) -> Result<Vec<Vec<f32>>, CalibError> {
+        match self {
+            Self::Intensity(dark) => {
+                if image.pixels.len() != dark.len() {
+                    return Err(CalibError::File {
+                        file: what.to_string(),
+                        problem: format!(
+                            "{} pixels, the dark capture has {}",
+                            image.pixels.len(),
+                            dark.len()
+                        ),
+                    });
+                }
+                Ok(vec![less_black(image, dark)])
+            }
+            Self::Primaries { unmixing, dark } => unmixing.reduce(image, dark, what),
+        }
+    }
+}
 
 /// A member shown once whose decode leaves more of its reached pixels unknown than this share
 /// of its decoded ones ([`Correspondence::reached_unknown_share`]) has its group shown the inverses
@@ -372,7 +565,12 @@ impl GroupCaptures {
                 paired = config.exposed_longer(self.exposure);
                 &paired
             }
-            _ => config,
+            // Pairs of a set exposed longer (groups in their primaries).
+            (_, false) => {
+                paired = config.exposed_longer(self.exposure);
+                &paired
+            }
+            (None, true) => config,
         };
         let captures = match (&self.inverses, once) {
             (Some(inverses), true) => {

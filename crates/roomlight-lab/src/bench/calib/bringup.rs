@@ -15,11 +15,12 @@ use roomlight_sim::{CameraNoise, Room};
 /// first LED preset's target, and the rounds (momentum, 20 model rounds per capture, the
 /// default) until the camera agent's stop rule settles, against the simulator's truth. Also
 /// what the model is worth: the true excess of the measured model's optimum.
-pub(super) fn cold_start(room: &Room) -> Result<()> {
+pub(super) fn cold_start(room: &Room, settings: Settings) -> Result<()> {
     let mut noise = CameraNoise::with_seed(room, 1);
     let bar = indicatif::ProgressBar::hidden();
     let mut lines = Vec::new();
-    let cal = pipeline::calibrate(room, &mut noise, &bar, |l| lines.push(l))?;
+    let cal =
+        pipeline::calibrate_configured(room, false, settings, &mut noise, &bar, |l| lines.push(l))?;
     println!("cold start: calibration in {} captures", cal.captures);
     for l in &lines {
         println!("  {l}");
@@ -108,7 +109,7 @@ fn converge(
 
 /// One projector joining the lit lab (issue 21: ≤ 40 captures): every other luminaire brought
 /// up and lit at mid grey, then the last standard luminaire switched on and calibrated hot.
-pub(super) fn hot_join(room: &Room) -> Result<()> {
+pub(super) fn hot_join(room: &Room, settings: Settings) -> Result<()> {
     use roomlight_calib::rig::Frame as RigFrame;
     let setup = pipeline::setup(room, false)?;
     let joiner = room
@@ -130,7 +131,7 @@ pub(super) fn hot_join(room: &Room) -> Result<()> {
         .collect();
     let mut noise = CameraNoise::with_seed(room, 2);
     let mut rig = SimRig::new(room, &mut noise).with_live(&others)?;
-    let up = block_on(Procedure::new(&mut rig, Settings::default(), |_| {}).bring_up(&setup))?;
+    let up = block_on(Procedure::new(&mut rig, settings, |_| {}).bring_up(&setup))?;
     let lit: Vec<(String, RigFrame)> = up
         .placed
         .iter()
@@ -159,7 +160,7 @@ pub(super) fn hot_join(room: &Room) -> Result<()> {
                 .push(stage);
         }
     };
-    let joined = block_on(Procedure::new(&mut rig, Settings::default(), record).join(
+    let joined = block_on(Procedure::new(&mut rig, settings, record).join(
         &setup,
         &joiner,
         Some(&claimed),
