@@ -31,6 +31,9 @@ pub struct DemoOptions {
     /// Weight of the light on the target in every preset's rounds, instead of the weight each
     /// preset asks for in the scene (`dark_weight`, 0 when left out).
     pub dark_weight: Option<f64>,
+    /// Luminaire nodes shaped to the first LED preset instead of flat over their regions
+    /// ([`pipeline::Nodes`]).
+    pub shaped_nodes: bool,
 }
 
 pub fn run(args: &DemoOptions) -> Result<()> {
@@ -57,13 +60,20 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     let t = Instant::now();
     // With patches on the target measured too, for the dark-target trade-off (the chart
     // patches' values, and so every model at weight 0, are the same as without).
-    let mut cal = pipeline::calibrate_with(&room, true, &mut noise, &bar, |line| {
-        bar.println(&line);
-        if bar.is_hidden() {
-            println!("{line}");
-        }
-        calibration.push(line);
-    })?;
+    let nodes = if args.shaped_nodes {
+        pipeline::Nodes::ShapedTo(0)
+    } else {
+        pipeline::Nodes::Flat
+    };
+    let settings = roomlight_calib::procedure::Settings::default();
+    let mut cal =
+        pipeline::calibrate_configured(&room, true, settings, nodes, &mut noise, &bar, |line| {
+            bar.println(&line);
+            if bar.is_hidden() {
+                println!("{line}");
+            }
+            calibration.push(line);
+        })?;
     phases.done("calibration", t);
     cal.wall_weight = args.wall_weight;
     let t = Instant::now();

@@ -195,6 +195,10 @@ struct DemoArgs {
     /// weight each preset asks for in the scene (`dark_weight`; 0 when left out).
     #[arg(long, value_parser = weight)]
     dark_weight: Option<f64>,
+    /// Shape every luminaire node to the first LED preset's falloff, photographed once with the
+    /// projectors dark (one more capture), instead of driving its region evenly.
+    #[arg(long)]
+    shaped_nodes: bool,
 }
 
 /// A weight: finite and at least 0.
@@ -366,6 +370,7 @@ fn main() -> Result<()> {
             out: args.out,
             wall_weight: args.wall_weight,
             dark_weight: args.dark_weight,
+            shaped_nodes: args.shaped_nodes,
         }),
         Command::Sim(args) => procs::sim(&args),
         Command::Calibrate(args) => procs::calibrate(&args),

@@ -158,6 +158,7 @@ fn setup(survey: &Survey) -> Setup {
         target_mask: survey.target_mask.clone(),
         target_patches: Vec::new(),
         wall_patches: Vec::new(),
+        reference: None,
     }
 }
 
@@ -170,6 +171,11 @@ fn log_event(event: Event) {
         Event::Primaries { sets } => {
             tracing::info!(?sets, "groups coded at the same time in their primaries")
         }
+        Event::Shaped {
+            projector,
+            nodes,
+            spread,
+        } => tracing::info!(%projector, nodes, ?spread, "nodes shaped to the reference"),
         Event::Decoded { projector, share } => {
             tracing::info!(%projector, decoded = format!("{:.1}%", 100.0 * share), "structured light decoded")
         }

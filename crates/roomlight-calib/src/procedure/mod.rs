@@ -25,6 +25,7 @@ use crate::rig::{Assignment, Frame, Projector, ProjectorKind, ProjectorRole, Rig
 use roomlight_core::LinearRgb;
 use std::borrow::Borrow;
 
+pub mod shape;
 mod steps;
 mod target;
 mod walls;
@@ -167,6 +168,10 @@ pub struct Setup {
     /// target lighting everywhere the camera sees a lit surface ([`Target::with_walls`]).
     /// Empty: none (the model over the charts, as before).
     pub wall_patches: Vec<Vec<u32>>,
+    /// The room under its own lighting with every projector dark, at the calibration's
+    /// exposure: the luminaires' nodes are shaped to its falloff ([`shape`]). `None`: nodes
+    /// flat over their regions, as before.
+    pub reference: Option<LinearImage>,
 }
 
 impl Setup {
@@ -289,6 +294,13 @@ pub enum Event {
         projector: String,
         chart: Option<usize>,
     },
+    /// A projector's nodes shaped to the reference ([`shape`]): the 5th and 95th percentiles
+    /// of the shape over its driven pixels.
+    Shaped {
+        projector: String,
+        nodes: usize,
+        spread: (f32, f32),
+    },
 }
 
 /// Why a step failed.
@@ -360,6 +372,8 @@ pub struct Placed {
     /// Projector pixels kept black for the target (charted projectors; empty otherwise).
     pub excluded: Vec<bool>,
     pub response: Response,
+    /// How its nodes were shaped to the room's reference ([`shape`]); `None`: flat.
+    pub shape: Option<shape::Shape>,
 }
 
 impl Placed {
@@ -714,6 +728,7 @@ pub fn place<M: Borrow<Measured>>(
             claim,
             excluded,
             response: m.response.clone(),
+            shape: None,
         });
     }
     Ok(placed)

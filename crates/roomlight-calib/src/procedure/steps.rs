@@ -426,8 +426,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
             .structured_light(&luminaires, &dark, &whites, None)
             .await?;
         let measured = self.responses(decoded, &luminaires, &dark, &whites).await?;
-        drop(whites);
-        let placed = place_calibrated(
+        let mut placed = place_calibrated(
             setup,
             &measured,
             None,
@@ -435,6 +434,8 @@ impl<'a, R: Rig> Procedure<'a, R> {
             &self.settings,
             &mut *self.progress,
         )?;
+        self.shape(setup, &dark, &mut placed, &measured, &luminaires, &whites)?;
+        drop(whites);
         self.assign(&placed).await?;
         // Every node black is the room as `dark` saw it: its black level.
         let columns = self.attenuation(setup, &placed, Some(&dark)).await?;
@@ -444,6 +445,41 @@ impl<'a, R: Rig> Procedure<'a, R> {
             columns,
             captures: self.captures,
         })
+    }
+
+    /// Shapes `placed`'s nodes to the setup's reference, if it has one ([`shape::shape`]),
+    /// `whites[k]` being `projectors[k]`'s and `measured` holding their decodes.
+    fn shape(
+        &mut self,
+        setup: &Setup,
+        dark: &LinearImage,
+        placed: &mut [Placed],
+        measured: &[Measured],
+        projectors: &[Projector],
+        whites: &[LinearImage],
+    ) -> Result<(), CalibError> {
+        let Some(reference) = &setup.reference else {
+            return Ok(());
+        };
+        let lit: Vec<Option<shape::Lit<'_>>> = placed
+            .iter()
+            .map(|p| {
+                let k = projectors.iter().position(|q| q.id == p.projector.id)?;
+                let m = measured.iter().find(|m| m.projector.id == p.projector.id)?;
+                Some(shape::Lit {
+                    white: whites.get(k)?,
+                    corr: &m.corr,
+                })
+            })
+            .collect();
+        for s in shape::shape(setup, reference, dark, placed, &lit)? {
+            self.report(Event::Shaped {
+                projector: s.projector,
+                nodes: s.nodes,
+                spread: s.spread,
+            });
+        }
+        Ok(())
     }
 
     /// The responses of decoded projectors, `whites[k]` being `projectors[k]`'s: shown
@@ -539,6 +575,8 @@ impl<'a, R: Rig> Procedure<'a, R> {
             &nodes,
             &mut *self.progress,
         )?;
+        let mut placed = placed;
+        self.shape(setup, &dark, &mut placed, &measured, one, &whites)?;
         let (Some(measured), Some(placed)) =
             (measured.into_iter().next(), placed.into_iter().next())
         else {

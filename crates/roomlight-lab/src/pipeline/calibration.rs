@@ -9,6 +9,7 @@ use roomlight_calib::attenuation::Attenuation;
 use roomlight_calib::charts::ChartCorners;
 use roomlight_calib::charts::PatchSample;
 use roomlight_calib::procedure::Target;
+use roomlight_calib::procedure::shape::Shape;
 use roomlight_calib::procedure::{
     BringUp, Event, Layout, Measured, Placed, Procedure, Settings, Setup, Stage, WallTiling,
     place_calibrated, wall_exclusion, wall_patches,
@@ -50,6 +51,9 @@ pub struct Calibrated {
     /// whole-frame node), each with its pixels kept black for the target: what the partition
     /// of unity is checked over ([`super::calibrated_partition`]).
     pub(crate) blending: Vec<(String, Vec<bool>)>,
+    /// How each luminaire's nodes were shaped to the room's reference (none: flat), so that
+    /// nodes placed again are shaped the same ([`Calibrated::regions_with_mask`]).
+    shapes: HashMap<String, Shape>,
     /// The room as configured by hand, and how the procedure measured it.
     setup: Setup,
     settings: Settings,
@@ -72,12 +76,33 @@ impl Calibrated {
     /// e.g. a contrast board put where the bust was: the procedure places the measured
     /// projectors again. Fails if the nodes would change.
     pub fn regions_with_mask(&self, room: &Room, mask: &[bool]) -> Result<Vec<NodeRegion>> {
+        self.placed_again(room, mask, true)
+    }
+
+    /// The nodes' blend: their weights before shaping ([`Nodes::ShapedTo`]), which is what
+    /// sums to one across overlaps; the regions themselves when the nodes are flat.
+    pub fn blend_regions(&self, room: &Room) -> Result<Vec<NodeRegion>> {
+        if self.shapes.is_empty() {
+            return Ok(self.regions.clone());
+        }
+        self.placed_again(room, &self.setup.target_mask, false)
+    }
+
+    /// The measured projectors placed again with `mask` as the target, shaped as they were
+    /// when `shaped`. Fails if the nodes would change.
+    fn placed_again(&self, room: &Room, mask: &[bool], shaped: bool) -> Result<Vec<NodeRegion>> {
         let setup = Setup {
             target_mask: mask.to_vec(),
+            reference: None,
             ..self.setup.clone()
         };
-        let placed =
+        let mut placed =
             place_calibrated(&setup, &self.measured, None, 0, &self.settings, &mut |_| {})?;
+        for p in placed.iter_mut().filter(|_| shaped) {
+            if let Some(shape) = self.shapes.get(&p.projector.id) {
+                shape.apply(p)?;
+            }
+        }
         let (regions, charts) = regions(room, &placed)?;
         if charts != self.node_charts {
             bail!(
@@ -118,6 +143,11 @@ impl Calibrated {
             .filter(|p| p.claim.is_some())
             .map(|p| (p.projector.id.clone(), p.excluded.clone()))
             .collect();
+        let shapes = up
+            .placed
+            .iter()
+            .filter_map(|p| Some((p.projector.id.clone(), p.shape.clone()?)))
+            .collect();
         let mut responses = vec![Response::linear(); room.projectors().len()];
         for m in &up.measured {
             responses[room.projector(&m.projector.id)?] = m.response.clone();
@@ -139,6 +169,7 @@ impl Calibrated {
             measured: up.measured,
             wall_weight: 0.0,
             blending,
+            shapes,
             setup,
             settings,
         })
@@ -198,6 +229,7 @@ pub fn setup(room: &Room, target_patches: bool) -> Result<Setup> {
     let exclude = wall_exclusion(&corners, &target_mask, width, tiling.margin);
     Ok(Setup {
         wall_patches: wall_patches(width, height, &exclude, &tiling),
+        reference: None,
         corners,
         sample: sample_config(room),
         target_mask,
@@ -226,23 +258,69 @@ pub fn calibrate_with(
     bar: &indicatif::ProgressBar,
     say: impl FnMut(String),
 ) -> Result<Calibrated> {
-    calibrate_configured(room, target_patches, Settings::default(), noise, bar, say)
+    calibrate_configured(
+        room,
+        target_patches,
+        Settings::default(),
+        Nodes::default(),
+        noise,
+        bar,
+        say,
+    )
 }
 
-/// [`calibrate_with`] with the procedure's `settings`.
+/// How the luminaires' nodes drive their regions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Nodes {
+    /// Evenly: one colour over the region, feathered.
+    Flat,
+    /// Following LED preset `n`'s falloff, photographed once with the projectors dark
+    /// ([`roomlight_calib::procedure::shape`]).
+    ShapedTo(usize),
+}
+
+impl Default for Nodes {
+    /// Flat. Shaped to its first LED preset, the lab's whole-room ΔE00 mean fell on every
+    /// preset, but the small room's 95th percentile rose (docs/results.md): not the default.
+    fn default() -> Self {
+        Self::Flat
+    }
+}
+
+/// Seed of the reference photograph's camera noise ([`Nodes::ShapedTo`]).
+const REFERENCE_SEED: u64 = 0x5EED_0F1E;
+
+/// [`calibrate_with`] with the procedure's `settings`, the nodes drawn as `nodes` says.
 pub fn calibrate_configured(
     room: &Room,
     target_patches: bool,
     settings: Settings,
+    nodes: Nodes,
     noise: &mut CameraNoise,
     bar: &indicatif::ProgressBar,
     mut say: impl FnMut(String),
 ) -> Result<Calibrated> {
-    let setup = setup(room, target_patches)?;
+    let mut setup = setup(room, target_patches)?;
+    // The survey's photograph of the room under its own lighting, projectors dark: one
+    // capture, counted with calibration's.
+    let reference = match nodes {
+        Nodes::Flat => 0,
+        Nodes::ShapedTo(preset) => {
+            let frames = vec![Frame::Black; room.projectors().len()];
+            let lit = room.render(&frames, Some(preset)).with_context(|| {
+                format!("photographing LED preset {preset} for the nodes' shape")
+            })?;
+            // Its own noise, so that the calibration's captures are those of a flat one.
+            let mut own = CameraNoise::with_seed(room, REFERENCE_SEED);
+            setup.reference = Some(image(&own.expose(&lit)));
+            1
+        }
+    };
     let log = StageLog::new(bar.clone());
     let mut rig = SimRig::new(room, noise);
-    let up = block_on(Procedure::new(&mut rig, settings, log.sink()).bring_up(&setup))
+    let mut up = block_on(Procedure::new(&mut rig, settings, log.sink()).bring_up(&setup))
         .context("calibrating the room")?;
+    up.captures += reference;
     for line in log.lines(&up, setup.corners.len()) {
         say(line);
     }
@@ -311,6 +389,26 @@ impl StageLog {
                     "{projector}: lights no chart; one node over its frame, started from the fallback"
                 ),
             });
+        }
+        let shaped: Vec<String> = events
+            .iter()
+            .filter_map(|(_, e)| match e {
+                Event::Shaped {
+                    projector,
+                    nodes,
+                    spread,
+                } => Some(format!(
+                    "{projector} {nodes} ({:.2}–{:.2})",
+                    spread.0, spread.1
+                )),
+                _ => None,
+            })
+            .collect();
+        if !shaped.is_empty() {
+            lines.push(format!(
+                "nodes shaped to the reference photograph (5th–95th percentile of the shape): {}",
+                shaped.join(", ")
+            ));
         }
         let charted = up.placed.iter().filter(|p| p.layout == Layout::Charted);
         lines.push(format!(

@@ -167,17 +167,19 @@ impl Truth {
     }
 }
 
-/// The partition of unity of a calibration's blending projectors (their nodes' weights
-/// summed per projector pixel), as [`placed_partition`] reads placed projectors.
+/// The partition of unity of a calibration's blending projectors (their nodes' blend weights,
+/// before any shaping, summed per projector pixel), as [`placed_partition`] reads placed
+/// projectors.
 pub fn calibrated_partition(
     room: &Room,
     cal: &Calibrated,
 ) -> Result<roomlight_calib::nodes::Partition> {
     let mut projectors = Vec::with_capacity(cal.blending.len());
+    let blend = cal.blend_regions(room)?;
     for (id, excluded) in &cal.blending {
         let k = room.projector(id)?;
         let p = &room.projectors()[k].pinhole;
-        let nodes = cal.regions.iter().filter(|r| r.projector == k);
+        let nodes = blend.iter().filter(|r| r.projector == k);
         let weights = summed(p.width * p.height, nodes.map(|r| r.weights.as_slice()));
         projectors.push((k, weights, excluded.clone()));
     }

@@ -5,6 +5,7 @@ mod dark_target;
 mod determinism;
 mod fuzz_files;
 mod procedure;
+mod shaped;
 mod support;
 mod walls;
 mod wire_calibration;

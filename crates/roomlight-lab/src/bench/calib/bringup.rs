@@ -19,8 +19,15 @@ pub(super) fn cold_start(room: &Room, settings: Settings) -> Result<()> {
     let mut noise = CameraNoise::with_seed(room, 1);
     let bar = indicatif::ProgressBar::hidden();
     let mut lines = Vec::new();
-    let cal =
-        pipeline::calibrate_configured(room, false, settings, &mut noise, &bar, |l| lines.push(l))?;
+    let cal = pipeline::calibrate_configured(
+        room,
+        false,
+        settings,
+        pipeline::Nodes::default(),
+        &mut noise,
+        &bar,
+        |l| lines.push(l),
+    )?;
     println!("cold start: calibration in {} captures", cal.captures);
     for l in &lines {
         println!("  {l}");

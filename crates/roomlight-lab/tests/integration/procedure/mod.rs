@@ -41,6 +41,7 @@ fn setup(room: &Room) -> Setup {
         target_mask: room.pixels().iter().map(|p| p.target).collect(),
         target_patches: Vec::new(),
         wall_patches: Vec::new(),
+        reference: None,
     }
 }
 
