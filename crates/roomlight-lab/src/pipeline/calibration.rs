@@ -281,7 +281,7 @@ pub enum Nodes {
 
 impl Default for Nodes {
     /// Flat. Shaped to its first LED preset, the lab's whole-room ΔE00 mean fell on every
-    /// preset, but the small room's 95th percentile rose (docs/results.md): not the default.
+    /// preset, but the small room's mean and 95th percentile rose (docs/results.md): not the default.
     fn default() -> Self {
         Self::Flat
     }
