@@ -19,6 +19,8 @@ use super::{Layout, Placed, Setup};
 use crate::CalibError;
 use crate::graycode::Correspondence;
 use crate::image_io::LinearImage;
+use roomlight_core::LinearRgb;
+use roomlight_core::metrics::luminance;
 use std::collections::VecDeque;
 
 /// Side of a block of projector pixels over which the ratio is read. Falloff varies slowly;
@@ -181,12 +183,9 @@ pub fn shape(
     Ok(out)
 }
 
-fn lum(p: [f32; 3]) -> f64 {
-    0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64
-}
-
-fn less(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+/// The luminance `a` adds over `b` (negative where it is darker).
+fn rise(a: [f32; 3], b: [f32; 3]) -> f64 {
+    luminance(LinearRgb(a.map(f64::from)) - LinearRgb(b.map(f64::from)))
 }
 
 /// Nearest-rank quantile `q` of `v` (reordered); `None` when empty.
@@ -207,7 +206,7 @@ fn white_p99(lit: &Lit<'_>, dark: &LinearImage) -> f64 {
         .iter()
         .zip(lit.white.pixels.iter().zip(&dark.pixels))
         .filter(|(m, _)| m.is_some())
-        .map(|(_, (w, d))| lum(less(*w, *d)))
+        .map(|(_, (w, d))| rise(*w, *d))
         .collect();
     quantile(&mut v, 0.99).unwrap_or(0.0)
 }
@@ -237,8 +236,8 @@ impl Usable<'_> {
             return None;
         }
         let d = self.dark.pixels[c];
-        let white = lum(less(w, d));
-        (white >= self.floor && white > 0.0).then(|| (lum(less(r, d)).max(0.0), white))
+        let white = rise(w, d);
+        (white >= self.floor && white > 0.0).then(|| (rise(r, d).max(0.0), white))
     }
 }
 

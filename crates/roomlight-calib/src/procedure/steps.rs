@@ -567,7 +567,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
         self.settings = settings;
         let measured = self.responses(decoded?, one, &dark, &whites).await?;
         let nodes = self.settings.nodes;
-        let placed = place(
+        let mut placed = place(
             setup,
             &measured,
             claimed,
@@ -575,7 +575,6 @@ impl<'a, R: Rig> Procedure<'a, R> {
             &nodes,
             &mut *self.progress,
         )?;
-        let mut placed = placed;
         self.shape(setup, &dark, &mut placed, &measured, one, &whites)?;
         let (Some(measured), Some(placed)) =
             (measured.into_iter().next(), placed.into_iter().next())

@@ -93,7 +93,6 @@ impl Calibrated {
     fn placed_again(&self, room: &Room, mask: &[bool], shaped: bool) -> Result<Vec<NodeRegion>> {
         let setup = Setup {
             target_mask: mask.to_vec(),
-            reference: None,
             ..self.setup.clone()
         };
         let mut placed =
@@ -135,7 +134,10 @@ impl Calibrated {
     }
 
     /// The procedure's bring-up in the simulator's terms.
-    fn new(room: &Room, setup: Setup, settings: Settings, up: BringUp) -> Result<Self> {
+    fn new(room: &Room, mut setup: Setup, settings: Settings, up: BringUp) -> Result<Self> {
+        // The photograph has shaped the nodes; nothing later reads it (nodes placed again
+        // take the shapes kept, [`Calibrated::regions_with_mask`]).
+        setup.reference = None;
         let (regions, node_charts) = regions(room, &up.placed)?;
         let blending = up
             .placed
