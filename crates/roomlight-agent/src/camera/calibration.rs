@@ -30,7 +30,7 @@ pub(super) use super::rig::assign_message;
 
 /// Hadamard columns keep the entries above this many standard deviations of their own noise
 /// (DESIGN §2), as the in-process pipeline does.
-const MULTIPLEXED_SIGMAS: f64 = 3.0;
+const MULTIPLEXED_SIGMAS: f64 = roomlight_calib::attenuation::SUPPORT_SIGMAS;
 
 /// Each node's column over the model's patches, and which model patches every capture could
 /// measure.
@@ -493,9 +493,9 @@ fn model_measurable(survey: &Survey, usable: &[bool]) -> Vec<bool> {
 }
 
 /// Columns of hot measurements: entries above one standard deviation of the difference (√2 σ
-/// of one capture: about where the Hadamard path's 3σ cut lands with its lower variance; at
+/// of one capture), [`MULTIPLEXED_SIGMAS`] of its own noise as the Hadamard columns keep; at
 /// 3√2 σ the lab's model dropped enough faint light that the room measured 6% below its
-/// optimum).
+/// optimum.
 fn hot_columns(survey: &Survey, excluded: &[bool], hot: &[Hot]) -> Result<Measured, ModelError> {
     let Some(first) = hot.first() else {
         return Ok((Vec::new(), vec![true; survey.patches.len()]));

@@ -1,6 +1,7 @@
-//! Model only what the scene needs: how many attenuation entries the 3σ cut-off keeps, the
-//! bytes a round saves with supports, and what the cut-off costs open-loop and in the closed
-//! loop — on the simulated rooms and on synthetic ones.
+//! Model only what the scene needs: how many attenuation entries the support's cut-off keeps
+//! (`SUPPORT_SIGMAS`; 3σ on the synthetic rooms), the bytes a round saves with supports, and
+//! what the cut-off costs open-loop and in the closed loop — on the simulated rooms and on
+//! synthetic ones.
 
 use crate::pipeline;
 use anyhow::Result;
@@ -11,7 +12,7 @@ use roomlight_core::synthetic::{SyntheticConfig, synthetic_room};
 use roomlight_core::{LinearRgb, Problem, StepRule};
 use serde::Serialize;
 
-/// Model only what the scene needs: how much the 3σ cut-off keeps and what it costs.
+/// Model only what the scene needs: how much the cut-off keeps and what it costs.
 #[derive(Debug, Clone, Serialize)]
 pub struct Sparsity {
     pub case: String,
@@ -101,7 +102,7 @@ pub(super) fn scene_sparsity(
     Sparsity::new(case, &model.problem, &uncut, &model.conventional)
 }
 
-/// The synthetic room with its 3σ cut-off against the same room with every entry the
+/// The synthetic room with its own 3σ cut-off against the same room with every entry the
 /// generator writes.
 pub(super) fn synthetic_sparsity(case: &str, nodes: usize, seed: u64) -> Result<Sparsity> {
     let room = synthetic_room(&SyntheticConfig::new(nodes, seed))?;

@@ -5,7 +5,7 @@
 //! order of captures and what each shows are the procedure's, the same as over the wire.
 
 use anyhow::{Context, Result, bail};
-use roomlight_calib::attenuation::Attenuation;
+use roomlight_calib::attenuation::{Attenuation, SUPPORT_SIGMAS};
 use roomlight_calib::charts::ChartCorners;
 use roomlight_calib::charts::PatchSample;
 use roomlight_calib::procedure::Target;
@@ -36,7 +36,8 @@ pub struct Calibrated {
     pub corners: Vec<ChartCorners>,
     /// Attenuation, black level and which patches it could measure.
     pub attenuation: Attenuation,
-    /// Attenuation columns (entries within 3σ of zero dropped), over every room patch.
+    /// Attenuation columns (entries within [`SUPPORT_SIGMAS`] σ of zero dropped, the target's
+    /// patches whole: [`Attenuation::columns_whole_on`]), over every room patch.
     pub columns: Vec<Vec<(u32, LinearRgb)>>,
     /// Captures used.
     pub captures: usize,
@@ -156,7 +157,7 @@ impl Calibrated {
         }
         let attenuation = up.columns.attenuation;
         let columns = attenuation
-            .columns(3.0)?
+            .columns_whole_on(SUPPORT_SIGMAS, setup.target_patch_range())?
             .iter()
             .map(|c| c.iter().collect())
             .collect();

@@ -193,7 +193,7 @@ impl FrameBuilder {
     }
 }
 
-/// `model` with every attenuation entry kept (no 3σ cut-off), over the same patches: what the
+/// `model` with every attenuation entry kept (no cut-off), over the same patches: what the
 /// sparse supports are compared against.
 pub fn uncut_problem(cal: &Calibrated, model: &Model) -> Result<Problem> {
     let uncut: Vec<Vec<(u32, LinearRgb)>> = cal
