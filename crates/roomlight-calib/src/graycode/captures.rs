@@ -91,8 +91,13 @@ impl<'a> Captures<'a> {
     /// against twice; the noise cannot be measured from pattern + inverse against white, so
     /// the decoder takes the camera model's, for patterns `exposure` times as long as white
     /// (≥ 1; scaled back to white's units). At twice the exposure a read-noise-limited
-    /// difference is as clean as a pair's in half the captures. Plain Gray code is refused:
-    /// its coarse stripes move the reflected light with them.
+    /// difference is as clean as a pair's in half the captures. Plain Gray code is refused, not
+    /// for its reflected light (white less a pattern is, by linearity, the inverse a camera
+    /// would capture, reflected light and blur included) but for what it codes: the defocused
+    /// large aperture, whose blurred fine stripes differ from their inverses by little more
+    /// than the noise; shown once, 9.6% of the lab's large aperture's decoded pixels fell where
+    /// it gives no direct light (2026-12-04). The clipping fallback below also needs XOR's
+    /// patterns, which light about half of every pixel's.
     ///
     /// Where a lit pattern can clip (white's brightest channel at `clip`, the level at which
     /// a pattern capture clips in these captures' units: the camera's ceiling over the
@@ -122,8 +127,9 @@ impl<'a> Captures<'a> {
             return Err(CalibError::Invalid {
                 field: "single-shot structured light",
                 problem: format!(
-                    "needs XOR coding, the pattern set is {:?} (its coarse stripes move the \
-                     reflected light, which only a captured inverse cancels)",
+                    "needs XOR coding, the pattern set is {:?} (plain Gray code codes a \
+                     defocused projector, whose blurred stripes need captured inverses' lower \
+                     noise)",
                     manifest.coding
                 ),
             });

@@ -60,7 +60,8 @@ fn photographs_decode_in_a_single_shot_per_bit_within_a_pixel_or_unknown() {
     })
     .expect("decode");
     check("single shot", &photos, &decoded, 0.985);
-    // Plain Gray code's coarse stripes move the reflected light: refused, not decoded wrong.
+    // Plain Gray code (a defocused projector's, whose blurred stripes need a captured
+    // inverse's lower noise) is refused, not decoded wrong.
     let gray = Manifest::with_coding(128, 96, Coding::Gray).expect("manifest");
     let err = decode_single_shot(&gray, &DecodeConfig::default(), None, |_| {
         Ok(&photos.captures[0])
