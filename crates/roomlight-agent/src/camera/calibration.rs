@@ -492,10 +492,9 @@ fn model_measurable(survey: &Survey, usable: &[bool]) -> Vec<bool> {
         .collect()
 }
 
-/// Columns of hot measurements: entries above one standard deviation of the difference (√2 σ
-/// of one capture), [`MULTIPLEXED_SIGMAS`] of its own noise as the Hadamard columns keep; at
-/// 3√2 σ the lab's model dropped enough faint light that the room measured 6% below its
-/// optimum.
+/// Columns of hot measurements: entries above [`MULTIPLEXED_SIGMAS`] standard deviations of
+/// the difference (its own noise, √2 σ of one capture), as the Hadamard columns keep; at 3√2 σ
+/// the lab's model dropped enough faint light that the room measured 6% below its optimum.
 fn hot_columns(survey: &Survey, excluded: &[bool], hot: &[Hot]) -> Result<Measured, ModelError> {
     let Some(first) = hot.first() else {
         return Ok((Vec::new(), vec![true; survey.patches.len()]));
@@ -509,7 +508,11 @@ fn hot_columns(survey: &Survey, excluded: &[bool], hot: &[Hot]) -> Result<Measur
     let mut columns = Vec::new();
     for h in hot {
         for ((node, p), sigma) in h.columns.iter().zip(&h.sigma) {
-            columns.push((*node, model_column(survey, excluded, p, sigma, &usable)?));
+            let threshold: Vec<LinearRgb> = sigma.iter().map(|s| *s * MULTIPLEXED_SIGMAS).collect();
+            columns.push((
+                *node,
+                model_column(survey, excluded, p, &threshold, &usable)?,
+            ));
         }
     }
     Ok((columns, model_measurable(survey, &usable)))
@@ -533,8 +536,8 @@ fn multiplexed_columns(
 
 /// Hot calibration through the camera's patches (no survey, so no whole images to read charts
 /// in): the projector's nodes all black, then each alone at white, one capture each, while the
-/// others keep their values; `p = max(y_white − y_black, 0)` with the entries at or below √2 σ
-/// of the model's patch noise dropped (see [`hot_columns`]). The same captures as
+/// others keep their values; `p = max(y_white − y_black, 0)` with the entries at or below
+/// [`MULTIPLEXED_SIGMAS`] · √2 σ of the model's patch noise dropped (see [`hot_columns`]). The same captures as
 /// [`Procedure::hot`], which reads them from images.
 async fn hot_patches(
     shared: &Shared,
@@ -561,7 +564,7 @@ async fn hot_patches(
         .problem
         .noise()
         .iter()
-        .map(|s| *s * std::f64::consts::SQRT_2)
+        .map(|s| *s * (MULTIPLEXED_SIGMAS * std::f64::consts::SQRT_2))
         .collect();
     let camera = || RigError::Camera("the capture failed (logged)".into());
     let mut rig = WireRig::new(shared, eye, vec![projector.to_string()]);
