@@ -167,6 +167,8 @@ pub struct LoopConfig {
     /// Benchmark oracle: stop once the plant's true `G` is at or below this value. A real
     /// camera does not know the true `G`; benchmarks use it to stop runs that are done.
     pub stop_at_true_objective: Option<f64>,
+    /// The most captures averaged ([`crate::round::Controller`]; 1: every capture alone).
+    pub average: usize,
 }
 
 impl LoopConfig {
@@ -179,6 +181,7 @@ impl LoopConfig {
             max_captures,
             stop_when_settled: false,
             stop_at_true_objective: None,
+            average: crate::round::AVERAGE_CAPTURES,
         }
     }
 }
@@ -274,7 +277,8 @@ pub fn run_observed(
 ) -> Result<Trace, LoopError> {
     check_inputs(model, plant, start, config)?;
     let mut nodes = build_nodes(model, config.rule, start)?;
-    let mut controller = Controller::new(model.noise().to_vec(), config.model_rounds);
+    let mut controller =
+        Controller::new(model.noise().to_vec(), config.model_rounds).averaging(config.average);
     let mut stale: VecDeque<(Vec<LinearRgb>, bool)> = VecDeque::new();
     let mut records = Vec::new();
     let mut model_rounds = 0;

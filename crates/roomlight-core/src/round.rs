@@ -16,7 +16,7 @@
 //! streams or cameras: the camera agent and the in-memory loop drive it.
 
 use crate::aggregator::{ErrorAggregator, RoundSummary};
-use crate::model::{ModelError, PatchId};
+use crate::model::{ModelError, PatchId, check_len, validate_values};
 use crate::rgb::LinearRgb;
 use std::collections::{HashMap, HashSet};
 use std::time::Duration;
@@ -38,6 +38,18 @@ pub enum Next {
 /// and the problem the momentum was built on is not the one now). Settling is judged on the
 /// captures alone ([`Settle`]).
 ///
+/// **Captures are averaged.** A capture's errors are fused with what the last ones predict for
+/// it (the errors held, less the contributions since: the model's account of what the nodes
+/// changed), `e ← ê + (e_measured − ê)/k`, `k` the captures averaged so far, up to
+/// `average` ([`AVERAGE_CAPTURES`] by default): a static room's camera noise falls by `√k`,
+/// and the noise the rounds would otherwise fit (their floor) with it. The average starts
+/// afresh (`k = 1`, the capture alone) at the first capture, when the live projectors or the
+/// target changed, and whenever the capture disagrees with the prediction beyond its noise (a
+/// χ² of the difference over the patches' σ more than [`INNOVATION_SIGMAS`] standard
+/// deviations above what the capture's and the average's noise give): a large step whose
+/// model prediction is off, a late frame, a room that changed. With no noise known (every σ
+/// zero) there is nothing to judge by, and every capture stands alone.
+///
 /// Drive it as: `match next() { Capture => measured(errors), Model => predicted() }`, send the
 /// round's errors, hand it each contribution ([`Controller::contribution`]); repeat.
 ///
@@ -54,6 +66,10 @@ pub struct Controller {
     /// The per-patch noise `σ` of the captures, for the settle rule.
     noise: Vec<LinearRgb>,
     model_rounds: usize,
+    /// The most captures averaged ([`Controller`]; 1: none).
+    average: usize,
+    /// Captures in the current average (0 before the first).
+    averaged: usize,
     /// Model rounds still to run before the next capture.
     pending: usize,
     /// The generation of the live projectors the last round was sent to.
@@ -72,10 +88,21 @@ impl Controller {
             contributions: Vec::new(),
             noise,
             model_rounds,
+            average: AVERAGE_CAPTURES,
+            averaged: 0,
             pending: 0,
             generation: None,
             changed: false,
             settle: Settle::default(),
+        }
+    }
+
+    /// The same, averaging up to `captures` captures (at least 1: 1 takes every capture
+    /// alone).
+    pub fn averaging(self, captures: usize) -> Self {
+        Self {
+            average: captures.max(1),
+            ..self
         }
     }
 
@@ -103,14 +130,55 @@ impl Controller {
     /// rounds follow it, and the settle rule takes its `G`. Refused (nothing changes) when the
     /// errors have the wrong length or a value that is not finite.
     pub fn measured(&mut self, errors: Vec<LinearRgb>) -> Result<RoundSummary, ModelError> {
+        check_len("measured errors", errors.len(), self.noise.len())?;
+        validate_values("measured errors", &errors, false)?;
+        // The capture measured what the contributions changed: they are the prediction it is
+        // averaged with.
+        self.apply_contributions();
+        let errors = self.averaged_with_prediction(errors);
         let mut summary = self.aggregator.measured(errors)?;
-        // The capture measured what the contributions changed: they are in its errors.
-        self.contributions.clear();
         let noise = objective_noise(self.aggregator.errors(), &self.noise);
         self.settle.observe(summary.objective, noise);
         self.pending = self.model_rounds;
         summary.restart |= std::mem::take(&mut self.changed);
         Ok(summary)
+    }
+
+    /// `measured` fused with the errors held (the prediction for this capture), see
+    /// [`Controller`]; `measured` alone when the average starts afresh.
+    fn averaged_with_prediction(&mut self, measured: Vec<LinearRgb>) -> Vec<LinearRgb> {
+        if self.changed || self.averaged == 0 || self.average <= 1 {
+            self.averaged = 1;
+            return measured;
+        }
+        let predicted = self.aggregator.errors();
+        // χ² of the difference over the patches' σ (a patch or channel of σ 0 cannot be
+        // judged and is left out of it).
+        let (mut chi2, mut dof) = (0.0, 0usize);
+        for ((m, p), s) in measured.iter().zip(predicted).zip(&self.noise) {
+            for c in 0..3 {
+                if s[c] > 0.0 {
+                    let d = (m[c] - p[c]) / s[c];
+                    chi2 += d * d;
+                    dof += 1;
+                }
+            }
+        }
+        // The difference carries the capture's noise and the average's (σ²/k of it).
+        let scale = 1.0 + 1.0 / self.averaged as f64;
+        let dof_f = dof as f64;
+        let limit = scale * (dof_f + INNOVATION_SIGMAS * (2.0 * dof_f).sqrt());
+        if dof == 0 || !chi2.is_finite() || chi2 > limit {
+            self.averaged = 1;
+            return measured;
+        }
+        self.averaged = (self.averaged + 1).min(self.average);
+        let gain = 1.0 / self.averaged as f64;
+        predicted
+            .iter()
+            .zip(&measured)
+            .map(|(p, m)| *p + (*m - *p) * gain)
+            .collect()
     }
 
     /// The next model round (errors predicted from the contributions since the last round),
@@ -178,11 +246,24 @@ impl Controller {
         self.settle.settled()
     }
 
+    /// How many captures the errors of the last capture average (1: that capture alone; 0
+    /// before the first). Their `G` carries about `½ Σ σ²/k` of camera noise, not `½ Σ σ²`.
+    pub fn averaged(&self) -> usize {
+        self.averaged
+    }
+
     /// A capture has been taken: [`Controller::errors`] describe the room.
     pub fn has_measured(&self) -> bool {
         self.settle.measured()
     }
 }
+
+/// The most captures a [`Controller`] averages by default.
+pub const AVERAGE_CAPTURES: usize = 8;
+
+/// How many standard deviations of its χ² a capture's difference from the prediction may lie
+/// above its mean and still be averaged ([`Controller`]).
+pub const INNOVATION_SIGMAS: f64 = 4.0;
 
 /// First-order standard deviation of a measured `G` from the patch noise:
 /// `sqrt(Σ_i Σ_c (e_ic σ_ic)²)` (the settle rule's noise).

@@ -44,7 +44,7 @@ enum Command {
         #[arg(long)]
         check: bool,
         /// One stdout line per round instead of the summary, for tools that follow the rounds:
-        /// `round R captures C objective G live L calibrated H`.
+        /// `round R captures C objective G live L calibrated H averaged K`.
         #[arg(long)]
         status_lines: bool,
     },

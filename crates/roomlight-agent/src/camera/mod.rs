@@ -163,6 +163,9 @@ pub struct RoomStatus {
     pub captures: u64,
     /// `G` of the last measured round.
     pub measured_objective: f64,
+    /// How many captures the errors of `measured_objective` average (the round controller's
+    /// [`roomlight_core::round::Controller::averaged`]): its camera noise is `½ Σ σ²/k`.
+    pub averaged: usize,
     /// Projectors attached now.
     pub live_projectors: usize,
     /// Protobuf bytes sent to node agents since the previous status (errors and setup).

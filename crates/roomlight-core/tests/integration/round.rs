@@ -350,3 +350,69 @@ fn the_controller_settles_after_two_quiet_captures() {
     c.measured(errors(3.0)).expect("valid");
     assert!(!c.settled(), "a real change unsettles it");
 }
+
+/// Captures of a static room are averaged with what the last ones predict: the held errors'
+/// spread falls as 1/√k up to the cap, a capture the prediction does not explain (the room
+/// changed) starts the average afresh, and so does a change of the live projectors; model
+/// rounds' contributions move the prediction the capture is averaged with.
+#[test]
+fn captures_are_averaged_with_the_prediction_until_the_room_disagrees() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let sigma = 0.01;
+    let patches = 300;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let normal = Normal::new(0.0, sigma).expect("normal");
+    let mut noisy = |truth: f64| -> Vec<LinearRgb> {
+        (0..patches)
+            .map(|_| LinearRgb([0, 1, 2].map(|_| truth + normal.sample(&mut rng))))
+            .collect()
+    };
+    // The held errors' RMS deviation from `truth`, in units of σ.
+    let spread = |c: &mut Controller, truth: f64| {
+        let e = c.errors();
+        let sum: f64 = e
+            .iter()
+            .flat_map(|v| (0..3).map(move |k| (v[k] - truth).powi(2)))
+            .sum();
+        (sum / (3 * e.len()) as f64).sqrt() / sigma
+    };
+    let mut c = Controller::new(vec![LinearRgb::splat(sigma); patches], 0).averaging(4);
+    c.measured(noisy(0.5)).expect("first");
+    let first = spread(&mut c, 0.5);
+    assert!((first - 1.0).abs() < 0.1, "one capture: {first} σ");
+    for _ in 0..5 {
+        c.measured(noisy(0.5)).expect("static");
+    }
+    // Four captures averaged (the cap): σ/2, whatever came before.
+    let averaged = spread(&mut c, 0.5);
+    assert!(
+        (0.4..0.62).contains(&averaged),
+        "four captures: {averaged} σ"
+    );
+    // The room changed by 5σ everywhere: the prediction is refused, the capture stands alone.
+    c.measured(noisy(0.55)).expect("changed");
+    let fresh = spread(&mut c, 0.55);
+    assert!((fresh - 1.0).abs() < 0.1, "afresh: {fresh} σ");
+    // A model round's contributions are the prediction: the nodes took 0.05 off every error,
+    // and the room followed; the capture is averaged, not refused.
+    c.contribution((0..patches as u32).map(|i| (i, LinearRgb::splat(0.05))))
+        .expect("contribution");
+    c.measured(noisy(0.5)).expect("predicted");
+    let followed = spread(&mut c, 0.5);
+    assert!(
+        followed < 0.85,
+        "averaged with the prediction: {followed} σ"
+    );
+    // A projector joined: afresh.
+    c.live(1);
+    c.live(2);
+    c.measured(noisy(0.5)).expect("joined");
+    let joined = spread(&mut c, 0.5);
+    assert!((joined - 1.0).abs() < 0.1, "a projector joined: {joined} σ");
+    // Without any noise known nothing is averaged.
+    let mut quiet = controller(0.0, 0);
+    quiet.measured(errors(1.0)).expect("first");
+    quiet.measured(errors(2.0)).expect("second");
+    assert_eq!(quiet.errors(), errors(2.0));
+}

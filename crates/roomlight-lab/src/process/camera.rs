@@ -408,6 +408,7 @@ async fn print_rounds(
                         round: s.round,
                         captures: s.captures,
                         objective: s.measured_objective,
+                        averaged: s.averaged,
                         live: s.live_projectors,
                         calibrated: s.calibrated_hot,
                         settled: s.settled,

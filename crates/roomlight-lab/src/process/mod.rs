@@ -28,4 +28,4 @@ pub use lights::{LightsSpec, ManualLights};
 pub use node::{NodeDisplay, run_node};
 pub use photos::GrabMode;
 pub use sim::{PreparedSim, SimRoom, SyntheticSim, prepare_sim};
-pub use status::{Round, StatusLines, StatusPrinter};
+pub use status::{Round, StatusLine, StatusLines, StatusPrinter};

@@ -15,8 +15,9 @@ pub enum StatusLines {
     /// `round 1366: 4 live (was 5)`.
     #[default]
     Summary,
-    /// One line per round, `round R captures C objective G live L calibrated H` (G to seven
-    /// digits), for tools that follow the rounds.
+    /// One line per round, `round R captures C objective G live L calibrated H averaged K`
+    /// (G to seven digits; K the captures its errors average, so a tool can take their noise,
+    /// `½ Σ σ²/K`, out of G), for tools that follow the rounds.
     EveryRound,
 }
 
@@ -27,6 +28,8 @@ pub struct Round {
     pub captures: u64,
     /// The measured objective G.
     pub objective: f64,
+    /// How many captures the errors of G average.
+    pub averaged: usize,
     pub live: usize,
     /// Projectors calibrated over the wire or hot.
     pub calibrated: u64,
@@ -136,23 +139,101 @@ impl StatusPrinter {
     }
 }
 
-/// The line of one round, `round R captures C objective G live L calibrated H`.
+/// The line of one round, `round R captures C objective G live L calibrated H averaged K`.
 fn every_round(r: &Round) -> String {
     format!(
-        "round {} captures {} objective {:.6e} live {} calibrated {}",
-        r.round, r.captures, r.objective, r.live, r.calibrated
+        "round {} captures {} objective {:.6e} live {} calibrated {} averaged {}",
+        r.round, r.captures, r.objective, r.live, r.calibrated, r.averaged
     )
+}
+
+/// The camera agent's status line, `round R captures C objective G live L calibrated H
+/// averaged K`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct StatusLine {
+    pub round: u64,
+    pub captures: u64,
+    pub objective: f64,
+    pub live: usize,
+    /// Projectors calibrated over the wire or hot.
+    pub calibrated: u64,
+    /// How many captures the errors of `objective` average.
+    pub averaged: usize,
+}
+
+impl StatusLine {
+    pub fn parse(line: &str) -> Option<Self> {
+        let w: Vec<&str> = line.split_whitespace().collect();
+        match w.as_slice() {
+            [
+                "round",
+                r,
+                "captures",
+                c,
+                "objective",
+                g,
+                "live",
+                l,
+                "calibrated",
+                h,
+                "averaged",
+                k,
+            ] => Some(Self {
+                round: r.parse().ok()?,
+                captures: c.parse().ok()?,
+                objective: g.parse().ok()?,
+                live: l.parse().ok()?,
+                calibrated: h.parse().ok()?,
+                averaged: k.parse().ok()?,
+            }),
+            _ => None,
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    #[test]
+    fn a_status_line_is_read_and_anything_else_is_not() {
+        let s = StatusLine::parse(
+            "round 42 captures 7 objective 1.250000e-2 live 3 calibrated 0 averaged 4",
+        );
+        assert_eq!(
+            s,
+            Some(StatusLine {
+                round: 42,
+                captures: 7,
+                objective: 0.0125,
+                live: 3,
+                calibrated: 0,
+                averaged: 4,
+            })
+        );
+        assert_eq!(StatusLine::parse("camera listening on 127.0.0.1:5"), None);
+        // What the printer writes is what the parser reads.
+        let r = at(10, 3);
+        let read = StatusLine::parse(&every_round(&r)).expect("a status line");
+        assert_eq!(
+            (
+                read.round,
+                read.captures,
+                read.live,
+                read.calibrated,
+                read.averaged
+            ),
+            (r.round, r.captures, r.live, r.calibrated, r.averaged)
+        );
+        assert!((read.objective - r.objective).abs() <= 1e-6 * r.objective);
+    }
+
     fn at(round: u64, live: usize) -> Round {
         Round {
             round,
             captures: round / 4,
             objective: 1.0 / (round as f64 + 1.0),
+            averaged: 1,
             live,
             calibrated: 0,
             settled: false,
@@ -178,7 +259,7 @@ mod tests {
         assert_eq!(lines.len(), 1650);
         assert_eq!(
             lines[9],
-            "round 10 captures 2 objective 9.090909e-2 live 3 calibrated 0"
+            "round 10 captures 2 objective 9.090909e-2 live 3 calibrated 0 averaged 1"
         );
     }
 

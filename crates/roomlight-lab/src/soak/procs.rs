@@ -284,59 +284,9 @@ fn open_fds(pid: u32) -> Option<u64> {
     Some(std::fs::read_dir(format!("/proc/{pid}/fd")).ok()?.count() as u64)
 }
 
-/// The camera agent's status line, `round R captures C objective G live L calibrated H`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Status {
-    pub round: u64,
-    pub captures: u64,
-    pub objective: f64,
-    pub live: usize,
-}
-
-impl Status {
-    pub fn parse(line: &str) -> Option<Self> {
-        let w: Vec<&str> = line.split_whitespace().collect();
-        match w.as_slice() {
-            [
-                "round",
-                r,
-                "captures",
-                c,
-                "objective",
-                g,
-                "live",
-                l,
-                "calibrated",
-                _,
-            ] => Some(Self {
-                round: r.parse().ok()?,
-                captures: c.parse().ok()?,
-                objective: g.parse().ok()?,
-                live: l.parse().ok()?,
-            }),
-            _ => None,
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_status_line_is_read_and_anything_else_is_not() {
-        let s = Status::parse("round 42 captures 7 objective 1.250000e-2 live 3 calibrated 0");
-        assert_eq!(
-            s,
-            Some(Status {
-                round: 42,
-                captures: 7,
-                objective: 0.0125,
-                live: 3
-            })
-        );
-        assert_eq!(Status::parse("camera listening on 127.0.0.1:5"), None);
-    }
 
     fn reading(at_round: u64, fds: u64, peers: u64) -> Sample {
         Sample {

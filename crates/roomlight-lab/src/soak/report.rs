@@ -2,10 +2,11 @@
 //! set, descriptors and log volume, the events, the final excess over the optimum of the
 //! projectors present at the end, and the criteria it is held to, each failure named.
 
-use super::procs::{Incarnation, Status};
+use super::procs::Incarnation;
 use super::room::Room;
 use super::{Event, SoakArgs};
 use crate::bench::results::Stamp;
+use crate::process::StatusLine as Status;
 use roomlight_core::optimum::optimum;
 use serde::Serialize;
 use std::collections::BTreeMap;

@@ -4,7 +4,8 @@
 //! follows the camera agent's status lines (`--status-lines`: one per round), counts the rounds
 //! of every camera incarnation, and waits on conditions with deadlines.
 
-use super::procs::{Agent, Status};
+use super::procs::Agent;
+use crate::process::StatusLine as Status;
 use crate::process::{ModelFile, load_model};
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;

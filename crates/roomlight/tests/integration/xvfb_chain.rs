@@ -67,34 +67,21 @@ fn address(line: &str) -> String {
     line.rsplit(' ').next().expect("an address").to_string()
 }
 
-/// `(captures, objective, live, calibrated)` of a camera status line.
-fn status(line: &str) -> Option<(u64, f64, usize, usize)> {
-    let w: Vec<&str> = line.split_whitespace().collect();
-    match w.as_slice() {
-        [
-            "round",
-            _,
-            "captures",
-            c,
-            "objective",
-            g,
-            "live",
-            l,
-            "calibrated",
-            k,
-        ] => Some((
-            c.parse().ok()?,
-            g.parse().ok()?,
-            l.parse().ok()?,
-            k.parse().ok()?,
-        )),
-        _ => None,
-    }
+/// `(captures, (objective, captures it averages), live, calibrated)` of a camera status line.
+fn status(line: &str) -> Option<(u64, (f64, usize), usize, usize)> {
+    let s = roomlight_lab::process::StatusLine::parse(line)?;
+    Some((
+        s.captures,
+        (s.objective, s.averaged),
+        s.live,
+        s.calibrated as usize,
+    ))
 }
 
 /// The optimum of the model the camera agent wrote in `d`, and the excess over it of a
-/// measured objective once the camera noise's bias `½ Σ σ²` is taken out (as processes/main.rs).
-fn noise_free(d: &Path) -> (f64, impl Fn(f64) -> f64) {
+/// measured objective that averages `k` captures once the camera noise's bias `½ Σ σ²/k` is
+/// taken out (as processes/mod.rs).
+fn noise_free(d: &Path) -> (f64, impl Fn((f64, usize)) -> f64) {
     let model: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
             .expect("json");
@@ -105,7 +92,9 @@ fn noise_free(d: &Path) -> (f64, impl Fn(f64) -> f64) {
         .filter(|&i| problem.target()[i] != problem.black()[i])
         .map(|i| 0.5 * problem.noise()[i].norm_squared())
         .sum();
-    (best.objective, move |g: f64| best.excess(g - bias))
+    (best.objective, move |(g, k): (f64, usize)| {
+        best.excess(g - bias / k.max(1) as f64)
+    })
 }
 
 /// The camera's resolution, as processes/main.rs's (at 320×240 the run did not converge within the

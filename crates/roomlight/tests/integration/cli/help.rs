@@ -163,7 +163,7 @@ fn demo_and_camera_help_say_what_they_run_and_print() {
     assert!(flat.contains("at most a line a second"), "{camera}");
     assert!(
         flat.contains("--status-lines")
-            && flat.contains("round R captures C objective G live L calibrated H"),
+            && flat.contains("round R captures C objective G live L calibrated H averaged K"),
         "{camera}"
     );
     let sim = roomlight(&["sim", "--help"]);
