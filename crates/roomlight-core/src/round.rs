@@ -41,7 +41,9 @@ pub enum Next {
 /// **Captures are averaged.** A capture's errors are fused with what the last ones predict for
 /// it (the errors held, less the contributions since: the model's account of what the nodes
 /// changed), `e ← ê + (e_measured − ê)/k`, `k` the captures averaged so far, up to
-/// `average` ([`AVERAGE_CAPTURES`] by default): a static room's camera noise falls by `√k`,
+/// `average` ([`AVERAGE_CAPTURES`] by default): a static room's camera noise falls by `√k`
+/// (past the cap the gain stays `1/average`, a moving average whose variance is
+/// `1/(2·average − 1)` of a capture's: `1/15` at 8),
 /// and the noise the rounds would otherwise fit (their floor) with it. The average starts
 /// afresh (`k = 1`, the capture alone) at the first capture, when the live projectors or the
 /// target changed, and whenever the capture disagrees with the prediction beyond its noise (a
@@ -247,7 +249,8 @@ impl Controller {
     }
 
     /// How many captures the errors of the last capture average (1: that capture alone; 0
-    /// before the first). Their `G` carries about `½ Σ σ²/k` of camera noise, not `½ Σ σ²`.
+    /// before the first; at most the cap). Their `G` carries at most about `½ Σ σ²/k` of camera
+    /// noise, not `½ Σ σ²` (at the cap, as a moving average, less: see [`Controller`]).
     pub fn averaged(&self) -> usize {
         self.averaged
     }
