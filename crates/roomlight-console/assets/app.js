@@ -481,6 +481,7 @@ function renderRoom(status) {
   setText($('captures'), status.captures ?? '–');
   setText($('objective'), formatNumber(status.objective));
   setText($('excess'), formatExcess(status.excess));
+  setText($('averaged'), status.averaged == null ? '–' : `${status.averaged} capture${status.averaged === 1 ? '' : 's'}`);
   setText($('restarts'), status.restarts ?? '–');
   setText($('settled'), status.paused ? 'paused' : status.settled ? 'settled' : 'converging');
   const camera = status.camera || {};

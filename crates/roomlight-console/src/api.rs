@@ -289,6 +289,8 @@ pub fn status_json(console: &Console) -> Value {
         "room": console.control.room(),
         "round": s.round, "captures": s.captures,
         "objective": objective, "optimum": optimum, "excess": excess,
+        // How many captures the errors of `objective` average (the round controller's).
+        "averaged": objective.map(|_| s.averaged),
         "settled": s.settled, "paused": o.paused, "restarts": o.restarts,
         "camera": camera,
         "preset": o.preset, "presets": console.control.presets(),

@@ -154,6 +154,12 @@ async fn the_status_tells_the_room_as_it_is() {
         objective >= 0.0 && optimum >= 0.0 && s["excess"].as_f64().is_some(),
         "{s}"
     );
+    // The captures the objective averages, as the camera agent's round controller counts them.
+    let averaged = s["averaged"].as_u64().expect("averaged");
+    assert!(
+        (1..=roomlight_core::round::AVERAGE_CAPTURES as u64).contains(&averaged),
+        "{s}"
+    );
     // The optimum is the camera agent's model's, computed independently here.
     let truth = roomlight_core::optimum::optimum(&sb.control().problem()).expect("optimum");
     assert!(

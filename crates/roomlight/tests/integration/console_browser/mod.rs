@@ -171,7 +171,8 @@ async fn room_page(b: &Browser, room: &Room) {
     let plots = "return [document.getElementById('round').textContent, \
         document.getElementById('objective').textContent, \
         document.getElementById('objective-plot').toDataURL(), \
-        document.getElementById('objective-time').toDataURL()]";
+        document.getElementById('objective-time').toDataURL(), \
+        document.getElementById('averaged').textContent]";
     let round = |v: &Value| v[0].as_str().and_then(|r| r.parse::<u64>().ok());
     let before = b
         .until("a round number", Duration::from_secs(10), async || {
@@ -185,15 +186,22 @@ async fn room_page(b: &Browser, room: &Room) {
         async || {
             let now = b.js(plots).await;
             let objective = now[1].as_str().and_then(|g| g.parse::<f64>().ok());
+            // `K capture(s)`: the captures the objective averages, 1 to the controller's cap.
+            let averaged = now[4]
+                .as_str()
+                .and_then(|a| a.split(' ').next()?.parse::<usize>().ok());
             let moved = round(&now) > round(&before)
                 && now[2] != before[2]
                 && now[3] != before[3]
-                && objective.is_some_and(|g| g > 0.0);
+                && objective.is_some_and(|g| g > 0.0)
+                && averaged
+                    .is_some_and(|k| (1..=roomlight_core::round::AVERAGE_CAPTURES).contains(&k));
             moved.then_some(()).ok_or(format!(
-                "round {:?} then {:?}, objective {}, plots changed {} {}",
+                "round {:?} then {:?}, objective {}, averaged {}, plots changed {} {}",
                 round(&before),
                 round(&now),
                 now[1],
+                now[4],
                 now[2] != before[2],
                 now[3] != before[3]
             ))
