@@ -164,7 +164,8 @@ pub struct RoomStatus {
     /// `G` of the last measured round.
     pub measured_objective: f64,
     /// How many captures the errors of `measured_objective` average (the round controller's
-    /// [`roomlight_core::round::Controller::averaged`]): its camera noise is `½ Σ σ²/k`.
+    /// [`roomlight_core::round::Controller::averaged`]): its camera noise is at most about
+    /// `½ Σ σ²/k`.
     pub averaged: usize,
     /// Projectors attached now.
     pub live_projectors: usize,

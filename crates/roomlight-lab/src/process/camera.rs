@@ -405,12 +405,14 @@ async fn print_rounds(
                 let round = {
                     let s = status.borrow();
                     super::Round {
-                        round: s.round,
-                        captures: s.captures,
-                        objective: s.measured_objective,
-                        averaged: s.averaged,
-                        live: s.live_projectors,
-                        calibrated: s.calibrated_hot,
+                        line: super::StatusLine {
+                            round: s.round,
+                            captures: s.captures,
+                            objective: s.measured_objective,
+                            live: s.live_projectors,
+                            calibrated: s.calibrated_hot,
+                            averaged: s.averaged,
+                        },
                         settled: s.settled,
                     }
                 };

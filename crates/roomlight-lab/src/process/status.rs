@@ -21,19 +21,11 @@ pub enum StatusLines {
     EveryRound,
 }
 
-/// The figures of one round the lines are made of.
+/// The figures of one round the lines are made of: those of its status line, and whether G
+/// has settled at its noise (the summary says so).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Round {
-    pub round: u64,
-    pub captures: u64,
-    /// The measured objective G.
-    pub objective: f64,
-    /// How many captures the errors of G average.
-    pub averaged: usize,
-    pub live: usize,
-    /// Projectors calibrated over the wire or hot.
-    pub calibrated: u64,
-    /// G has settled at its noise.
+    pub line: StatusLine,
     pub settled: bool,
 }
 
@@ -67,20 +59,20 @@ impl StatusPrinter {
     pub fn round(&mut self, round: Round, now: Instant) -> Vec<String> {
         let before = self.last.replace(round);
         if self.mode == StatusLines::EveryRound {
-            return vec![every_round(&round)];
+            return vec![round.line.to_string()];
         }
         let mut lines = Vec::new();
         if let Some(b) = before {
-            if b.live != round.live {
+            if b.line.live != round.line.live {
                 lines.push(format!(
                     "round {}: {} live (was {})",
-                    round.round, round.live, b.live
+                    round.line.round, round.line.live, b.line.live
                 ));
             }
-            if b.calibrated != round.calibrated {
+            if b.line.calibrated != round.line.calibrated {
                 lines.push(format!(
                     "round {}: {} calibrated over the wire or hot (was {})",
-                    round.round, round.calibrated, b.calibrated
+                    round.line.round, round.line.calibrated, b.line.calibrated
                 ));
             }
         }
@@ -104,47 +96,42 @@ impl StatusPrinter {
     pub fn flush(&mut self, now: Instant) -> Option<String> {
         let (first, seen) = self.pending.take()?;
         let last = self.last?;
-        let rounds = last.round.saturating_sub(first.round) + 1;
+        let rounds = last.line.round.saturating_sub(first.line.round) + 1;
         let span = now.saturating_duration_since(self.printed.map_or(seen, |(t, _)| t));
         let mut line = if rounds == 1 {
-            format!("round {}", last.round)
+            format!("round {}", last.line.round)
         } else if span.is_zero() {
-            format!("rounds {}–{}", first.round, last.round)
+            format!("rounds {}–{}", first.line.round, last.line.round)
         } else {
             format!(
                 "rounds {}–{} ({:.0}/s)",
-                first.round,
-                last.round,
+                first.line.round,
+                last.line.round,
                 rounds as f64 / span.as_secs_f64()
             )
         };
         line.push_str(&format!(
             ", captures {}, objective {:.2e}",
-            last.captures, last.objective
+            last.line.captures, last.line.objective
         ));
         // The change since the last summary; none from or to zero or a non-finite G.
         if let Some((_, g)) = self.printed
             && g > 0.0
             && g.is_finite()
-            && last.objective.is_finite()
+            && last.line.objective.is_finite()
         {
-            line.push_str(&format!(" ({:+.0}%)", 100.0 * (last.objective / g - 1.0)));
+            line.push_str(&format!(
+                " ({:+.0}%)",
+                100.0 * (last.line.objective / g - 1.0)
+            ));
         }
-        line.push_str(&format!(", {} live", last.live));
+        line.push_str(&format!(", {} live", last.line.live));
         if last.settled {
             line.push_str(", settled");
         }
-        self.printed = Some((now, last.objective));
+        self.printed = Some((now, last.line.objective));
         Some(line)
     }
-}
-
-/// The line of one round, `round R captures C objective G live L calibrated H averaged K`.
-fn every_round(r: &Round) -> String {
-    format!(
-        "round {} captures {} objective {:.6e} live {} calibrated {} averaged {}",
-        r.round, r.captures, r.objective, r.live, r.calibrated, r.averaged
-    )
 }
 
 /// The camera agent's status line, `round R captures C objective G live L calibrated H
@@ -161,7 +148,19 @@ pub struct StatusLine {
     pub averaged: usize,
 }
 
+/// The line as the camera agent prints it (G to seven digits); [`StatusLine::parse`] reads it.
+impl std::fmt::Display for StatusLine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "round {} captures {} objective {:.6e} live {} calibrated {} averaged {}",
+            self.round, self.captures, self.objective, self.live, self.calibrated, self.averaged
+        )
+    }
+}
+
 impl StatusLine {
+    /// The figures of a status line, or `None` for any other line.
     pub fn parse(line: &str) -> Option<Self> {
         let w: Vec<&str> = line.split_whitespace().collect();
         match w.as_slice() {
@@ -212,30 +211,29 @@ mod tests {
             })
         );
         assert_eq!(StatusLine::parse("camera listening on 127.0.0.1:5"), None);
-        // What the printer writes is what the parser reads.
-        let r = at(10, 3);
-        let read = StatusLine::parse(&every_round(&r)).expect("a status line");
+        // What the printer writes is what the parser reads (G to seven digits).
+        let r = at(10, 3).line;
+        let read = StatusLine::parse(&r.to_string()).expect("a status line");
         assert_eq!(
-            (
-                read.round,
-                read.captures,
-                read.live,
-                read.calibrated,
-                read.averaged
-            ),
-            (r.round, r.captures, r.live, r.calibrated, r.averaged)
+            StatusLine {
+                objective: r.objective,
+                ..read
+            },
+            r
         );
         assert!((read.objective - r.objective).abs() <= 1e-6 * r.objective);
     }
 
     fn at(round: u64, live: usize) -> Round {
         Round {
-            round,
-            captures: round / 4,
-            objective: 1.0 / (round as f64 + 1.0),
-            averaged: 1,
-            live,
-            calibrated: 0,
+            line: StatusLine {
+                round,
+                captures: round / 4,
+                objective: 1.0 / (round as f64 + 1.0),
+                live,
+                calibrated: 0,
+                averaged: 1,
+            },
             settled: false,
         }
     }
@@ -297,14 +295,14 @@ mod tests {
         let t0 = Instant::now();
         let mut printer = StatusPrinter::new(StatusLines::Summary);
         let mut r = at(1, 1);
-        r.objective = 0.0;
+        r.line.objective = 0.0;
         assert_eq!(
             printer.round(r, t0),
             ["round 1, captures 0, objective 0.00e0, 1 live"]
         );
-        r.round = 2;
+        r.line.round = 2;
         r.settled = true;
-        r.calibrated = 1;
+        r.line.calibrated = 1;
         let lines = printer.round(r, t0 + SUMMARY_EVERY);
         assert_eq!(
             lines,

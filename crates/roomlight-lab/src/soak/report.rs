@@ -6,7 +6,7 @@ use super::procs::Incarnation;
 use super::room::Room;
 use super::{Event, SoakArgs};
 use crate::bench::results::Stamp;
-use crate::process::StatusLine as Status;
+use crate::process::StatusLine;
 use roomlight_core::optimum::optimum;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -44,7 +44,7 @@ impl Criteria {
 /// How the room was at the end of the run.
 #[derive(Debug, Clone)]
 pub struct End {
-    pub status: Option<Status>,
+    pub status: Option<StatusLine>,
     /// Projectors whose node agent ran at the end.
     pub present: Vec<String>,
     /// Why the run stopped early, if it did.

