@@ -52,7 +52,13 @@ pub enum Next {
 /// model prediction is off, a late frame, a room that changed. With no noise known (every σ
 /// zero) there is nothing to judge by, and every capture stands alone.
 ///
-/// Drive it as: `match next() { Capture => measured(errors), Model => predicted() }`, send the
+/// **Stale captures are refused.** A camera that hands over its frames late shows, after the
+/// nodes stepped, the room as it was before: [`Controller::stale`] tells such a capture by the
+/// same χ² (it disagrees with the prediction and agrees with the last capture), and the caller
+/// takes another instead of stepping the nodes twice on errors they already answered.
+///
+/// Drive it as: `match next() { Capture => measured(errors), Model => predicted() }` (a capture
+/// for which `stale(errors)` holds is dropped and another taken), send the
 /// round's errors, hand it each contribution ([`Controller::contribution`]); repeat.
 ///
 /// A round's contributions are summed in a fixed order, not in the order they arrived:
@@ -72,6 +78,11 @@ pub struct Controller {
     average: usize,
     /// Captures in the current average (0 before the first).
     averaged: usize,
+    /// The errors of the last capture as averaged: what the room showed then, before the nodes
+    /// stepped (empty before the first capture).
+    held: Vec<LinearRgb>,
+    /// Captures judged stale in a row since the last one measured.
+    stale_run: usize,
     /// Model rounds still to run before the next capture.
     pending: usize,
     /// The generation of the live projectors the last round was sent to.
@@ -92,6 +103,8 @@ impl Controller {
             model_rounds,
             average: AVERAGE_CAPTURES,
             averaged: 0,
+            held: Vec::new(),
+            stale_run: 0,
             pending: 0,
             generation: None,
             changed: false,
@@ -138,6 +151,8 @@ impl Controller {
         // averaged with.
         self.apply_contributions();
         let errors = self.averaged_with_prediction(errors);
+        self.held.clone_from(&errors);
+        self.stale_run = 0;
         let mut summary = self.aggregator.measured(errors)?;
         let noise = objective_noise(self.aggregator.errors(), &self.noise);
         self.settle.observe(summary.objective, noise);
@@ -154,23 +169,8 @@ impl Controller {
             return measured;
         }
         let predicted = self.aggregator.errors();
-        // χ² of the difference over the patches' σ (a patch or channel of σ 0 cannot be
-        // judged and is left out of it).
-        let (mut chi2, mut dof) = (0.0, 0usize);
-        for ((m, p), s) in measured.iter().zip(predicted).zip(&self.noise) {
-            for c in 0..3 {
-                if s[c] > 0.0 {
-                    let d = (m[c] - p[c]) / s[c];
-                    chi2 += d * d;
-                    dof += 1;
-                }
-            }
-        }
-        // The difference carries the capture's noise and the average's (σ²/k of it).
-        let scale = 1.0 + 1.0 / self.averaged as f64;
-        let dof_f = dof as f64;
-        let limit = scale * (dof_f + INNOVATION_SIGMAS * (2.0 * dof_f).sqrt());
-        if dof == 0 || !chi2.is_finite() || chi2 > limit {
+        let agrees = self.agrees(&measured, predicted);
+        if agrees != Some(true) {
             self.averaged = 1;
             return measured;
         }
@@ -181,6 +181,57 @@ impl Controller {
             .zip(&measured)
             .map(|(p, m)| *p + (*m - *p) * gain)
             .collect()
+    }
+
+    /// Whether `measured` agrees with `expected` (errors averaged over the current average's
+    /// captures) within the noise: the χ² of the difference over the patches' σ at most
+    /// [`INNOVATION_SIGMAS`] of its standard deviations above what the capture's noise and the
+    /// average's (σ²/k of it) give. A patch or channel of σ 0 cannot be judged and is left out;
+    /// `None` when none can be (no noise known) or the χ² is not finite.
+    fn agrees(&self, measured: &[LinearRgb], expected: &[LinearRgb]) -> Option<bool> {
+        let (mut chi2, mut dof) = (0.0, 0usize);
+        for ((m, p), s) in measured.iter().zip(expected).zip(&self.noise) {
+            for c in 0..3 {
+                if s[c] > 0.0 {
+                    let d = (m[c] - p[c]) / s[c];
+                    chi2 += d * d;
+                    dof += 1;
+                }
+            }
+        }
+        // Before any capture (k = 0) the expectation has no noise of its own.
+        let scale = 1.0 + 1.0 / self.averaged.max(1) as f64;
+        let dof_f = dof as f64;
+        let limit = scale * (dof_f + INNOVATION_SIGMAS * (2.0 * dof_f).sqrt());
+        (dof > 0 && chi2.is_finite()).then_some(chi2 <= limit)
+    }
+
+    /// True when a capture shows the room as it was at the last capture, before the nodes
+    /// stepped, rather than as they have shown since: it disagrees with the prediction beyond
+    /// its noise and agrees with the errors of the last capture within it. A camera that hands
+    /// over its frames late (its latency unknown, or longer than configured) gives such
+    /// captures; acting on them steps the nodes a second time on errors they already answered,
+    /// which diverges (`bench room --hard`'s stale cases). Refuse the capture and take another.
+    ///
+    /// Judged only between two measured rounds of the same live projectors and target, with
+    /// some noise known, and at most [`STALE_CAPTURES`] times in a row: a room where the nodes'
+    /// steps truly change nothing (a display that shows nothing) is measured again after
+    /// that, rather than never. Nothing changes but the count of stale captures in a row.
+    pub fn stale(&mut self, errors: &[LinearRgb]) -> bool {
+        if self.changed
+            || self.averaged == 0
+            || self.stale_run >= STALE_CAPTURES
+            || errors.len() != self.held.len()
+        {
+            return false;
+        }
+        self.apply_contributions();
+        let stale = self.agrees(errors, self.aggregator.errors()) == Some(false)
+            && self.agrees(errors, &self.held) == Some(true);
+        if stale {
+            self.stale_run += 1;
+        }
+        stale
     }
 
     /// The next model round (errors predicted from the contributions since the last round),
@@ -263,6 +314,11 @@ impl Controller {
 
 /// The most captures a [`Controller`] averages by default.
 pub const AVERAGE_CAPTURES: usize = 8;
+
+/// The most captures in a row [`Controller::stale`] refuses as stale: a camera up to this many
+/// frames late is caught without being told its latency (a longer one is configured,
+/// `stale_frames`).
+pub const STALE_CAPTURES: usize = 3;
 
 /// How many standard deviations of its χ² a capture's difference from the prediction may lie
 /// above its mean and still be averaged ([`Controller`]).

@@ -79,7 +79,10 @@ pub struct CameraConfig {
     pub calibration_epoch: u64,
     /// Frames the camera hands over late (its latency, measured once at installation): before
     /// each measured round the camera agent discards this many captures, so that the nodes
-    /// never act on errors of values they no longer show. Every capture is counted.
+    /// never act on errors of values they no longer show. Every capture is counted. Left at 0,
+    /// late frames are still caught, up to `round::STALE_CAPTURES` in a row, by what they show
+    /// (`Controller::stale`: the room before the nodes' last step), at the cost of judging
+    /// each; the agent logs the most it refused in a row, which is the value to set here.
     pub stale_frames: usize,
     /// Where to write the model (`problem`, `owners`, `start`, as JSON, atomically) after each
     /// projector calibrated over the wire or hot, and after patches left the model; `None`:

@@ -53,6 +53,9 @@ pub(super) struct Rounds<C> {
     paused: bool,
     /// Times the target changed.
     restarts: u64,
+    /// Captures refused as stale since the last one measured, and the most ever in a row
+    /// (logged when it grows: the camera's latency, which `stale_frames` can name instead).
+    stale: (usize, usize),
 }
 
 impl<C: Camera> Rounds<C> {
@@ -76,6 +79,7 @@ impl<C: Camera> Rounds<C> {
             requests,
             paused: false,
             restarts: 0,
+            stale: (0, 0),
         }
     }
 
@@ -192,6 +196,24 @@ impl<C: Camera> Rounds<C> {
         self.leave_out_unmeasurable(&ok).await;
         let errors = shared.live().errors(&y);
         self.note_live();
+        if self.controller.stale(&errors) {
+            // Nothing is sent: the next cycle takes another capture (counted like every one).
+            self.stale.0 += 1;
+            tracing::debug!(
+                captures = self.eye.count,
+                "stale capture: it shows the values before the nodes' last step; taking another"
+            );
+            return;
+        }
+        let (in_row, most) = std::mem::take(&mut self.stale);
+        self.stale.1 = most.max(in_row);
+        if in_row > most {
+            tracing::info!(
+                frames = in_row,
+                configured = shared.config.stale_frames,
+                "the camera handed over frames late: captures refused until one showed the nodes' last step (stale_frames in the camera's configuration discards them without judging)"
+            );
+        }
         let summary = match self.controller.measured(errors) {
             Ok(s) => s,
             Err(e) => {

@@ -7,7 +7,8 @@
 use roomlight_core::LinearRgb;
 use roomlight_core::aggregator::ErrorKind;
 use roomlight_core::round::{
-    Backoff, Collection, Controller, Next, Projectors, Received, Settle, objective_noise,
+    Backoff, Collection, Controller, Next, Projectors, Received, STALE_CAPTURES, Settle,
+    objective_noise,
 };
 use std::time::Duration;
 
@@ -415,4 +416,75 @@ fn captures_are_averaged_with_the_prediction_until_the_room_disagrees() {
     quiet.measured(errors(1.0)).expect("first");
     quiet.measured(errors(2.0)).expect("second");
     assert_eq!(quiet.errors(), errors(2.0));
+}
+
+/// A camera that hands over its frames late shows, after the nodes stepped, the room as it was
+/// at the last capture: such a capture is refused (nothing changes), the fresh one after it is
+/// measured; a step the room followed is never refused, nor one it followed only in part (a
+/// model 40% off), nor a room that changed otherwise; and after `STALE_CAPTURES` refusals in a
+/// row the capture is measured whatever it shows (a display that shows nothing is not waited
+/// for forever).
+#[test]
+fn a_capture_that_shows_the_values_before_the_last_step_is_stale() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let (sigma, patches) = (0.01, 200);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let normal = Normal::new(0.0, sigma).expect("normal");
+    let mut noisy = |truth: f64| -> Vec<LinearRgb> {
+        (0..patches)
+            .map(|_| LinearRgb([0, 1, 2].map(|_| truth + normal.sample(&mut rng))))
+            .collect()
+    };
+    let step = |c: &mut Controller, by: f64| {
+        c.contribution((0..patches as u32).map(|i| (i, LinearRgb::splat(by))))
+            .expect("contribution");
+    };
+    let mut c = Controller::new(vec![LinearRgb::splat(sigma); patches], 0);
+    // Nothing to judge by before the first capture.
+    assert!(!c.stale(&noisy(0.5)));
+    c.measured(noisy(0.5)).expect("first");
+    // The nodes take 0.1 (10σ) off every error; the camera shows the old room twice.
+    step(&mut c, 0.1);
+    let before = c.errors().to_vec();
+    assert!(c.stale(&noisy(0.5)), "the room before the step");
+    assert!(c.stale(&noisy(0.5)), "still before the step");
+    assert_eq!(c.errors(), before, "a stale verdict changes nothing");
+    assert!(!c.stale(&noisy(0.4)), "the room after the step");
+    c.measured(noisy(0.4)).expect("fresh");
+    assert_eq!(
+        c.averaged(),
+        2,
+        "the fresh capture agrees with the prediction"
+    );
+    // A step the room follows in part (the model 40% off): measured, not refused.
+    step(&mut c, 0.1);
+    assert!(!c.stale(&noisy(0.34)));
+    c.measured(noisy(0.34)).expect("partial");
+    // A room that changed otherwise (a door opened: everything 0.2 brighter) is not stale.
+    step(&mut c, 0.1);
+    assert!(!c.stale(&noisy(0.04)));
+    c.measured(noisy(0.04)).expect("changed");
+    // A display that shows nothing: refused STALE_CAPTURES times, then measured.
+    step(&mut c, 0.02);
+    let refused = (0..10).take_while(|_| c.stale(&noisy(0.04))).count();
+    assert_eq!(refused, STALE_CAPTURES);
+    c.measured(noisy(0.04)).expect("measured at last");
+    assert_eq!(
+        c.averaged(),
+        1,
+        "the disagreement starts the average afresh"
+    );
+    // After a change of the live projectors nothing is judged stale.
+    step(&mut c, 0.1);
+    c.live(1);
+    c.live(2);
+    assert!(!c.stale(&noisy(0.04)));
+    // Without any noise known nothing is judged.
+    let mut quiet = controller(0.0, 0);
+    quiet.measured(errors(1.0)).expect("first");
+    quiet
+        .contribution([(0, LinearRgb::splat(0.5))])
+        .expect("contribution");
+    assert!(!quiet.stale(&errors(1.0)));
 }

@@ -4,6 +4,7 @@
 mod dark_target;
 mod determinism;
 mod fuzz_files;
+mod late_camera;
 mod procedure;
 mod shaped;
 mod support;
