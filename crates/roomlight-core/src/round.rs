@@ -40,16 +40,25 @@ pub enum Next {
 ///
 /// **Captures are averaged.** A capture's errors are fused with what the last ones predict for
 /// it (the errors held, less the contributions since: the model's account of what the nodes
-/// changed), `e ← ê + (e_measured − ê)/k`, `k` the captures averaged so far, up to
-/// `average` ([`AVERAGE_CAPTURES`] by default): a static room's camera noise falls by `√k`
-/// (past the cap the gain stays `1/average`, a moving average whose variance is
-/// `1/(2·average − 1)` of a capture's: `1/15` at 8),
-/// and the noise the rounds would otherwise fit (their floor) with it. The average starts
-/// afresh (`k = 1`, the capture alone) at the first capture, when the live projectors or the
-/// target changed, and whenever the capture disagrees with the prediction beyond its noise (a
-/// χ² of the difference over the patches' σ more than [`INNOVATION_SIGMAS`] standard
-/// deviations above what the capture's and the average's noise give): a large step whose
-/// model prediction is off, a late frame, a room that changed. With no noise known (every σ
+/// changed), per patch and channel by Kalman's gain: `e ← ê + (e_measured − ê)·g`,
+/// `g = P⁻/(P⁻ + 1)`, `P` the variance of the errors held in units of the capture's σ² (1 after
+/// a capture alone) and `P⁻ = P + α²·step²` with the model's error on the step since (below).
+/// In a static room this is the plain average, `g = 1/k` after `k` captures, up to `average`
+/// ([`AVERAGE_CAPTURES`] by default): the camera noise falls by `√k` (past the cap `P⁻` stays
+/// at least `1/(average − 1)`, a gain of at least `1/average`, a moving average whose variance
+/// is `1/(2·average − 1)` of a capture's: `1/15` at 8), and the noise the rounds would
+/// otherwise fit (their floor) with it.
+///
+/// When the capture disagrees with the prediction beyond its noise (a χ² of the difference over
+/// its variance more than [`INNOVATION_SIGMAS`] standard deviations above its degrees of
+/// freedom), the model's prediction of the step is taken to be off by a share `α` of the step
+/// itself, `α²` estimated from the difference's squares beyond the noise over the step's; the
+/// patches the step moved most then follow the capture, those it left alone keep their
+/// average. (Before, such a capture started the average afresh: on the lab's paper preset the
+/// first large step always did, which cost a capture to 1%.) The average starts afresh (`P = 1`,
+/// the capture alone) at the first capture, when the live projectors or the target changed,
+/// and when even that model error does not explain the difference or would exceed
+/// [`MODEL_ERROR_LIMIT`] (a room that changed, a late frame). With no noise known (every σ
 /// zero) there is nothing to judge by, and every capture stands alone.
 ///
 /// **Stale captures are refused.** A camera that hands over its frames late shows, after the
@@ -81,6 +90,9 @@ pub struct Controller {
     /// The errors of the last capture as averaged: what the room showed then, before the nodes
     /// stepped (empty before the first capture).
     held: Vec<LinearRgb>,
+    /// The variance of the errors held, per patch and channel, in units of the capture's σ²
+    /// (1 after a capture alone, `1/k` after `k` averaged; empty before the first).
+    variance: Vec<[f64; 3]>,
     /// Captures judged stale in a row since the last one measured.
     stale_run: usize,
     /// Model rounds still to run before the next capture.
@@ -104,6 +116,7 @@ impl Controller {
             average: AVERAGE_CAPTURES,
             averaged: 0,
             held: Vec::new(),
+            variance: Vec::new(),
             stale_run: 0,
             pending: 0,
             generation: None,
@@ -164,45 +177,121 @@ impl Controller {
     /// `measured` fused with the errors held (the prediction for this capture), see
     /// [`Controller`]; `measured` alone when the average starts afresh.
     fn averaged_with_prediction(&mut self, measured: Vec<LinearRgb>) -> Vec<LinearRgb> {
+        let fresh = |this: &mut Self, measured: Vec<LinearRgb>| {
+            this.variance = vec![[1.0; 3]; measured.len()];
+            this.averaged = 1;
+            measured
+        };
         if self.changed || self.averaged == 0 || self.average <= 1 {
-            self.averaged = 1;
-            return measured;
+            return fresh(self, measured);
         }
         let predicted = self.aggregator.errors();
-        let agrees = self.agrees(&measured, predicted);
-        if agrees != Some(true) {
-            self.averaged = 1;
-            return measured;
+        // The model's error on the step since the last capture, as a share `α` of what it
+        // predicted the step changed (`held − predicted`), when the capture disagrees with the
+        // prediction beyond the noise: a large step whose prediction is off by a few percent.
+        let model_error = match self.agrees(&measured, predicted, None) {
+            Some(true) => None,
+            None => return fresh(self, measured),
+            Some(false) => match self.model_error(&measured) {
+                Some(alpha2) => Some(alpha2),
+                None => return fresh(self, measured),
+            },
+        };
+        let predicted = self.aggregator.errors();
+        let floor = 1.0 / (self.average - 1) as f64;
+        let mut fused = Vec::with_capacity(measured.len());
+        for (i, (p, m)) in predicted.iter().zip(&measured).enumerate() {
+            let mut e = *p;
+            for c in 0..3 {
+                let s = self.noise[i][c];
+                if s <= 0.0 {
+                    e[c] = m[c];
+                    continue;
+                }
+                let step = (self.held[i][c] - p[c]) / s;
+                let q = model_error.map_or(0.0, |a2| a2 * step * step);
+                let prior = (self.variance[i][c] + q).max(floor);
+                // Kalman's gain: the prediction's variance over the difference's (σ² units).
+                let gain = prior / (prior + 1.0);
+                e[c] = p[c] + (m[c] - p[c]) * gain;
+                self.variance[i][c] = gain;
+            }
+            fused.push(e);
         }
-        self.averaged = (self.averaged + 1).min(self.average);
-        let gain = 1.0 / self.averaged as f64;
-        predicted
-            .iter()
-            .zip(&measured)
-            .map(|(p, m)| *p + (*m - *p) * gain)
-            .collect()
+        // The captures an average of equal weights would take to this noise: Σσ²/Σ(σ²·p).
+        let (mut total, mut left) = (0.0, 0.0);
+        for (v, s) in self.variance.iter().zip(&self.noise) {
+            for c in 0..3 {
+                total += s[c] * s[c];
+                left += s[c] * s[c] * v[c];
+            }
+        }
+        // No noise known (total 0): the capture alone, as above.
+        self.averaged = if left > 0.0 {
+            ((total / left).round() as usize).clamp(1, self.average)
+        } else {
+            1
+        };
+        fused
     }
 
-    /// Whether `measured` agrees with `expected` (errors averaged over the current average's
-    /// captures) within the noise: the χ² of the difference over the patches' σ at most
-    /// [`INNOVATION_SIGMAS`] of its standard deviations above what the capture's noise and the
-    /// average's (σ²/k of it) give. A patch or channel of σ 0 cannot be judged and is left out;
-    /// `None` when none can be (no noise known) or the χ² is not finite.
-    fn agrees(&self, measured: &[LinearRgb], expected: &[LinearRgb]) -> Option<bool> {
-        let (mut chi2, mut dof) = (0.0, 0usize);
-        for ((m, p), s) in measured.iter().zip(expected).zip(&self.noise) {
+    /// `α²`, the model's relative error on the step since the last capture, estimated from
+    /// how far `measured` lies from the prediction beyond the noise (the difference's squares
+    /// less their expected noise, over the step's squares, each in units of σ²), when the
+    /// prediction with that error agrees with the capture and `α` is at most
+    /// [`MODEL_ERROR_LIMIT`]; `None` otherwise (the room changed in a way the step does not
+    /// explain, or nothing stepped): the capture then starts the average afresh.
+    fn model_error(&self, measured: &[LinearRgb]) -> Option<f64> {
+        let predicted = self.aggregator.errors();
+        let (mut excess, mut steps) = (0.0, 0.0);
+        for (i, (p, m)) in predicted.iter().zip(measured).enumerate() {
             for c in 0..3 {
-                if s[c] > 0.0 {
-                    let d = (m[c] - p[c]) / s[c];
-                    chi2 += d * d;
+                let s = self.noise[i][c];
+                if s > 0.0 {
+                    let d = (m[c] - p[c]) / s;
+                    let step = (self.held[i][c] - p[c]) / s;
+                    excess += d * d - (1.0 + self.variance[i][c]);
+                    steps += step * step;
+                }
+            }
+        }
+        // Nothing stepped (steps 0): no model error explains the difference.
+        let alpha2 = excess.max(0.0) / steps;
+        if !alpha2.is_finite() || alpha2 > MODEL_ERROR_LIMIT * MODEL_ERROR_LIMIT {
+            return None;
+        }
+        (self.agrees(measured, predicted, Some(alpha2)) == Some(true)).then_some(alpha2)
+    }
+
+    /// Whether `measured` agrees with `expected` within the noise: the χ² of the difference
+    /// over its variance (the capture's σ², the average's `σ²·p`, and with `model_error = α²`
+    /// the model's `α²·step²`) at most [`INNOVATION_SIGMAS`] of its standard deviations above
+    /// its degrees of freedom. A patch or channel of σ 0 cannot be judged and is left out;
+    /// `None` when none can be (no noise known) or the χ² is not finite.
+    fn agrees(
+        &self,
+        measured: &[LinearRgb],
+        expected: &[LinearRgb],
+        model_error: Option<f64>,
+    ) -> Option<bool> {
+        let (mut chi2, mut dof) = (0.0, 0usize);
+        for (i, (m, p)) in measured.iter().zip(expected).enumerate() {
+            for c in 0..3 {
+                let s = self.noise[i][c];
+                if s > 0.0 {
+                    let d = (m[c] - p[c]) / s;
+                    let held = self.variance.get(i).map_or(0.0, |v| v[c]);
+                    let q = model_error.map_or(0.0, |a2| {
+                        let step = (self.held[i][c] - p[c]) / s;
+                        a2 * step * step
+                    });
+                    chi2 += d * d / (1.0 + held + q);
                     dof += 1;
                 }
             }
         }
-        // Before any capture (k = 0) the expectation has no noise of its own.
-        let scale = 1.0 + 1.0 / self.averaged.max(1) as f64;
         let dof_f = dof as f64;
-        let limit = scale * (dof_f + INNOVATION_SIGMAS * (2.0 * dof_f).sqrt());
+        let limit = dof_f + INNOVATION_SIGMAS * (2.0 * dof_f).sqrt();
         (dof > 0 && chi2.is_finite()).then_some(chi2 <= limit)
     }
 
@@ -226,8 +315,8 @@ impl Controller {
             return false;
         }
         self.apply_contributions();
-        let stale = self.agrees(errors, self.aggregator.errors()) == Some(false)
-            && self.agrees(errors, &self.held) == Some(true);
+        let stale = self.agrees(errors, self.aggregator.errors(), None) == Some(false)
+            && self.agrees(errors, &self.held, None) == Some(true);
         if stale {
             self.stale_run += 1;
         }
@@ -300,8 +389,10 @@ impl Controller {
     }
 
     /// How many captures the errors of the last capture average (1: that capture alone; 0
-    /// before the first; at most the cap). Their `G` carries at most about `½ Σ σ²/k` of camera
-    /// noise, not `½ Σ σ²` (at the cap, as a moving average, less: see [`Controller`]).
+    /// before the first; at most the cap): where patches were fused with different gains, the
+    /// captures of equal weight that would leave the same noise, `Σσ²/Σσ²P`, rounded. Their
+    /// `G` carries about `½ Σ σ²/k` of camera noise, not `½ Σ σ²` (at the cap, as a moving
+    /// average, less: see [`Controller`]).
     pub fn averaged(&self) -> usize {
         self.averaged
     }
@@ -319,6 +410,11 @@ pub const AVERAGE_CAPTURES: usize = 8;
 /// frames late is caught without being told its latency (a longer one is configured,
 /// `stale_frames`).
 pub const STALE_CAPTURES: usize = 3;
+
+/// The largest relative error of the model's prediction of a step that a capture is still
+/// averaged with (see [`Controller`]); beyond it the room changed in a way the step does not
+/// explain and the average starts afresh.
+pub const MODEL_ERROR_LIMIT: f64 = 0.5;
 
 /// How many standard deviations of its χ² a capture's difference from the prediction may lie
 /// above its mean and still be averaged ([`Controller`]).

@@ -488,3 +488,73 @@ fn a_capture_that_shows_the_values_before_the_last_step_is_stale() {
         .expect("contribution");
     assert!(!quiet.stale(&errors(1.0)));
 }
+
+/// A step whose prediction is off by a tenth (the room follows 90% of it) on half the patches:
+/// the capture disagrees with the prediction beyond its noise, and is fused with it by the
+/// model's error on the step instead of starting the average afresh. The patches the step left
+/// alone keep their average (σ/√5 after five captures, not σ); those it moved follow the
+/// capture and come out closer to the truth than the capture alone. A model off by more than
+/// half the step starts afresh.
+#[test]
+fn a_step_the_model_predicts_in_part_keeps_the_average_where_it_did_not_step() {
+    /// Captures of a room whose errors are `truth(patch)`, with noise.
+    type Sampler<'a> = dyn FnMut(&dyn Fn(usize) -> f64) -> Vec<LinearRgb> + 'a;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let (sigma, patches) = (0.01, 400);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let normal = Normal::new(0.0, sigma).expect("normal");
+    let mut noisy = |truth: &dyn Fn(usize) -> f64| -> Vec<LinearRgb> {
+        (0..patches)
+            .map(|i| LinearRgb([0, 1, 2].map(|_| truth(i) + normal.sample(&mut rng))))
+            .collect()
+    };
+    // RMS deviation from `truth` over `which` patches, in units of σ.
+    let spread = |e: &[LinearRgb], truth: &dyn Fn(usize) -> f64, which: &dyn Fn(usize) -> bool| {
+        let (sum, n) = e
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| which(*i))
+            .flat_map(|(i, v)| (0..3).map(move |k| (v[k] - truth(i)).powi(2)))
+            .fold((0.0, 0usize), |(s, n), d| (s + d, n + 1));
+        (sum / n as f64).sqrt() / sigma
+    };
+    let stepped = |i: usize| i.is_multiple_of(2);
+    let run = |follows: f64, noisy: &mut Sampler| {
+        let mut c = Controller::new(vec![LinearRgb::splat(sigma); patches], 0);
+        for _ in 0..4 {
+            c.measured(noisy(&|_| 0.5)).expect("static");
+        }
+        assert_eq!(c.averaged(), 4);
+        // The nodes take 0.1 (10σ) off the even patches' errors; the room follows `follows`.
+        c.contribution(
+            (0..patches as u32)
+                .filter(|&i| stepped(i as usize))
+                .map(|i| (i, LinearRgb::splat(0.1))),
+        )
+        .expect("contribution");
+        let truth = move |i: usize| if stepped(i) { 0.5 - 0.1 * follows } else { 0.5 };
+        c.measured(noisy(&truth)).expect("after the step");
+        let e = c.errors().to_vec();
+        (
+            spread(&e, &truth, &|i| !stepped(i)),
+            spread(&e, &truth, &stepped),
+            c.averaged(),
+        )
+    };
+    let (still, moved, averaged) = run(0.9, &mut noisy);
+    assert!(
+        (0.35..0.6).contains(&still),
+        "unstepped patches: {still} σ (five captures averaged: 0.45)"
+    );
+    assert!(
+        moved < 0.95,
+        "stepped patches: {moved} σ (the capture alone: 1)"
+    );
+    assert!((2..=4).contains(&averaged), "averaged {averaged}");
+    // A model off by 60% of the step: the room changed in a way the step does not explain.
+    let (still, moved, averaged) = run(0.4, &mut noisy);
+    assert!((still - 1.0).abs() < 0.12, "afresh: {still} σ");
+    assert!((moved - 1.0).abs() < 0.12, "afresh: {moved} σ");
+    assert_eq!(averaged, 1);
+}
