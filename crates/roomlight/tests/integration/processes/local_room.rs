@@ -142,7 +142,16 @@ fn local_room_serves_the_console_and_stops_on_sigterm() {
         .recv_timeout(Duration::from_secs(30))
         .expect("the script stops")
         .expect("its exit status");
-    let rest: Vec<String> = rx.try_iter().collect();
+    // The exit can be seen before the reader thread has passed on the script's last lines:
+    // read until its stdout closes (every process holding it has stopped), at most 10 s.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut rest: Vec<String> = Vec::new();
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match rx.recv_timeout(left) {
+            Ok(line) => rest.push(line),
+            Err(_) => break,
+        }
+    }
     assert!(rest.iter().any(|l| l.starts_with("stopped;")), "{rest:?}");
     // It waited for every process it started: none is left.
     let left: Vec<&u32> = spawned.iter().filter(|&&p| !gone(p)).collect();
