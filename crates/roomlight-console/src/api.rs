@@ -291,6 +291,8 @@ pub fn status_json(console: &Console) -> Value {
         "objective": objective, "optimum": optimum, "excess": excess,
         // How many captures the errors of `objective` average (the round controller's).
         "averaged": objective.map(|_| s.averaged),
+        // The most captures refused in a row as late: the camera's latency in frames.
+        "late_frames": s.late_frames,
         "settled": s.settled, "paused": o.paused, "restarts": o.restarts,
         "camera": camera,
         "preset": o.preset, "presets": console.control.presets(),

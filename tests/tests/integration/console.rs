@@ -160,6 +160,8 @@ async fn the_status_tells_the_room_as_it_is() {
         (1..=roomlight_core::round::AVERAGE_CAPTURES as u64).contains(&averaged),
         "{s}"
     );
+    // A camera that hands over every frame at once: no capture was refused as late.
+    assert_eq!(s["late_frames"].as_u64(), Some(0), "{s}");
     // The optimum is the camera agent's model's, computed independently here.
     let truth = roomlight_core::optimum::optimum(&sb.control().problem()).expect("optimum");
     assert!(

@@ -170,6 +170,10 @@ pub struct RoomStatus {
     /// [`roomlight_core::round::Controller::averaged`]): its camera noise is at most about
     /// `½ Σ σ²/k`.
     pub averaged: usize,
+    /// The most captures in a row refused as late (they showed the room before the nodes'
+    /// last step, [`roomlight_core::round::Controller::stale`]); 0 when none was: the camera's
+    /// latency in frames, which the configuration's `stale_frames` can name instead.
+    pub late_frames: usize,
     /// Projectors attached now.
     pub live_projectors: usize,
     /// Protobuf bytes sent to node agents since the previous status (errors and setup).

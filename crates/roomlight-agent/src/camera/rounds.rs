@@ -247,6 +247,7 @@ impl<C: Camera> Rounds<C> {
             s.captures = self.eye.count;
             s.measured_objective = measured_objective;
             s.averaged = self.controller.averaged();
+            s.late_frames = self.stale.1;
             s.live_projectors = live_projectors;
             s.bytes_out = shared.bytes_out.swap(0, Ordering::Relaxed);
             s.bytes_in = shared.bytes_in.swap(0, Ordering::Relaxed);

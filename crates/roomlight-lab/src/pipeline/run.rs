@@ -169,6 +169,8 @@ pub struct RunResult {
     pub rounds: u64,
     /// Projectors the camera agent calibrated hot during the run.
     pub calibrated_hot: u64,
+    /// The most captures the camera agent refused in a row as late (`RoomStatus::late_frames`).
+    pub late_frames: usize,
     /// Protobuf bytes between the agents, both ways, per round once the agents are attached (the first capture's traffic, which
     /// carries every node's attenuation, left out).
     pub bytes_per_round: f64,
@@ -728,6 +730,7 @@ fn report(
         rounds: last.round,
         bytes_per_round: steady.bytes_per_round(),
         calibrated_hot: last.calibrated_hot,
+        late_frames: last.late_frames,
     };
     Ok(RunDetail {
         result,

@@ -593,6 +593,7 @@ mod tests {
             capture_seconds: 1.0,
             rounds: 600,
             calibrated_hot: 0,
+            late_frames: 0,
             bytes_per_round: 0.0,
         }
     }

@@ -55,4 +55,6 @@ fn late_frames_are_refused_and_the_rounds_converge() {
         result.rounds,
         result.captures
     );
+    // The status names the latency: two frames.
+    assert_eq!(result.late_frames, 2, "late frames in the status");
 }
