@@ -210,11 +210,14 @@ impl Controller {
                 }
                 let step = (self.held[i][c] - p[c]) / s;
                 let q = model_error.map_or(0.0, |a2| a2 * step * step);
-                let prior = (self.variance[i][c] + q).max(floor);
-                // Kalman's gain: the prediction's variance over the difference's (σ² units).
-                let gain = prior / (prior + 1.0);
+                let prior = self.variance[i][c] + q;
+                // Kalman's gain: the prediction's variance over the difference's (σ² units),
+                // the prediction's taken at least `floor` (a gain of at least 1/average).
+                let gain = prior.max(floor) / (prior.max(floor) + 1.0);
                 e[c] = p[c] + (m[c] - p[c]) * gain;
-                self.variance[i][c] = gain;
+                // The fused errors' variance for that gain (Joseph's form: `gain` itself at
+                // the optimal gain, less where the floor raised it: 1/15 at a gain of 1/8).
+                self.variance[i][c] = (1.0 - gain).powi(2) * prior + gain * gain;
             }
             fused.push(e);
         }
@@ -226,9 +229,10 @@ impl Controller {
                 left += s[c] * s[c] * v[c];
             }
         }
-        // No noise known (total 0): the capture alone, as above.
+        // No noise known (total 0): the capture alone, as above. Past the cap, a moving average
+        // of gain 1/average leaves the noise of 2·average − 1 captures.
         self.averaged = if left > 0.0 {
-            ((total / left).round() as usize).clamp(1, self.average)
+            ((total / left).round() as usize).clamp(1, 2 * self.average - 1)
         } else {
             1
         };
@@ -389,10 +393,10 @@ impl Controller {
     }
 
     /// How many captures the errors of the last capture average (1: that capture alone; 0
-    /// before the first; at most the cap): where patches were fused with different gains, the
-    /// captures of equal weight that would leave the same noise, `Σσ²/Σσ²P`, rounded. Their
-    /// `G` carries about `½ Σ σ²/k` of camera noise, not `½ Σ σ²` (at the cap, as a moving
-    /// average, less: see [`Controller`]).
+    /// before the first): the captures of equal weight that would leave the same noise,
+    /// `Σσ²/Σσ²P`, rounded, where patches were fused with different gains or past the cap
+    /// (the moving average's `2·average − 1`, at most). Their `G` carries about `½ Σ σ²/k` of
+    /// camera noise, not `½ Σ σ²`.
     pub fn averaged(&self) -> usize {
         self.averaged
     }

@@ -385,11 +385,22 @@ fn captures_are_averaged_with_the_prediction_until_the_room_disagrees() {
     for _ in 0..5 {
         c.measured(noisy(0.5)).expect("static");
     }
-    // Four captures averaged (the cap): σ/2, whatever came before.
+    // Four captures averaged (the cap), then a moving average of gain 1/4: its variance falls
+    // towards 1/7 of a capture's, and the count says so (6 after six captures, 7 at last).
     let averaged = spread(&mut c, 0.5);
     assert!(
-        (0.4..0.62).contains(&averaged),
-        "four captures: {averaged} σ"
+        (0.33..0.52).contains(&averaged),
+        "six captures: {averaged} σ (0.42 expected)"
+    );
+    assert_eq!(c.averaged(), 6);
+    for _ in 0..20 {
+        c.measured(noisy(0.5)).expect("static");
+    }
+    assert_eq!(c.averaged(), 7, "the moving average's noise: 1/7 of a capture's");
+    let moving = spread(&mut c, 0.5);
+    assert!(
+        (0.3..0.46).contains(&moving),
+        "a moving average of gain 1/4: {moving} σ (0.38 expected)"
     );
     // The room changed by 5σ everywhere: the prediction is refused, the capture stands alone.
     c.measured(noisy(0.55)).expect("changed");

@@ -196,7 +196,7 @@ async fn room_page(b: &Browser, room: &Room) {
                 && now[3] != before[3]
                 && objective.is_some_and(|g| g > 0.0)
                 && averaged
-                    .is_some_and(|k| (1..=roomlight_core::round::AVERAGE_CAPTURES).contains(&k))
+                    .is_some_and(|k| (1..2 * roomlight_core::round::AVERAGE_CAPTURES).contains(&k))
                 // The simulated camera hands over every frame at once: none refused as late.
                 && now[5] == "none";
             moved.then_some(()).ok_or(format!(
