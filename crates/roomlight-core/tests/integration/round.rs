@@ -396,7 +396,11 @@ fn captures_are_averaged_with_the_prediction_until_the_room_disagrees() {
     for _ in 0..20 {
         c.measured(noisy(0.5)).expect("static");
     }
-    assert_eq!(c.averaged(), 7, "the moving average's noise: 1/7 of a capture's");
+    assert_eq!(
+        c.averaged(),
+        7,
+        "the moving average's noise: 1/7 of a capture's"
+    );
     let moving = spread(&mut c, 0.5);
     assert!(
         (0.3..0.46).contains(&moving),

@@ -516,10 +516,15 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
             "{r}"
         );
         // Stale errors break the rules that assume fresh ones (the table says so); every other
-        // rule and case must not diverge.
+        // rule and case must not diverge. The default rule copes without being told the
+        // latency: the camera agent refuses the captures that show the room before the step
+        // (before it did, stale-2 diverged to 1.3e2).
         let stale = r["case"].as_str().is_some_and(|c| c.contains("stale"));
-        let coping =
-            !stale || matches!(r["rule"].as_str(), Some("safe-delay" | "model-100-discard"));
+        let coping = !stale
+            || matches!(
+                r["rule"].as_str(),
+                Some("safe-delay" | "model-100" | "model-100-discard")
+            );
         if coping {
             assert_eq!(r["diverged"], false, "{r}");
         }
@@ -539,6 +544,8 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         ("small-bright-target", "model-100"),
         ("small/stale-1", "model-100-discard"),
         ("small/stale-2", "model-100-discard"),
+        ("small/stale-1", "model-100"),
+        ("small/stale-2", "model-100"),
     ] {
         let to_1pct = row(case, rule)["captures_to_1pct"].as_u64();
         assert!(
@@ -559,6 +566,10 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
     ] {
         assert!(excess(case, "model-100") < excess(case, "paper"), "{case}");
         assert!(excess(case, "model-100") < 0.5, "{case}");
+    }
+    // Late frames refused, the default rule ends within 1% as with fresh ones.
+    for case in ["small/stale-1", "small/stale-2"] {
+        assert!(excess(case, "model-100") < 0.01, "{case}");
     }
     // The damped step survives two stale captures and ends below where it started.
     assert!(excess("small/stale-2", "safe-delay") < excess("small/stale-2", "paper"));
