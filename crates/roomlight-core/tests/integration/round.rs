@@ -352,23 +352,34 @@ fn the_controller_settles_after_two_quiet_captures() {
     assert!(!c.settled(), "a real change unsettles it");
 }
 
+/// Captures of a room of `patches` patches whose errors are `truth(patch)` on every channel,
+/// each with Gaussian noise σ = `sigma` (seeded).
+fn noisy_room(
+    sigma: f64,
+    patches: usize,
+    seed: u64,
+) -> impl FnMut(&dyn Fn(usize) -> f64) -> Vec<LinearRgb> {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let normal = Normal::new(0.0, sigma).expect("normal");
+    move |truth| {
+        (0..patches)
+            .map(|i| LinearRgb([0, 1, 2].map(|_| truth(i) + normal.sample(&mut rng))))
+            .collect()
+    }
+}
+
 /// Captures of a static room are averaged with what the last ones predict: the held errors'
 /// spread falls as 1/√k up to the cap, a capture the prediction does not explain (the room
 /// changed) starts the average afresh, and so does a change of the live projectors; model
 /// rounds' contributions move the prediction the capture is averaged with.
 #[test]
 fn captures_are_averaged_with_the_prediction_until_the_room_disagrees() {
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
     let sigma = 0.01;
     let patches = 300;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let normal = Normal::new(0.0, sigma).expect("normal");
-    let mut noisy = |truth: f64| -> Vec<LinearRgb> {
-        (0..patches)
-            .map(|_| LinearRgb([0, 1, 2].map(|_| truth + normal.sample(&mut rng))))
-            .collect()
-    };
+    let mut room = noisy_room(sigma, patches, 7);
+    let mut noisy = |truth: f64| room(&|_| truth);
     // The held errors' RMS deviation from `truth`, in units of σ.
     let spread = |c: &mut Controller, truth: f64| {
         let e = c.errors();
@@ -441,16 +452,9 @@ fn captures_are_averaged_with_the_prediction_until_the_room_disagrees() {
 /// for forever).
 #[test]
 fn a_capture_that_shows_the_values_before_the_last_step_is_stale() {
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
     let (sigma, patches) = (0.01, 200);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-    let normal = Normal::new(0.0, sigma).expect("normal");
-    let mut noisy = |truth: f64| -> Vec<LinearRgb> {
-        (0..patches)
-            .map(|_| LinearRgb([0, 1, 2].map(|_| truth + normal.sample(&mut rng))))
-            .collect()
-    };
+    let mut room = noisy_room(sigma, patches, 11);
+    let mut noisy = |truth: f64| room(&|_| truth);
     let step = |c: &mut Controller, by: f64| {
         c.contribution((0..patches as u32).map(|i| (i, LinearRgb::splat(by))))
             .expect("contribution");
@@ -514,16 +518,8 @@ fn a_capture_that_shows_the_values_before_the_last_step_is_stale() {
 fn a_step_the_model_predicts_in_part_keeps_the_average_where_it_did_not_step() {
     /// Captures of a room whose errors are `truth(patch)`, with noise.
     type Sampler<'a> = dyn FnMut(&dyn Fn(usize) -> f64) -> Vec<LinearRgb> + 'a;
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
     let (sigma, patches) = (0.01, 400);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-    let normal = Normal::new(0.0, sigma).expect("normal");
-    let mut noisy = |truth: &dyn Fn(usize) -> f64| -> Vec<LinearRgb> {
-        (0..patches)
-            .map(|i| LinearRgb([0, 1, 2].map(|_| truth(i) + normal.sample(&mut rng))))
-            .collect()
-    };
+    let mut noisy = noisy_room(sigma, patches, 5);
     // RMS deviation from `truth` over `which` patches, in units of σ.
     let spread = |e: &[LinearRgb], truth: &dyn Fn(usize) -> f64, which: &dyn Fn(usize) -> bool| {
         let (sum, n) = e
