@@ -34,6 +34,9 @@ pub struct DemoOptions {
     /// Luminaire nodes shaped to the first LED preset instead of flat over their regions
     /// ([`pipeline::Nodes`]).
     pub shaped_nodes: bool,
+    /// Calibration codes up to three groups at once in their primaries
+    /// ([`roomlight_calib::procedure::Settings::primaries`]).
+    pub primaries: bool,
 }
 
 pub fn run(args: &DemoOptions) -> Result<()> {
@@ -65,7 +68,10 @@ pub fn run(args: &DemoOptions) -> Result<()> {
     } else {
         pipeline::Nodes::Flat
     };
-    let settings = roomlight_calib::procedure::Settings::default();
+    let settings = roomlight_calib::procedure::Settings {
+        primaries: args.primaries,
+        ..Default::default()
+    };
     let mut cal =
         pipeline::calibrate_configured(&room, true, settings, nodes, &mut noise, &bar, |line| {
             bar.println(&line);

@@ -199,6 +199,10 @@ struct DemoArgs {
     /// projectors dark (one more capture), instead of driving its region evenly.
     #[arg(long)]
     shaped_nodes: bool,
+    /// Calibrate with up to three groups of projectors coded at once, each in its own primary,
+    /// instead of one group at a time in white (fewer captures; `bench calib --primaries`).
+    #[arg(long)]
+    primaries: bool,
 }
 
 /// A weight: finite and at least 0.
@@ -371,6 +375,7 @@ fn main() -> Result<()> {
             wall_weight: args.wall_weight,
             dark_weight: args.dark_weight,
             shaped_nodes: args.shaped_nodes,
+            primaries: args.primaries,
         }),
         Command::Sim(args) => procs::sim(&args),
         Command::Calibrate(args) => procs::calibrate(&args),

@@ -78,9 +78,10 @@ pub struct Settings {
     /// each in its own primary, told apart by the camera's colour
     /// ([`crate::graycode::Unmixing`]): a set of three takes its slots once (every member's
     /// pairs), plus a capture of each group's primary white. Off by default: on the lab it
-    /// brings the bring-up from 158 captures to 116, but one primary carries a third of
-    /// white's light, the floor projectors decode 2–3% fewer of their pixels, and the demo's
-    /// charts end 0.2–0.75 ΔE00 worse (docs/results.md, 2026-12-03).
+    /// brings the bring-up from 154 captures to 112 (to first converged light 159 → 118),
+    /// but one primary carries a third of white's light, the floor projectors decode 2–3%
+    /// fewer of their pixels, and the demo's charts end 0.2–0.75 ΔE00 worse
+    /// (docs/results.md, 2026-12-03 and 2026-12-07).
     pub primaries: bool,
 }
 
@@ -532,6 +533,53 @@ pub fn footprints(
         })
         .collect()
 }
+
+/// The camera pixels a projector lights directly, as its white shows them (`gain`, its rise
+/// above dark; `footprint`, the pixels [`footprints`] gives it): those raised above
+/// [`DIRECT_SHARE`] of the footprint's 99th percentile. What [`code_cell`] sizes the cells
+/// by. The footprint's share of the peak (10%) counts the light the walls reflect onto one
+/// another too: in the lab the wall projectors' footprints were 2.7–3.0 times the camera
+/// pixels they light directly (333 114 against 119 908 for wall-left, the simulator's truth),
+/// which made them look finer than the camera and gave them cells of 2, where a real
+/// camera's lens blurs such stripes into grey (the photographic test: 51% in their cell or
+/// beside it, against 99.91% over cells of 4). This count is 79–106% of the direct one there
+/// (`roomlight bench calib`, 2026-12-07). 0 for an empty footprint.
+pub fn direct_footprint(gain: &[f32], footprint: &[bool]) -> usize {
+    let mut lit: Vec<f32> = gain
+        .iter()
+        .zip(footprint)
+        .filter(|&(g, &f)| f && g.is_finite())
+        .map(|(g, _)| *g)
+        .collect();
+    if lit.is_empty() {
+        return 0;
+    }
+    let k = (lit.len() * 99 / 100).min(lit.len() - 1);
+    let (_, top, _) = lit.select_nth_unstable_by(k, f32::total_cmp);
+    let floor = DIRECT_SHARE * *top;
+    gain.iter().filter(|&&g| g > floor).count()
+}
+
+/// The camera pixels [`code_cell`] sizes a projector's cells by: those it lights directly
+/// ([`direct_footprint`]) for a standard projector; for a large aperture, its whole footprint
+/// (down to 1% of its peak), which gives it cells of 2 in the lab. Its in-focus pixels must
+/// be placed within ±1 projector pixel (issue 21 item 7's bar, 98%): over cells of 2 the
+/// simulated lab places 99.98% of them so, over cells of 4, which its direct footprint would
+/// give, 97.92% (`roomlight bench calib`, 2026-12-07). A real lens blurs stripes of 4 pixels
+/// of it (1.2 camera pixels) as it does a wall projector's; its light-weighted centroids
+/// (`crate::centroid`) are the measure that does not depend on them.
+pub fn cell_footprint(p: &Projector, gain: &[f32], footprint: &[bool]) -> usize {
+    match p.kind {
+        ProjectorKind::LargeAperture => footprint.iter().filter(|&&lit| lit).count(),
+        ProjectorKind::Standard => direct_footprint(gain, footprint),
+    }
+}
+
+/// The share of a footprint's 99th percentile above which a camera pixel counts as lit
+/// directly ([`direct_footprint`]). Light reflected from the other walls of the lab reaches
+/// 15–30% of the walls' direct light; direct light on surfaces seen at a grazing angle falls
+/// below it too, so the count errs small, and a cell is then at most one size larger.
+pub const DIRECT_SHARE: f32 = 0.2;
 
 /// The code cell of a projector whose footprint covers `footprint` camera pixels
 /// ([`Manifest::cell`]): the smallest power of two (up to [`LARGEST_CELL`]) whose finest

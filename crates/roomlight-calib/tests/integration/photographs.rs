@@ -228,3 +228,48 @@ fn check(
     assert!(t.gross <= 0.001, "{t:?}");
     assert!(t.unlit_gross as f64 <= 0.001 * t.lit as f64, "{t:?}");
 }
+
+/// The cells are sized by the camera pixels a projector lights directly, not by all its white
+/// raises: in a small white room the light the walls reflect onto one another is 10–20% of a
+/// wall projector's direct light, above the footprint's 10% of the peak, and counted in it
+/// made the lab's wall projectors look 2.7–3.0 times finer than the camera and gave them
+/// cells of 2, which a real lens blurs into grey (the test above: 51% in their cell or
+/// beside it). Here a 256×192 projector lights 90×70 of a 200×150 camera's pixels directly
+/// (about 2.8 projector pixels a camera pixel a side), its light falling to 45% across them,
+/// and everything else receives 15% of its brightest light reflected.
+#[test]
+fn cells_are_sized_by_the_direct_footprint_not_the_reflected_light() {
+    use roomlight_calib::procedure::{Settings, code_cell, direct_footprint};
+    use roomlight_calib::rig::{Projector, ProjectorKind, ProjectorRole};
+    let (w, h) = (200usize, 150usize);
+    let direct = |x: usize, y: usize| {
+        ((50..140).contains(&x) && (40..110).contains(&y))
+            .then(|| 1.0 - 0.55 * (x - 50) as f32 / 89.0)
+    };
+    let gain: Vec<f32> = (0..w * h)
+        .map(|i| 0.15 + direct(i % w, i / w).unwrap_or(0.0))
+        .collect();
+    let truth = (0..w * h)
+        .filter(|&i| direct(i % w, i / w).is_some())
+        .count();
+    let peak = gain.iter().copied().fold(0.0f32, f32::max);
+    let share = Settings::default().footprint_share;
+    let footprint: Vec<bool> = gain.iter().map(|&g| g > share * peak).collect();
+    let p = Projector {
+        id: "wall".into(),
+        width: 256,
+        height: 192,
+        kind: ProjectorKind::Standard,
+        role: ProjectorRole::Luminaire,
+    };
+    let all = footprint.iter().filter(|&&lit| lit).count();
+    assert_eq!(all, w * h, "the reflected light is in the footprint");
+    assert_eq!(code_cell(&p, all), 2);
+    assert_eq!(direct_footprint(&gain, &footprint), truth);
+    assert_eq!(code_cell(&p, truth), 4);
+    // Nothing lit, or a capture with non-finite values where nothing else is lit: no count.
+    assert_eq!(direct_footprint(&gain, &vec![false; w * h]), 0);
+    let mut broken = vec![0.0f32; w * h];
+    broken[7] = f32::NAN;
+    assert_eq!(direct_footprint(&broken, &vec![true; w * h]), 0);
+}

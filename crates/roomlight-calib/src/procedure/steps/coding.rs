@@ -19,12 +19,15 @@ impl<R: Rig> Procedure<'_, R> {
         needed: Option<&[bool]>,
     ) -> Result<Vec<Decoded>, ProcedureError> {
         let footprints = footprints(projectors, dark, whites, &self.settings);
+        let dark_intensity = dark.intensity();
+        let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
         let manifests: Vec<Manifest> = projectors
             .iter()
             .zip(&footprints)
-            .map(|(p, f)| {
+            .zip(&gains)
+            .map(|((p, f), g)| {
                 let cell = if self.settings.cells {
-                    code_cell(p, f.iter().filter(|&&lit| lit).count())
+                    code_cell(p, cell_footprint(p, g, f))
                 } else {
                     1
                 };
@@ -77,8 +80,6 @@ impl<R: Rig> Procedure<'_, R> {
                     .collect(),
             });
         }
-        let dark_intensity = dark.intensity();
-        let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
         let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
         for set in &sets {
             // Where a blending projector of an earlier set was decoded it takes the light
