@@ -22,6 +22,17 @@ pub struct NodeConfig {
     pub target_margin_px: u32,
     /// Fewest decoded patch centres for a chart to count as lit by a projector.
     pub min_patches: usize,
+    /// Radius, in camera pixels, of the closing (dilation then erosion) that fills gaps of
+    /// unknown pixels inside a decoded footprint before its edges are ramped
+    /// ([`overlap_shares`]). A gap left open is an edge: the projector's share ramps down
+    /// around it and the others' up, so a decode speckled with unknown pixels (a noisier one,
+    /// such as groups coded in their primaries) gives speckled weights, and chart patches
+    /// the attenuation captures then see as non-uniform are dropped from the model. At 2,
+    /// the lab's model kept 212 of its chart patches on neutral coded in white and 182 in
+    /// primaries (charts' mean ΔE00 2.07 and 2.58); at 5, 215 and 214 (2.06 and 2.20), the
+    /// whole room's 95th percentile lower on every preset (`roomlight demo [--primaries]`,
+    /// 2026-12-07). A shadow narrower than twice this is lit as if it were not there.
+    pub gap_close_px: u32,
 }
 
 impl Default for NodeConfig {
@@ -31,6 +42,7 @@ impl Default for NodeConfig {
             edge_feather_px: 12.0,
             target_margin_px: 6,
             min_patches: 6,
+            gap_close_px: 5,
         }
     }
 }
@@ -316,7 +328,8 @@ fn lit_charts(
 /// Overlap shares in camera space: each projector's share at a surface point ramps from 0 at
 /// the boundary of its footprint (frustum edge or shadow) to 1 at `edge_feather_px` camera
 /// pixels inside it; the shares of the projectors at a point are normalised to sum to 1.
-/// The footprint is the decoded region with small gaps (unknown pixels) closed.
+/// The footprint is the decoded region with small gaps (unknown pixels) closed
+/// ([`NodeConfig::gap_close_px`]).
 fn overlap_shares(
     luminaires: &[Correspondence],
     (cw, ch): (usize, usize),
@@ -326,7 +339,8 @@ fn overlap_shares(
         .iter()
         .map(|c| {
             let covered: Vec<bool> = c.map.iter().map(Option::is_some).collect();
-            let closed = erode(&dilate(&covered, cw, ch, 2), cw, ch, 2);
+            let r = config.gap_close_px;
+            let closed = erode(&dilate(&covered, cw, ch, r), cw, ch, r);
             distance_inside(&closed, cw, ch)
                 .into_iter()
                 .map(|d| (d / config.edge_feather_px.max(1e-3)).min(1.0))
