@@ -51,22 +51,27 @@ fn partition(
     partition_of_unity(truth, &w, &dark, &near_target)
 }
 
-#[test]
-fn nodes_partition_the_light_feather_smoothly_and_keep_the_target_dark() {
-    let room = Room::build(small_scene()).expect("room");
-    let charts = chart_corners(&room);
-    // The two standard luminaires (the large aperture is handled by its cone mask).
-    let corr: Vec<Correspondence> = (0..2)
+/// The small room's two standard luminaires decoded from its own structured light (the large
+/// aperture is handled by its cone mask).
+fn luminaires(room: &Room) -> Vec<Correspondence> {
+    (0..2)
         .map(|k| {
             decode_projector(
-                &room,
+                room,
                 k,
                 Coding::Xor04,
                 &DecodeConfig::default(),
                 40 + k as u64,
             )
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn nodes_partition_the_light_feather_smoothly_and_keep_the_target_dark() {
+    let room = Room::build(small_scene()).expect("room");
+    let charts = chart_corners(&room);
+    let corr = luminaires(&room);
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
     let config = NodeConfig::default();
     let seg = segment(&corr, &charts, Some(&mask), &config).expect("nodes");
@@ -209,17 +214,7 @@ fn a_projector_that_lights_no_chart_is_refused() {
 fn gaps_in_a_decode_are_not_footprint_edges() {
     let room = Room::build(small_scene()).expect("room");
     let charts = chart_corners(&room);
-    let corr: Vec<Correspondence> = (0..2)
-        .map(|k| {
-            decode_projector(
-                &room,
-                k,
-                Coding::Xor04,
-                &DecodeConfig::default(),
-                40 + k as u64,
-            )
-        })
-        .collect();
+    let corr = luminaires(&room);
     let mask: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
     let truth: Vec<Vec<Option<u32>>> = (0..2).map(|k| room.true_correspondence(k)).collect();
     // Gaps of 6 × 6 camera pixels every 16 in both decodes.
