@@ -78,10 +78,10 @@ pub struct Settings {
     /// each in its own primary, told apart by the camera's colour
     /// ([`crate::graycode::Unmixing`]): a set of three takes its slots once (every member's
     /// pairs), plus a capture of each group's primary white. Off by default: on the lab it
-    /// brings the bring-up from 154 captures to 112 (to first converged light 159 → 118),
+    /// brings the bring-up from 154 captures to 112 (to first converged light 159 → 119),
     /// but one primary carries a third of white's light, the floor projectors decode 2–3%
-    /// fewer of their pixels, and the demo's charts end 0.2–0.75 ΔE00 worse
-    /// (docs/results.md, 2026-12-03 and 2026-12-07).
+    /// fewer of their pixels, the demo's charts end 0.03–0.24 ΔE00 worse and its calibration
+    /// peaks at 815 MB against 592 (docs/results.md, 2026-12-07).
     pub primaries: bool,
 }
 
@@ -542,8 +542,10 @@ pub fn footprints(
 /// pixels they light directly (333 114 against 119 908 for wall-left, the simulator's truth),
 /// which made them look finer than the camera and gave them cells of 2, where a real
 /// camera's lens blurs such stripes into grey (the photographic test: 51% in their cell or
-/// beside it, against 99.91% over cells of 4). This count is 79–106% of the direct one there
-/// (`roomlight bench calib`, 2026-12-07). 0 for an empty footprint.
+/// beside it, against 99.91% over cells of 4). This count is 63–171% of the direct one there
+/// (floor-right 44 185 against 70 688, wall-front 159 668 against 93 551; `roomlight bench
+/// calib`, 2026-12-07), and 2.7 times it in the small room, whose white walls stand close to
+/// its projectors: an estimate, not a measurement. 0 for an empty footprint.
 pub fn direct_footprint(gain: &[f32], footprint: &[bool]) -> usize {
     let mut lit: Vec<f32> = gain
         .iter()
@@ -576,9 +578,10 @@ pub fn cell_footprint(p: &Projector, gain: &[f32], footprint: &[bool]) -> usize 
 }
 
 /// The share of a footprint's 99th percentile above which a camera pixel counts as lit
-/// directly ([`direct_footprint`]). Light reflected from the other walls of the lab reaches
-/// 15–30% of the walls' direct light; direct light on surfaces seen at a grazing angle falls
-/// below it too, so the count errs small, and a cell is then at most one size larger.
+/// directly ([`direct_footprint`]). At 10% of the peak the lab's walls counted 333 000–377 000
+/// camera pixels, at 20% of it 88 000–104 000, where they light 120 000–124 000 directly
+/// (2026-12-07): the reflected light lies between, and so does this share. Direct light on
+/// surfaces seen at a grazing angle falls below it too.
 pub const DIRECT_SHARE: f32 = 0.2;
 
 /// The code cell of a projector whose footprint covers `footprint` camera pixels
