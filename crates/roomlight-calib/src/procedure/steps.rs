@@ -10,6 +10,7 @@ use crate::graycode::{
 use std::sync::Arc;
 
 mod coding;
+mod planes;
 
 /// Runs the steps of calibration on a rig, counting captures and reporting progress.
 pub struct Procedure<'a, R: Rig> {

@@ -2,6 +2,7 @@
 //! shown and captured, each member decoded from them (shown once, or with inverses where
 //! once left too much unknown), its direct light elsewhere disowned.
 
+use super::planes::Planes;
 use super::*;
 
 impl<R: Rig> Procedure<'_, R> {
@@ -269,8 +270,12 @@ impl<R: Rig> Procedure<'_, R> {
             .collect();
         let mut corrs = Vec::with_capacity(sets.len());
         for (jobs, captures) in std::mem::take(&mut sets) {
-            let (c, captures) = self.decode_group(jobs.clone(), captures).await?;
+            let (c, mut captures) = self.decode_group(jobs.clone(), captures).await?;
             corrs.push(c);
+            // Only a group with members shown once reads its planes again (with inverses).
+            if !jobs.iter().any(|(.., once)| *once) {
+                captures.bits = Planes::default();
+            }
             sets.push((jobs, captures));
         }
         // Shown once, a member that left many reached pixels unknown where it is needed (the
@@ -331,7 +336,7 @@ impl<R: Rig> Procedure<'_, R> {
         exposure: f32,
         reduction: &Reduction,
         inverse: bool,
-    ) -> Result<Vec<Vec<Vec<f32>>>, ProcedureError> {
+    ) -> Result<Vec<Planes>, ProcedureError> {
         let shows = |k: usize| !inverse || once[k];
         let slots_of = |group: &[usize]| {
             group
@@ -342,7 +347,10 @@ impl<R: Rig> Procedure<'_, R> {
                 .unwrap_or(0)
         };
         let longest = set.iter().map(|(g, _)| slots_of(g)).max().unwrap_or(0);
-        let mut captures: Vec<Vec<Vec<f32>>> = set.iter().map(|_| Vec::new()).collect();
+        // A set of groups in their primaries holds every group's planes until the first is
+        // decoded: in half precision ([`Planes`]).
+        let compact = set.len() > 1;
+        let mut captures: Vec<Planes> = set.iter().map(|_| Planes::default()).collect();
         for j in 0..longest {
             let frames: Vec<(&str, Frame)> = set
                 .iter()
@@ -367,7 +375,7 @@ impl<R: Rig> Procedure<'_, R> {
             for ((captures, plane), (group, _)) in captures.iter_mut().zip(reduced).zip(set) {
                 // A group whose patterns have all been shown keeps no more planes.
                 if j < slots_of(group) {
-                    captures.push(plane);
+                    captures.push(plane, compact);
                 }
             }
         }
@@ -379,11 +387,15 @@ impl<R: Rig> Procedure<'_, R> {
     async fn decode_group(
         &mut self,
         jobs: Vec<Job>,
-        group_captures: GroupCaptures,
+        mut group_captures: GroupCaptures,
     ) -> Result<(Vec<Correspondence>, GroupCaptures), ProcedureError> {
         let out = self
             .rig
             .offload(move || {
+                group_captures.bits.widen();
+                if let Some(inverses) = &mut group_captures.inverses {
+                    inverses.widen();
+                }
                 let corrs = jobs
                     .iter()
                     .map(|(p, m, config, ours, once)| {
@@ -525,10 +537,10 @@ struct GroupCaptures {
     white: Vec<f32>,
     white_top: Vec<f32>,
     dark: Vec<f32>,
-    bits: Vec<Vec<f32>>,
+    bits: Planes,
     /// The inverse of each slot, where members shown once were shown them after all
     /// ([`PAIRS_AFTER_SINGLE`]): they then decode from pairs.
-    inverses: Option<Vec<Vec<f32>>>,
+    inverses: Option<Planes>,
 }
 
 impl GroupCaptures {
@@ -548,7 +560,6 @@ impl GroupCaptures {
                 .iter()
                 .position(|q| *q == pattern)
                 .and_then(|j| self.bits.get(j))
-                .map(Vec::as_slice)
                 .ok_or_else(|| CalibError::File {
                     file: format!("{pattern:?}"),
                     problem: format!("not captured ({} slots)", self.bits.len()),
@@ -580,7 +591,6 @@ impl GroupCaptures {
                         .iter()
                         .position(|q| *q == inverted(pattern))
                         .and_then(|j| inverses.get(j))
-                        .map(Vec::as_slice)
                         .ok_or_else(|| CalibError::File {
                             file: format!("{pattern:?}"),
                             problem: format!("not captured ({} inverse slots)", inverses.len()),
@@ -688,10 +698,12 @@ mod tests {
             white: white.intensity(),
             white_top: brightest(&white),
             dark: dark_intensity.clone(),
-            bits: images
-                .iter()
-                .map(|i| less_black(i, &dark_intensity))
-                .collect(),
+            bits: Planes::full(
+                images
+                    .iter()
+                    .map(|i| less_black(i, &dark_intensity))
+                    .collect(),
+            ),
             inverses: None,
         };
         let gains: Vec<Vec<f32>> = whites.iter().map(|w| gain(w, &dark_intensity)).collect();
