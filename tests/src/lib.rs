@@ -82,6 +82,7 @@ impl Default for SandboxBuilder {
                 calibration_epoch: 1,
                 stale_frames: 0,
                 model_out: None,
+                primaries: true,
             },
             start: None,
             plant: PlantConfig::default(),

@@ -269,6 +269,7 @@ mod tests {
             calibration_epoch: 1,
             stale_frames: 0,
             model_out: None,
+            primaries: true,
         };
         let model = RoomModel {
             problem,

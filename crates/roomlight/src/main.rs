@@ -199,10 +199,10 @@ struct DemoArgs {
     /// projectors dark (one more capture), instead of driving its region evenly.
     #[arg(long)]
     shaped_nodes: bool,
-    /// Calibrate with up to three groups of projectors coded at once, each in its own primary,
-    /// instead of one group at a time in white (fewer captures; `bench calib --primaries`).
+    /// Calibrate with one group of projectors coded at a time in white, instead of up to three
+    /// at once, each in its own primary (more captures, fuller decodes; `bench calib --white`).
     #[arg(long)]
-    primaries: bool,
+    white: bool,
 }
 
 /// A weight: finite and at least 0.
@@ -294,10 +294,10 @@ enum BenchCommand {
         /// Only the large aperture's light-weighted centroids (a minute or two on the lab).
         #[arg(long)]
         area_only: bool,
-        /// Code up to three groups of projectors at once, each in its own primary, instead of
-        /// one group at a time in white (fewer captures, thinner decodes; to compare).
+        /// Code one group of projectors at a time in white, instead of up to three at once,
+        /// each in its own primary (more captures, fuller decodes; to compare).
         #[arg(long)]
-        primaries: bool,
+        white: bool,
     },
     // Its help says the sizes it runs, from the constants it runs them from.
     #[command(about = net_about(), long_about = None)]
@@ -375,7 +375,7 @@ fn main() -> Result<()> {
             wall_weight: args.wall_weight,
             dark_weight: args.dark_weight,
             shaped_nodes: args.shaped_nodes,
-            primaries: args.primaries,
+            primaries: !args.white,
         }),
         Command::Sim(args) => procs::sim(&args),
         Command::Calibrate(args) => procs::calibrate(&args),
@@ -498,8 +498,8 @@ fn bench(args: BenchArgs) -> Result<()> {
         Some(BenchCommand::Calib {
             quick,
             area_only,
-            primaries,
-        }) => bench::calib::run(quick, area_only, primaries),
+            white,
+        }) => bench::calib::run(quick, area_only, !white),
         Some(BenchCommand::Console { nodes, rounds }) => {
             bench::console::run(nodes, rounds).map(|_| ())
         }

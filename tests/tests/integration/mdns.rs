@@ -41,6 +41,7 @@ async fn a_node_finds_the_camera_agent_of_its_room_over_mdns_on_loopback() {
         calibration_epoch: 1,
         stale_frames: 0,
         model_out: None,
+        primaries: true,
     };
     let (mut status, _camera) = camera::serve(
         config,

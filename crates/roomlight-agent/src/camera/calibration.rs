@@ -343,11 +343,11 @@ async fn over_the_wire(
     let lit = !shared.registry.lock().projectors().dark();
     let claimed = claims_beside(shared, survey, &batch);
     let first = shared.live().problem.nodes() as u32;
-    let settings = if lit {
-        Settings::default().lit_room()
-    } else {
-        Settings::default()
+    let settings = Settings {
+        primaries: shared.config.primaries,
+        ..Settings::default()
     };
+    let settings = if lit { settings.lit_room() } else { settings };
     let mut rig = WireRig::new(shared, eye, batch);
     let mut procedure = Procedure::new(&mut rig, settings, notes.reporter(shared));
     let live = procedure.rig().projectors();

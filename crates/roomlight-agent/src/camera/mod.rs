@@ -88,6 +88,11 @@ pub struct CameraConfig {
     /// projector calibrated over the wire or hot, and after patches left the model; `None`:
     /// nowhere.
     pub model_out: Option<std::path::PathBuf>,
+    /// Calibration over the wire codes up to three groups of projectors at once, each in its
+    /// own primary ([`roomlight_calib::procedure::Settings::primaries`], the default); `false`:
+    /// one group at a time in white, for projectors that do not show their primaries at once
+    /// (a single-chip DLP's colour wheel photographed faster than it turns).
+    pub primaries: bool,
 }
 
 impl std::fmt::Debug for CameraConfig {
@@ -101,6 +106,7 @@ impl std::fmt::Debug for CameraConfig {
             .field("calibration_epoch", &self.calibration_epoch)
             .field("stale_frames", &self.stale_frames)
             .field("model_out", &self.model_out)
+            .field("primaries", &self.primaries)
             .finish()
     }
 }

@@ -34,7 +34,7 @@ pub struct NodeConfig {
     /// the attenuation captures then see as non-uniform are dropped from the model. At 2,
     /// the lab's model kept 212 of its chart patches on neutral coded in white and 182 in
     /// primaries (charts' mean ΔE00 2.07 and 2.58); at 5, 215 and 214 (2.06 and 2.20), the
-    /// whole room's 95th percentile lower on every preset (`roomlight demo [--primaries]`,
+    /// whole room's 95th percentile lower on every preset (`roomlight demo [--white]`,
     /// 2026-12-07). A shadow narrower than twice this is lit as if it were not there.
     pub gap_close_px: u32,
 }

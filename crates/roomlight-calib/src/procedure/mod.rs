@@ -77,11 +77,14 @@ pub struct Settings {
     /// Code up to three groups of projectors at the same time whatever their footprints,
     /// each in its own primary, told apart by the camera's colour
     /// ([`crate::graycode::Unmixing`]): a set of three takes its slots once (every member's
-    /// pairs), plus a capture of each group's primary white. Off by default: on the lab it
-    /// brings the bring-up from 154 captures to 112 (to first converged light 159 → 119),
-    /// but one primary carries a third of white's light, the floor projectors decode 2–3%
-    /// fewer of their pixels, the demo's charts end 0.03–0.24 ΔE00 worse and its calibration
-    /// peaks at 815 MB against 592 (docs/results.md, 2026-12-07).
+    /// pairs), plus a capture of each group's primary white. On by default: on the lab it
+    /// brings the bring-up from 154 captures to 112 (to first converged light 159 → 118, issue
+    /// 21's bar 120); one primary carries a third of white's light, so the floor projectors
+    /// decode 1.6–3.5% fewer of their pixels (left unknown) and the partition of unity in
+    /// overlaps is 96.51% within 1e-3 against 97.33% in white, but the demo's charts end
+    /// 0.03–0.05 ΔE00 better (docs/results.md, 2026-12-07). Off for projectors that do not
+    /// show their primaries at once (a single-chip DLP's colour wheel photographed faster than
+    /// it turns), and in a lit room ([`Self::lit_room`]).
     pub primaries: bool,
 }
 
@@ -99,7 +102,7 @@ impl Default for Settings {
             fine_stripes: true,
             single_shot: true,
             cells: true,
-            primaries: false,
+            primaries: true,
         }
     }
 }
@@ -130,9 +133,13 @@ impl Settings {
     /// from the pairs' by 2.7% of its light (up to 68% on one dim patch), its model optimum
     /// lies 1.8% higher, and the measured objective stays about 1% above it for 17 captures
     /// (53 in one run). Which of the two columns is nearer the truth is not yet known.
+    /// Coded in white too: a batch joining a lit room, whose light adds its shot noise to a
+    /// primary's third of white, has not been measured in primaries (a single joiner is one
+    /// group, coded in white either way).
     pub fn lit_room(self) -> Self {
         Self {
             single_shot: false,
+            primaries: false,
             ..self
         }
     }
@@ -327,6 +334,10 @@ pub struct Decoded {
     /// The pattern set it was coded with (its coding and code cell).
     pub manifest: Manifest,
     pub corr: Correspondence,
+    /// The decoder its first pass was decoded with, as far as its noise goes
+    /// ([`Settings::decoder`], in one primary's noise where its set was coded in primaries):
+    /// what its reached but unknown pixels are judged by ([`place_calibrated`]).
+    pub decoder: DecodeConfig,
     pub second: Option<SecondPass>,
 }
 
@@ -337,6 +348,8 @@ pub struct Measured {
     /// The pattern set it was coded with (its coding and code cell).
     pub manifest: Manifest,
     pub corr: Correspondence,
+    /// As [`Decoded::decoder`].
+    pub decoder: DecodeConfig,
     pub response: Response,
     pub second: Option<SecondPass>,
 }
@@ -462,8 +475,12 @@ pub const LEFT_TO_JOINER: f32 = 1e-3;
 
 /// A standard luminaire calibrated with others that leaves more of its reached pixels unknown
 /// than this share of its decoded ones is placed beside the others, as a joiner is
-/// ([`place_calibrated`]). On the lab (`roomlight bench calib`, 2026-11-28) the walls and
-/// floor-left left 0.00–0.55%, floor-right 4.30% (a grazing face the others light).
+/// ([`place_calibrated`]), judged on the noise it was decoded with ([`Decoded::decoder`]).
+/// On the lab (`roomlight bench calib`, 2026-12-07), coded in primaries, the walls and
+/// floor-left leave 0.00–0.08% and floor-right 1.04% (a grazing face the others light),
+/// just over this share: 0.81% judged on white's higher noise floor, which segmented it with
+/// the others (partition of unity in overlaps 93.58% within 1e-3 against 96.51% beside them,
+/// and the demo's charts 0.07–0.28 ΔE00 worse). Coded in white, 0.00–0.70% and 5.41%.
 pub const BESIDE_UNKNOWN: f64 = 0.01;
 
 /// The camera pixels where a projector joining a lit room is needed: those where the
@@ -663,10 +680,7 @@ pub fn place_calibrated(
     progress: &mut dyn FnMut(Event),
 ) -> Result<Vec<Placed>, CalibError> {
     let incomplete = |m: &Measured| {
-        m.projector.blends()
-            && m.corr
-                .reached_unknown_share(&settings.decoder(&m.projector))
-                > BESIDE_UNKNOWN
+        m.projector.blends() && m.corr.reached_unknown_share(&m.decoder) > BESIDE_UNKNOWN
     };
     let (rest, first): (Vec<&Measured>, Vec<&Measured>) =
         measured.iter().partition(|m| incomplete(m));

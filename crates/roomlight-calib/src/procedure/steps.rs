@@ -266,6 +266,7 @@ impl<'a, R: Rig> Procedure<'a, R> {
             projector: d.projector,
             manifest: d.manifest,
             corr: d.corr,
+            decoder: d.decoder,
             response,
             second: d.second,
         })

@@ -114,7 +114,7 @@ fn scene(quick: bool) -> Result<roomlight_sim::Scene> {
 
 /// The calibration bench on the lab (or the small room, `quick`); `area_only`: only the large
 /// aperture's light-weighted centroids; `primaries`: up to three groups coded at once in
-/// their primaries ([`Settings::primaries`]), to compare with the default.
+/// their primaries ([`Settings::primaries`], the default), else one at a time in white.
 pub fn run(quick: bool, area_only: bool, primaries: bool) -> Result<()> {
     let settings = Settings {
         primaries,

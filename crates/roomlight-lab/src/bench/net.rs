@@ -248,6 +248,7 @@ impl SyntheticAgents {
             calibration_epoch: 1,
             stale_frames: 0,
             model_out: None,
+            primaries: true,
         };
         let served = camera::serve_room(
             config,

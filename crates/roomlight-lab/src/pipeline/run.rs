@@ -503,6 +503,7 @@ impl Session<'_> {
                 0
             },
             model_out: None,
+            primaries: true,
         }
     }
 

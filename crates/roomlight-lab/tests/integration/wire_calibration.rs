@@ -123,6 +123,7 @@ impl Wire {
             calibration_epoch: 1,
             stale_frames: 0,
             model_out: None,
+            primaries: true,
         };
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await

@@ -60,6 +60,12 @@ struct CameraFile {
     calibration_epoch: u64,
     #[serde(default)]
     stale_frames: usize,
+    /// Calibration over the wire codes up to three groups of projectors at once, each in its
+    /// own primary (the default); `primaries = false`: one group at a time in white, for
+    /// projectors that do not show their primaries at once (a single-chip DLP's colour wheel
+    /// photographed faster than it turns). A lit room is coded in white either way.
+    #[serde(default = "primaries_default")]
+    primaries: bool,
     /// Advertise the camera agent over mDNS.
     #[serde(default = "mdns_default")]
     mdns: bool,
@@ -108,6 +114,9 @@ fn epoch_default() -> u64 {
     1
 }
 fn mdns_default() -> bool {
+    true
+}
+fn primaries_default() -> bool {
     true
 }
 
@@ -289,6 +298,7 @@ impl CameraFile {
                 calibration_epoch: self.calibration_epoch,
                 stale_frames: self.stale_frames,
                 model_out: self.model_out,
+                primaries: self.primaries,
             },
             hardware,
             source,

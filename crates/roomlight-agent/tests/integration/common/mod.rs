@@ -87,6 +87,7 @@ pub fn camera_config(heartbeat: Duration, deadline: Duration, model_rounds: usiz
         calibration_epoch: 1,
         stale_frames: 0,
         model_out: None,
+        primaries: true,
     }
 }
 

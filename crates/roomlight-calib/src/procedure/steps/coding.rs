@@ -82,7 +82,18 @@ impl<R: Rig> Procedure<'_, R> {
             });
         }
         let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
+        // The decoder each was decoded with, as far as its noise goes: one primary's where
+        // its set was coded in primaries.
+        let mut decoders: Vec<DecodeConfig> = projectors
+            .iter()
+            .map(|p| self.settings.decoder(p))
+            .collect();
         for set in &sets {
+            if set.len() > 1 {
+                for &k in set.iter().flat_map(|&g| &groups[g]) {
+                    decoders[k] = decoders[k].in_one_primary();
+                }
+            }
             // Where a blending projector of an earlier set was decoded it takes the light
             // whatever this set leaves unknown there ([`left_by`]): no inverses for that.
             let earlier = projectors
@@ -110,12 +121,13 @@ impl<R: Rig> Procedure<'_, R> {
         Ok(projectors
             .iter()
             .zip(manifests)
-            .zip(corrs)
-            .filter_map(|((p, manifest), corr)| {
+            .zip(corrs.into_iter().zip(decoders))
+            .filter_map(|((p, manifest), (corr, decoder))| {
                 corr.map(|corr| Decoded {
                     projector: p.clone(),
                     manifest,
                     corr,
+                    decoder,
                     second: None,
                 })
             })

@@ -376,9 +376,12 @@ fn a_bring_up_places_a_projector_that_left_a_face_unknown_beside_the_others() {
     // of its own, more than cells of 4 (the largest) resolve in a single shot, so over cells
     // wall-front's group takes its inverses (no earlier projector decoded beside it), which is
     // not what this test is about. Cells are tested at the lab's own camera (`roomlight bench
-    // calib`), on the apart room below and on photographs (roomlight-calib).
+    // calib`), on the apart room below and on photographs (roomlight-calib). In white, one
+    // group at a time: groups in their primaries are shown pairs, not once (the lab's
+    // floor-right is placed beside the others that way too: `roomlight bench calib`).
     let settings = Settings {
         cells: false,
+        primaries: false,
         ..Settings::default()
     };
     let up =
@@ -403,8 +406,9 @@ fn a_bring_up_places_a_projector_that_left_a_face_unknown_beside_the_others() {
         .map(|m| m.projector.id.as_str())
         .collect();
     assert_eq!(ids, ["wall-front", "floor-left", "floor-right"]);
-    let config = Settings::default().decode;
-    let unknown = up.measured[2].corr.reached_unknown_share(&config);
+    let unknown = up.measured[2]
+        .corr
+        .reached_unknown_share(&up.measured[2].decoder);
     println!("floor-right left {:.2}% unknown", 100.0 * unknown);
     assert!(unknown > roomlight_calib::procedure::BESIDE_UNKNOWN);
     let placed: Vec<&str> = up.placed.iter().map(|p| p.projector.id.as_str()).collect();

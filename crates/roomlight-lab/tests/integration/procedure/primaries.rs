@@ -60,6 +60,16 @@ fn overlapping_projectors_are_coded_at_once_in_their_primaries_through_crosstalk
     );
     assert_eq!(in_primaries, 3 + longest);
     assert!(in_primaries < in_white, "{in_primaries} against {in_white}");
+    // Each is judged on the noise it was decoded with (`Decoded::decoder`, which decides its
+    // placement beside the others): one primary's in the set, white's alone.
+    let settings = Settings::default();
+    for (d, w) in coloured.iter().zip(&white) {
+        let alone = settings.decoder(&d.projector);
+        assert_eq!(d.decoder, alone.in_one_primary(), "{}", d.projector.id);
+        assert_eq!(w.decoder, alone, "{}", w.projector.id);
+        // One channel's read noise against three's, up to 1.5 times it where unmixed.
+        assert!(d.decoder.noise_floor < w.decoder.noise_floor);
+    }
     for (d, w) in coloured.iter().zip(&white) {
         if d.projector.kind != ProjectorKind::Standard {
             continue;

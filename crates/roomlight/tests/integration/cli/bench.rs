@@ -183,7 +183,10 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
     }
     // Enough model rounds between captures: 1% within three captures where the room allows it,
     // after a join counted from the join (a hot one: from its calibration's end); 3 or fewer at
-    // 2026-11-27 19:22 UTC, and the bench is deterministic at a seed.
+    // 2026-11-27 19:22 UTC, and the bench is deterministic at a seed. Where the rounds' floor
+    // lies above 1% (†: the model's columns on the room's own errors stop there), that floor
+    // within three captures instead (issue 21 item 5): node-without-chart, coded in primaries,
+    // 1.6%† in 3 (2026-12-07; 1% in 2 coded in white).
     for (case, rule) in [
         ("small/leave-2-join-4", "model-100"),
         ("small/leave-2-join-4-hot", "model-100"),
@@ -200,9 +203,10 @@ fn bench_room_quick_hard_cases_stay_stable_and_converge() {
         ("small/stale-2", "model-100"),
     ] {
         let to_1pct = row(case, rule)["captures_to_1pct"].as_u64();
+        let to_floor = row(case, rule)["captures_to_floor"].as_u64();
         assert!(
-            to_1pct.is_some_and(|c| c <= 3),
-            "{case} {rule}: {to_1pct:?}"
+            to_1pct.is_some_and(|c| c <= 3) || to_floor.is_some_and(|c| c <= 3),
+            "{case} {rule}: to 1% {to_1pct:?}, to its floor above 1% {to_floor:?}"
         );
     }
     // Heavy noise: 1% is below its floor (where the rounds stop in the room); the floor's
