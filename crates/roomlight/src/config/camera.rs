@@ -344,4 +344,27 @@ mod tests {
         .expect("model_rounds = 0");
         assert_eq!(set.model_rounds, 0);
     }
+
+    /// Calibration over the wire codes in primaries unless the file says `primaries = false`,
+    /// and the agent gets what the file says; anything but a boolean is refused.
+    #[test]
+    fn primaries_default_to_the_procedures_and_can_be_turned_off() {
+        let minimal = "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\n\
+                       hardware = { sim = \"http://127.0.0.1:1\" }\nmodel = \"m.json\"\n";
+        let agent = |text: &str| {
+            let file: CameraFile = toml::from_str(text).expect("camera.toml");
+            let hardware = CameraHardware::Sim("http://127.0.0.1:1".into());
+            file.into_process(hardware, "t".into(), None).agent
+        };
+        let default = agent(minimal);
+        assert!(default.primaries);
+        assert_eq!(
+            default.primaries,
+            roomlight_calib::procedure::Settings::default().primaries
+        );
+        assert!(!agent(&format!("{minimal}primaries = false\n")).primaries);
+        assert!(
+            toml::from_str::<CameraFile>(&format!("{minimal}primaries = \"white\"\n")).is_err()
+        );
+    }
 }
