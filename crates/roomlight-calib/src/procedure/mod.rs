@@ -334,9 +334,10 @@ pub struct Decoded {
     /// The pattern set it was coded with (its coding and code cell).
     pub manifest: Manifest,
     pub corr: Correspondence,
-    /// The decoder its first pass was decoded with, as far as its noise goes
+    /// The decoder its first pass was decoded with, before scaling to its captures' exposure
     /// ([`Settings::decoder`], in one primary's noise where its set was coded in primaries):
-    /// what its reached but unknown pixels are judged by ([`place_calibrated`]).
+    /// what its reached but unknown pixels are judged by ([`place_calibrated`]), as its
+    /// group's inverses after a single shot are.
     pub decoder: DecodeConfig,
     pub second: Option<SecondPass>,
 }

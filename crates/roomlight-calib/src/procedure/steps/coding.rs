@@ -81,25 +81,15 @@ impl<R: Rig> Procedure<'_, R> {
                     .collect(),
             });
         }
-        let mut corrs: Vec<Option<Correspondence>> = vec![None; projectors.len()];
-        // The decoder each was decoded with, as far as its noise goes: one primary's where
-        // its set was coded in primaries.
-        let mut decoders: Vec<DecodeConfig> = projectors
-            .iter()
-            .map(|p| self.settings.decoder(p))
-            .collect();
+        // Each decode with the decoder its group's job ran.
+        let mut corrs: Vec<Option<(Correspondence, DecodeConfig)>> = vec![None; projectors.len()];
         for set in &sets {
-            if set.len() > 1 {
-                for &k in set.iter().flat_map(|&g| &groups[g]) {
-                    decoders[k] = decoders[k].in_one_primary();
-                }
-            }
             // Where a blending projector of an earlier set was decoded it takes the light
             // whatever this set leaves unknown there ([`left_by`]): no inverses for that.
             let earlier = projectors
                 .iter()
                 .zip(&corrs)
-                .filter_map(|(p, c)| Some((p, c.as_ref()?)));
+                .filter_map(|(p, c)| Some((p, &c.as_ref()?.0)));
             let left = left_by(earlier, needed, dark.pixels.len());
             let members: Vec<&[usize]> = set.iter().map(|&g| groups[g].as_slice()).collect();
             let decoded = self
@@ -121,9 +111,9 @@ impl<R: Rig> Procedure<'_, R> {
         Ok(projectors
             .iter()
             .zip(manifests)
-            .zip(corrs.into_iter().zip(decoders))
-            .filter_map(|((p, manifest), (corr, decoder))| {
-                corr.map(|corr| Decoded {
+            .zip(corrs)
+            .filter_map(|((p, manifest), decoded)| {
+                decoded.map(|(corr, decoder)| Decoded {
                     projector: p.clone(),
                     manifest,
                     corr,
@@ -153,7 +143,7 @@ impl<R: Rig> Procedure<'_, R> {
         gains: &[Vec<f32>],
         (dark, dark_intensity, whites): (&LinearImage, &[f32], &[LinearImage]),
         needed: Option<&[bool]>,
-    ) -> Result<Vec<Vec<Correspondence>>, ProcedureError> {
+    ) -> Result<Vec<Vec<(Correspondence, DecodeConfig)>>, ProcedureError> {
         let once = shown_once(once, set.len());
         let once = once.as_slice();
         let bits: Vec<Vec<Pattern>> = manifests
@@ -280,6 +270,10 @@ impl<R: Rig> Procedure<'_, R> {
                 (jobs, captures)
             })
             .collect();
+        let decoders: Vec<Vec<DecodeConfig>> = sets
+            .iter()
+            .map(|(jobs, _)| jobs.iter().map(|(_, _, config, ..)| *config).collect())
+            .collect();
         let mut corrs = Vec::with_capacity(sets.len());
         for (jobs, captures) in std::mem::take(&mut sets) {
             let (c, mut captures) = self.decode_group(jobs.clone(), captures).await?;
@@ -333,7 +327,11 @@ impl<R: Rig> Procedure<'_, R> {
                 share: corr.decoded_share(),
             });
         }
-        Ok(corrs)
+        Ok(corrs
+            .into_iter()
+            .zip(decoders)
+            .map(|(corrs, decoders)| corrs.into_iter().zip(decoders).collect())
+            .collect())
     }
 
     /// Shows a set's bit patterns slot by slot (member `k` its pattern `j` in its group's
