@@ -31,7 +31,7 @@ const STEP_SHARE: f64 = 0.9;
 /// neighbouring decoded camera pixels are, at the [`STEP_SHARE`] quantile over every such pair
 /// in a row or a column (0 with no pair): the projector's scale in the camera, with grazing
 /// surfaces in, and depth edges, the rare large jumps, out.
-fn step(c: &Correspondence) -> f64 {
+pub(super) fn step(c: &Correspondence) -> f64 {
     let (w, h) = (c.width as usize, c.height as usize);
     // Steps of 255 or more are counted as 255: a depth edge, never the quantile.
     let mut counts = [0usize; 256];

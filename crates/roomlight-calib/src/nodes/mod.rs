@@ -8,6 +8,7 @@ use crate::charts::{COLUMNS, ChartCorners, Homography, ROWS};
 use crate::graycode::Correspondence;
 use std::collections::VecDeque;
 
+mod between;
 mod bridge;
 mod mask;
 
@@ -37,6 +38,18 @@ pub struct NodeConfig {
     /// whole room's 95th percentile lower on every preset (`roomlight demo [--white]`,
     /// 2026-12-07). A shadow narrower than twice this is lit as if it were not there.
     pub gap_close_px: u32,
+    /// How far inside its footprint's edge (camera pixels) a projector's share stays 0 before
+    /// it ramps up over [`Self::edge_feather_px`]: where another projector gives light, this
+    /// rim of it stays dark (a projector whose footprint no other reaches lights its rim in
+    /// full). Its edge is where a decode is least sure (a camera pixel half on the footprint,
+    /// a stripe too dim to read, a pixel a row off), and a ramp that starts there turns each
+    /// such pixel into weights that miss one by a ramp step. Measured on 2026-12-07 (`roomlight
+    /// bench calib`, overlaps within 1e-3 / 0.05): the lab's bring-up 97.09 / 98.96% at 0,
+    /// about 97.35 / 99.23% at 1.5 and 97.87 / 99.45% at 8; but at 1.5 the small room's
+    /// (`--quick`) fell from 96.03 / 98.69% to 95.72 / 98.29% and its charts' ΔE00 in `bench
+    /// room --quick` from 1.38 to 1.72, and at 8 the lab's whole-room 95th percentile rose by
+    /// 1.5–3.4 ΔE00 on four of five presets (`roomlight demo`). So 0 by default.
+    pub edge_inset_px: f32,
 }
 
 impl Default for NodeConfig {
@@ -47,6 +60,7 @@ impl Default for NodeConfig {
             target_margin_px: 6,
             min_patches: 6,
             gap_close_px: 5,
+            edge_inset_px: 0.0,
         }
     }
 }
@@ -296,9 +310,10 @@ fn overlap_shares(
             let covered: Vec<bool> = c.map.iter().map(Option::is_some).collect();
             let r = config.gap_close_px;
             let closed = erode(&dilate(&covered, cw, ch, r), cw, ch, r);
+            let inset = config.edge_inset_px.max(0.0);
             distance_inside(&closed, cw, ch)
                 .into_iter()
-                .map(|d| (d / config.edge_feather_px.max(1e-3)).min(1.0))
+                .map(|d| ((d - inset).max(0.0) / config.edge_feather_px.max(1e-3)).min(1.0))
                 .collect()
         })
         .collect()
@@ -347,23 +362,49 @@ fn blend_in_order(
         };
         let (map, bridged) = bridge::bridged(c);
         let (inv, hops) = inverse_map(c, &map, &bridged);
-        // On the outermost ring of its footprint (chamfer distance 1 or √2 from its edge) or
-        // outside it.
-        let rim = |i: usize| shares[k][i] * config.edge_feather_px.max(1e-3) < 1.5;
-        let others_reach = |i: usize| (0..shares.len()).any(|j| j != k && shares[j][i] > 0.0);
+        let read_between = between::between(&inv, &hops, (pw, ph), cw);
+        // On the outermost ring of its footprint (where its share, ramping up from its inset,
+        // is below a pixel and a half's worth) or outside it.
+        let inset = config.edge_inset_px.max(0.0);
+        let rim = |i: usize| shares[k][i] * config.edge_feather_px.max(1e-3) + inset < 1.5;
+        // Projector pixels a camera pixel spans on either side of the one decoded at its
+        // centre: half the map's step, at least 1.
+        let beyond = (bridge::step(c) / 2.0).ceil().max(1.0) as u32;
+        // Where another projector gives light at a camera pixel: one segmented with it has a
+        // share there, or one segmented before it claimed some.
+        let others_reach = |i: usize| {
+            claimed.is_some_and(|c| c[i] > 0.0)
+                || (0..shares.len()).any(|j| j != k && shares[j][i] > 0.0)
+        };
         // Blend of each projector pixel: at the surface point it lights (all that is left
         // there where no footprint has a share: unseen).
         let blend: Vec<f32> = (0..pw * ph)
             .map(|p| match inv[p] {
-                // Filled from the rim, more than one step from what was decoded: beyond the
-                // footprint's decoded edge (a grazing strip the decode missed), where the others,
-                // seeing no footprint of this projector, give all their light. One step is the
-                // pixel beside a decoded one, which still lights that camera pixel where the
-                // projector is finer than the camera (half a camera pixel's worth of steps, the
-                // map's own scale, caught 6% of the lab's misses instead of 21%: across a
-                // grazing strip that is more than one camera pixel).
-                Some(i) if hops[p] > 1 && rim(i as usize) && others_reach(i as usize) => 0.0,
+                // Filled more than one step from a pixel with a camera pixel of its own, and
+                // landing (read between those on either side, [`between`]) outside its own
+                // footprint where another gives light: a band it grazes, too dim to decode,
+                // which the others, seeing no footprint of it there, light in full. One step
+                // is the pixel beside a decoded one, which still lights that camera pixel where
+                // the projector is finer than the camera.
+                Some(_)
+                    if hops[p] > 1
+                        && read_between[p].is_some_and(|j| {
+                            shares[k][j as usize] == 0.0 && others_reach(j as usize)
+                        }) =>
+                {
+                    0.0
+                }
+                // Filled from the outermost ring of its footprint (chamfer distance 1 or √2
+                // from its edge, beyond its inset), further from what was decoded than a camera
+                // pixel spans: beyond the footprint's decoded edge (a grazing strip the decode
+                // missed), where the others, seeing no footprint of this projector, give all
+                // their light. Nearer, the pixel still lights that camera pixel where the
+                // projector is finer than the camera (the lab's bring-up, overlaps within 1e-3:
+                // 97.09% beyond half the map's step, 96.74% beyond one step, 2026-12-07).
+                Some(i) if hops[p] > beyond && rim(i as usize) && others_reach(i as usize) => 0.0,
                 Some(i) if shares[k][i as usize] > 0.0 => blend_at(i as usize),
+                // Its footprint's inset rim, or filled from it: the others give all there.
+                Some(i) if others_reach(i as usize) => 0.0,
                 Some(i) => (1.0 - taken[i as usize]).max(0.0),
                 None => 1.0,
             })
