@@ -475,13 +475,12 @@ pub fn luminaires(projectors: &[Projector]) -> Vec<Projector> {
 pub const LEFT_TO_JOINER: f32 = 1e-3;
 
 /// A standard luminaire calibrated with others that leaves more of its reached pixels unknown
-/// than this share of its decoded ones is placed beside the others, as a joiner is
-/// ([`place_calibrated`]), judged on the noise it was decoded with ([`Decoded::decoder`]).
-/// On the lab (`roomlight bench calib`, 2026-12-07), coded in primaries, the walls and
-/// floor-left leave 0.00–0.08% and floor-right 1.04% (a grazing face the others light),
-/// just over this share: 0.81% judged on white's higher noise floor, which segmented it with
-/// the others (partition of unity in overlaps 93.58% within 1e-3 against 96.51% beside them,
-/// and the demo's charts 0.07–0.28 ΔE00 worse). Coded in white, 0.00–0.70% and 5.41%.
+/// than this share of its decoded ones, judged on the noise it was decoded with
+/// ([`Decoded::decoder`]), is placed beside the others as a joiner is ([`goes_beside`]). The
+/// lab coded in primaries (`roomlight bench calib`, 2026-12-07): walls and floor-left leave
+/// 0.00–0.08%, floor-right 1.04% (a grazing face the others light); 0.81% on white's higher
+/// noise floor, which segmented it with the others (overlaps within 1e-3 93.58% against
+/// 96.51% beside, charts 0.07–0.28 ΔE00 worse). Coded in white, 0.00–0.70% and 5.41%.
 pub const BESIDE_UNKNOWN: f64 = 0.01;
 
 /// The camera pixels where a projector joining a lit room is needed: those where the
@@ -664,10 +663,14 @@ pub(super) fn owned_pixels(group: &[usize], gains: &[Vec<f32>]) -> Vec<Option<Ve
         .collect()
 }
 
+/// Whether [`place_calibrated`] places `m` beside the others ([`BESIDE_UNKNOWN`]).
+pub fn goes_beside(m: &Measured) -> bool {
+    m.projector.blends() && m.corr.reached_unknown_share(&m.decoder) > BESIDE_UNKNOWN
+}
+
 /// Places projectors calibrated together ([`place`]), beside projectors already lit
-/// (`claimed`) if any: first those decoded in full, then, beside them too, the standard
-/// luminaires whose decode left more than [`BESIDE_UNKNOWN`] of their reached pixels unknown,
-/// as joiners are placed. Structured light spent no inverses or second pass where another
+/// (`claimed`) if any: first those decoded in full, then, beside them too, those that
+/// [`goes_beside`] picks, as joiners are placed. Structured light spent no inverses or second pass where another
 /// blending projector was decoded ([`Procedure::structured_light`]); segmented all together,
 /// such a projector's blend guessed at the face it left unknown where the others already
 /// give all the light (the lab's bring-up: 98.44% of overlap points within 0.05, against
@@ -680,11 +683,7 @@ pub fn place_calibrated(
     settings: &Settings,
     progress: &mut dyn FnMut(Event),
 ) -> Result<Vec<Placed>, CalibError> {
-    let incomplete = |m: &Measured| {
-        m.projector.blends() && m.corr.reached_unknown_share(&m.decoder) > BESIDE_UNKNOWN
-    };
-    let (rest, first): (Vec<&Measured>, Vec<&Measured>) =
-        measured.iter().partition(|m| incomplete(m));
+    let (rest, first): (Vec<&Measured>, Vec<_>) = measured.iter().partition(|m| goes_beside(m));
     if first.is_empty() || rest.is_empty() {
         return place(
             setup,

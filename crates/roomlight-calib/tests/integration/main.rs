@@ -2,6 +2,7 @@
 //! graph each, the most of CI's build): each former `tests/*.rs` is a module here.
 
 mod attenuation;
+mod beside;
 mod charts;
 mod common;
 mod cone;
