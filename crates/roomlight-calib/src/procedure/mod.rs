@@ -670,11 +670,11 @@ pub fn goes_beside(m: &Measured) -> bool {
 
 /// Places projectors calibrated together ([`place`]), beside projectors already lit
 /// (`claimed`) if any: first those decoded in full, then, beside them too, those that
-/// [`goes_beside`] picks, as joiners are placed. Structured light spent no inverses or second pass where another
-/// blending projector was decoded ([`Procedure::structured_light`]); segmented all together,
-/// such a projector's blend guessed at the face it left unknown where the others already
-/// give all the light (the lab's bring-up: 98.44% of overlap points within 0.05, against
-/// 99.70% placed beside). In that order: first, then beside; ids from `first_node` on.
+/// [`goes_beside`] picks, as joiners are placed. Structured light spent no inverses or second
+/// pass where another blending projector was decoded ([`Procedure::structured_light`]);
+/// segmented all together, such a projector's blend guessed at the face it left unknown where
+/// the others already give all the light (the lab's bring-up: 98.44% of overlap points within
+/// 0.05, against 99.70% beside). In that order, first then beside; ids from `first_node` on.
 pub fn place_calibrated(
     setup: &Setup,
     measured: &[Measured],
