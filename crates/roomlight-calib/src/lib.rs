@@ -10,6 +10,8 @@
 //! - [`cone`]: the large aperture's cone mask and the ring handed to the texture projector.
 //! - [`rig`]: the [`rig::Rig`] trait, what differs between the callers of calibration (which
 //!   projectors are live, show frames on them, capture).
+//! - [`shading`]: per-pixel, per-channel gains that make each luminaire follow the room's
+//!   reference photograph beyond the charts.
 //! - [`procedure`]: the one calibration procedure, written against a rig: bring-up of a dark
 //!   room, a projector joining a lit one.
 //!
@@ -26,6 +28,7 @@ pub mod nodes;
 pub mod procedure;
 pub mod response;
 pub mod rig;
+pub mod shading;
 pub mod shared_ramp;
 
 /// What went wrong, naming the file or field and what was expected.

@@ -210,6 +210,30 @@ fn print_whole_room(name: &str, w: &crate::whole_room::WholeRoom) {
     );
 }
 
+/// Seed of the shading passes' camera noise, mixed with the demo's.
+const SHADING_SEED: u64 = 0x5ade;
+
+fn print_shaded(name: &str, s: &crate::shaded::Shaded) {
+    let path: Vec<String> = s
+        .passes
+        .iter()
+        .map(|p| {
+            format!(
+                "{:.2} / {:.2}",
+                p.whole_room_de00_mean, p.whole_room_de00_p95
+            )
+        })
+        .collect();
+    let last = s.last();
+    println!(
+        "{name}, per-pixel shading after the rounds (in process, {} captures): whole room ΔE00 mean / p95 {}; charts {:.2} → {:.2}",
+        last.captures,
+        path.join(" → "),
+        s.passes[0].chart_de00_mean,
+        last.chart_de00_mean
+    );
+}
+
 /// The calibrated simulated lab the demo's runs share.
 struct Lab<'a> {
     room: &'a Arc<roomlight_sim::Room>,
@@ -242,9 +266,15 @@ impl Lab<'_> {
         let mut rules = Vec::new();
         let mut kept = None;
         let tradeoff = crate::dark_target::preset(self.room.scene());
+        // The shading passes' captures draw their own noise: the rounds' figures stay those of
+        // the nodes alone, capture for capture.
+        let mut shading_noise =
+            roomlight_sim::CameraNoise::with_seed(self.room, self.options.seed ^ SHADING_SEED);
+        let black = vec![roomlight_sim::Frame::Black; self.room.projectors().len()];
+        let dark = shading_noise.expose(&self.room.render(&black, None)?);
         for (preset, spec) in self.room.scene().presets.iter().enumerate() {
             let t = Instant::now();
-            let lit = pipeline::measure_lit(self.room, self.cal, preset, noise)?;
+            let (lit, photograph) = pipeline::photograph_lit(self.room, self.cal, preset, noise)?;
             let weight = self.options.dark_weight.unwrap_or(spec.dark_weight);
             let model = pipeline::Model::for_weight(self.cal, &lit, weight)?;
             if Some(preset) == tradeoff {
@@ -276,6 +306,26 @@ impl Lab<'_> {
                 );
             }
             self.phases.borrow_mut().done("pictures and whole room", t);
+            let t = Instant::now();
+            let shaded = crate::shaded::shade(
+                self.room,
+                self.cal,
+                self.reach,
+                crate::shaded::Preset {
+                    index: preset,
+                    reference: &photograph,
+                    dark: &dark,
+                },
+                &result.x,
+                &mut shading_noise,
+                crate::shaded::PASSES,
+            )?;
+            let mut shaded = shaded;
+            let file = format!("{}-de00-map-shaded.png", report::pictures::slug(&spec.name));
+            report::png::write_srgb8_image(&dir.join(&file), &shaded.map)?;
+            shaded.map_file = Some(file);
+            print_shaded(&spec.name, &shaded);
+            self.phases.borrow_mut().done("per-pixel shading", t);
             if preset == 0 {
                 let t = Instant::now();
                 rules = self.compare_rules(&model, &truth)?;
@@ -298,6 +348,7 @@ impl Lab<'_> {
                 result,
                 pictures,
                 model_best: model_best.to_vec(),
+                shaded,
             });
         }
         Ok((presets, rules, kept))

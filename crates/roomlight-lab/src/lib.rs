@@ -17,6 +17,7 @@ pub mod pm;
 pub mod process;
 pub mod rendered;
 pub mod report;
+pub mod shaded;
 pub mod shadow;
 pub mod soak;
 pub mod whole_room;

@@ -562,8 +562,19 @@ pub fn measure_lit(
     preset: usize,
     noise: &mut CameraNoise,
 ) -> Result<Vec<PatchSample>> {
+    Ok(photograph_lit(room, cal, preset, noise)?.0)
+}
+
+/// [`measure_lit`], with the photograph its samples were read from.
+pub fn photograph_lit(
+    room: &Room,
+    cal: &Calibrated,
+    preset: usize,
+    noise: &mut CameraNoise,
+) -> Result<(Vec<PatchSample>, roomlight_sim::Capture)> {
     let frames = vec![Frame::Black; room.projectors().len()];
-    cal.sample_room(&noise.expose(&room.render(&frames, Some(preset))?))
+    let photo = noise.expose(&room.render(&frames, Some(preset))?);
+    Ok((cal.sample_room(&photo)?, photo))
 }
 
 impl Model {

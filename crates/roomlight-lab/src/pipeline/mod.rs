@@ -30,7 +30,7 @@ use roomlight_calib::procedure::Setup;
 use roomlight_core::LinearRgb;
 use roomlight_sim::Room;
 
-fn image(c: &roomlight_sim::Capture) -> LinearImage {
+pub(crate) fn image(c: &roomlight_sim::Capture) -> LinearImage {
     LinearImage {
         width: c.width,
         height: c.height,

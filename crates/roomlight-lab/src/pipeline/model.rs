@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use roomlight_calib::procedure::Target;
 use roomlight_calib::response::{Encoder, Response};
+use roomlight_calib::shading::Gains;
 use roomlight_core::optimum::Optimum;
 use roomlight_core::{LinearRgb, Problem};
 use roomlight_sim::{Frame, NodeRegion, ProjectorImage, Room};
@@ -149,12 +150,22 @@ impl FrameBuilder {
 
     /// The frames for node values `x` (a missing value counts as black).
     pub fn frames(&self, x: &[LinearRgb]) -> Vec<Frame> {
+        self.frames_shaded(x, &[])
+    }
+
+    /// The frames for node values `x`, each projector's light multiplied pixel by pixel by its
+    /// gains (`gains[k]` for room projector `k`; none, or missing: as the nodes give it).
+    pub fn frames_shaded(&self, x: &[LinearRgb], gains: &[Option<Gains>]) -> Vec<Frame> {
         // Bands of rows are independent tasks: the same codes on any number of cores.
         self.projectors
             .par_iter()
             .enumerate()
             .map(|(k, p)| {
                 let encoder = &self.encoders[k];
+                let gains = gains
+                    .get(k)
+                    .and_then(Option::as_ref)
+                    .filter(|g| g.size() == (p.width, p.height));
                 let width = p.width.max(1) as usize;
                 let mut pixels = vec![[0.0f32; 3]; p.counts.len()];
                 pixels
@@ -168,7 +179,8 @@ impl FrameBuilder {
                         // pixel on a store it had just made (a quarter of a capture's time).
                         let (mut seen, mut last_bits, mut last_code) =
                             (false, [0u64; 3], [0.0f32; 3]);
-                        for (code, &c) in chunk.iter_mut().zip(&p.counts[first..]) {
+                        for (j, (code, &c)) in chunk.iter_mut().zip(&p.counts[first..]).enumerate()
+                        {
                             let end = at + usize::from(c);
                             let mut l = LinearRgb::ZERO;
                             for (&n, &w) in p.nodes[at..end].iter().zip(&p.weights[at..end]) {
@@ -176,6 +188,11 @@ impl FrameBuilder {
                                 l += v * f64::from(w);
                             }
                             at = end;
+                            if let Some(g) = gains {
+                                let i = (first + j) as u32;
+                                let g = g.at(i % p.width, i / p.width);
+                                l = LinearRgb(std::array::from_fn(|c| l.0[c] * f64::from(g[c])));
+                            }
                             let bits = l.0.map(f64::to_bits);
                             if !seen || bits != last_bits {
                                 (seen, last_bits, last_code) = (true, bits, encoder.code(l));

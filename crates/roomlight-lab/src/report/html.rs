@@ -190,6 +190,36 @@ prediction at its optimum.</p><table><tr><th>preset</th><th>model</th><th>patche
         }
     }
     h.push_str("</table>");
+    h.push_str(
+        "<p>Per-pixel shading after the rounds: each luminaire's light multiplied per block of its \
+pixels and per colour channel by gains stepped towards the LEDs' photograph, one capture a pass \
+(<code>roomlight_calib::shading</code>). It runs in the demo's process on what a camera gives (the \
+preset's photograph, noisy captures, the decodes); no message carries gains to a node agent yet. \
+Whole-room ΔE00 mean / p95 after each pass (the first: the rounds' result).</p>\
+<table><tr><th>preset</th><th>whole room, pass by pass</th><th>charts ΔE00 before → after</th></tr>",
+    );
+    for p in &report.presets {
+        let s = &p.shaded;
+        let path: Vec<String> = s
+            .passes
+            .iter()
+            .map(|q| {
+                format!(
+                    "{:.2} / {:.2}",
+                    q.whole_room_de00_mean, q.whole_room_de00_p95
+                )
+            })
+            .collect();
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{:.2} → {:.2}</td></tr>",
+            escape(&p.name),
+            path.join(" → "),
+            s.passes[0].chart_de00_mean,
+            s.last().chart_de00_mean
+        );
+    }
+    h.push_str("</table>");
 }
 
 /// One preset's ΔE00 map and its crops where it is worst, at the camera's full resolution.
@@ -207,12 +237,24 @@ fn whole_room_figures(h: &mut String, p: &PresetOutcome) {
         h,
         "<figure style=\"margin:1em 0\"><img src=\"{map}\" alt=\"ΔE00 map\"><figcaption>ΔE00 of the \
 result against the LEDs per camera pixel (mean {mean:.2}, 95th percentile {p95:.2} over reached pixels); \
-greys: not reached, black: no surface</figcaption></figure>\
+greys: not reached, black: no surface</figcaption></figure>{shaded}\
 <p>Where the map is worst: the {w}×{hh} window at ({x}, {y}), the camera's own pixels, not resampled ({shown}).</p>\
 <div class=\"row crops\">",
         map = escape(&pic.de00_map),
         mean = pic.whole_room.de00_mean,
         p95 = pic.whole_room.de00_p95,
+        shaded = p.shaded.map_file.as_ref().map_or(String::new(), |f| {
+            let last = p.shaded.last();
+            format!(
+                "<figure style=\"margin:1em 0\"><img src=\"{}\" alt=\"ΔE00 map after shading\">\
+<figcaption>The same after {} passes of per-pixel shading (mean {:.2}, 95th percentile {:.2})\
+</figcaption></figure>",
+                escape(f),
+                last.captures,
+                last.whole_room_de00_mean,
+                last.whole_room_de00_p95
+            )
+        }),
     );
     for (file, caption) in pic.crops.iter().zip(["the LEDs", "the result", "ΔE00"]) {
         let _ = write!(

@@ -37,6 +37,8 @@ pub struct PresetOutcome {
     /// What the measured model could reach over the whole room: its optimum over the charts
     /// alone, and with the walls weighed in ([`crate::whole_room_best::pair`]).
     pub model_best: Vec<crate::whole_room_best::Best>,
+    /// The room after per-pixel shading passes on the rounds' result ([`crate::shaded`]).
+    pub shaded: crate::shaded::Shaded,
 }
 
 /// One update rule run on the first preset, for the convergence plots.
@@ -275,6 +277,7 @@ fn preset_metrics(report: &Report, index: usize, p: &PresetOutcome) -> Value {
         "whole_room_seam": w.seam,
         "whole_room": w,
         "whole_room_model_best": p.model_best,
+        "whole_room_shaded": p.shaded,
         "ansi_contrast": ansi,
         "dark_weight": p.dark_weight,
         "linear_png_scale": p.pictures.linear.iter().map(|(f, s)| (f.clone(), json!(s))).collect::<serde_json::Map<_, _>>(),

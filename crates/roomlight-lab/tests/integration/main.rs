@@ -6,6 +6,7 @@ mod determinism;
 mod fuzz_files;
 mod late_camera;
 mod procedure;
+mod shading;
 mod shaped;
 mod support;
 mod walls;

@@ -1,0 +1,308 @@
+//! Per-pixel shading: each luminaire's light follows the room's reference photograph pixel by
+//! pixel and colour channel by channel, not only at the charts (issue 22 item 2).
+//!
+//! A node drives one colour over its region; the LEDs' light varies across that region by the
+//! surfaces' angles and distances to the LEDs (not the projector's), by the LED panels a preset
+//! turns on, and by inter-reflection. What the camera sees of the whole room closes that gap:
+//! with a photograph of the room under the LEDs (`reference`, projectors dark), one with the
+//! projectors' current light (`current`, LEDs off) and the room dark (`dark`), every camera
+//! pixel says by how much the projectors' light there should be multiplied, per channel:
+//! `(reference − dark) / (current − dark)`. Through each projector's decode those ratios land on
+//! blocks of its pixels ([`ratios`]), and the projector multiplies its drawn light by a gain per
+//! block and channel, bilinear between block centres ([`Gains`]), stepped a power `rate` of the
+//! ratio at a time ([`Gains::step`]). Every projector lighting a camera pixel gets that pixel's
+//! ratio, so overlaps keep their blend: a multiplicative step of all the light a pixel receives.
+//! Inter-reflection makes one step fall short; a few passes converge (docs/results.md).
+//!
+//! Bounds: a pass moves a block's gain by at most [`MAX_STEP`] either way, and a gain stays
+//! within [`MIN_GAIN`]..[`MAX_GAIN`]; a block the camera does not read (too few decoded pixels,
+//! too dim in the current light, saturated, on the target) is filled from read blocks up to
+//! [`FILL_BLOCKS`] away, and beyond keeps its gain. No NaN or infinity can reach a gain: every
+//! ratio is of finite, non-negative sums with a positive floor under the denominator.
+//!
+//! Hand-written: a ratio of images binned through a correspondence, no crate does it.
+
+use crate::CalibError;
+use crate::graycode::Correspondence;
+use crate::image_io::LinearImage;
+use std::collections::VecDeque;
+
+/// Side of a block of projector pixels that carries one gain. A wall projector's block sees
+/// some 40 camera pixels in the lab: enough to average the camera's noise down.
+pub const BLOCK: u32 = 16;
+
+/// Bounds of a gain: light down to 1/32 of the node's (a corner the LEDs leave dark) and up to
+/// 64 times (a node its chart keeps dim, asked for much more light away from it; the
+/// projector's codes clip at full light anyway). Measured on the lab: 8 instead moved its
+/// whole-room figures by at most 0.13 ΔE00.
+pub const MIN_GAIN: f32 = 1.0 / 32.0;
+pub const MAX_GAIN: f32 = 64.0;
+
+/// One pass moves a gain by at most this factor up or down.
+pub const MAX_STEP: f64 = 4.0;
+
+/// How many blocks a read ratio is carried on into blocks without one.
+pub const FILL_BLOCKS: u32 = 2;
+
+/// A camera pixel counts only when the projectors' current light raises it by at least this
+/// share of the 99th percentile of that rise over the decoded pixels: dimmer, its ratio is
+/// mostly noise.
+const MIN_SHARE: f64 = 0.02;
+
+/// A block needs this many usable camera pixels.
+const MIN_PIXELS: u32 = 3;
+
+/// The photographs one pass reads, all the camera's size.
+#[derive(Debug, Clone, Copy)]
+pub struct Photographs<'a> {
+    /// The room under the LEDs, projectors dark.
+    pub reference: &'a LinearImage,
+    /// The room under the projectors' current light, LEDs off.
+    pub current: &'a LinearImage,
+    /// The room dark.
+    pub dark: &'a LinearImage,
+    /// Camera pixels left out (the projection-mapping target: its light is not the room's).
+    pub excluded: &'a [bool],
+    /// The camera's saturation level: a pixel at or above it in any image is left out.
+    pub saturation: f32,
+}
+
+/// Per block of one projector's pixels and per channel, the factor its light should be
+/// multiplied by; `None` where the camera does not read it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ratios {
+    width: u32,
+    height: u32,
+    across: usize,
+    down: usize,
+    ratio: Vec<Option<[f64; 3]>>,
+}
+
+impl Ratios {
+    /// Blocks read (or filled) out of all.
+    pub fn read(&self) -> (usize, usize) {
+        (self.ratio.iter().flatten().count(), self.ratio.len())
+    }
+}
+
+/// The ratio of the reference's light to the current one on blocks of the projector that
+/// `corr` decodes, each block's ratio the ratio of its pixels' sums (per channel, so noise
+/// averages before it divides). Errors name the image whose size is not the camera's.
+pub fn ratios(photos: &Photographs<'_>, corr: &Correspondence) -> Result<Ratios, CalibError> {
+    let pixels = corr.map.len();
+    for (what, len) in [
+        ("reference", photos.reference.pixels.len()),
+        ("current", photos.current.pixels.len()),
+        ("dark", photos.dark.pixels.len()),
+        ("excluded", photos.excluded.len()),
+    ] {
+        if len != pixels {
+            return Err(CalibError::Invalid {
+                field: "shading",
+                problem: format!("the {what} image has {len} pixels, the decode {pixels}"),
+            });
+        }
+    }
+    let (pw, ph) = (corr.projector_width, corr.projector_height);
+    if pw == 0 || ph == 0 {
+        return Err(CalibError::Invalid {
+            field: "shading",
+            problem: format!("the decode's projector is {pw}×{ph}"),
+        });
+    }
+    let across = pw.div_ceil(BLOCK) as usize;
+    let down = ph.div_ceil(BLOCK) as usize;
+    let rise = |c: usize| -> Option<([f64; 3], [f64; 3])> {
+        if photos.excluded[c] {
+            return None;
+        }
+        let (r, u, d) = (
+            photos.reference.pixels[c],
+            photos.current.pixels[c],
+            photos.dark.pixels[c],
+        );
+        if r.iter()
+            .chain(&u)
+            .chain(&d)
+            .any(|v| !v.is_finite() || *v >= photos.saturation)
+        {
+            return None;
+        }
+        let up =
+            |a: [f32; 3]| std::array::from_fn(|i| (f64::from(a[i]) - f64::from(d[i])).max(0.0));
+        Some((up(r), up(u)))
+    };
+    let mean = |v: [f64; 3]| (v[0] + v[1] + v[2]) / 3.0;
+    let mut lit: Vec<f64> = corr
+        .map
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.is_some())
+        .filter_map(|(c, _)| rise(c).map(|(_, u)| mean(u)))
+        .collect();
+    let floor = MIN_SHARE * quantile(&mut lit, 0.99).unwrap_or(0.0);
+    let mut sums = vec![([0.0f64; 3], [0.0f64; 3], 0u32); across * down];
+    for (c, m) in corr.map.iter().enumerate() {
+        let Some((x, y)) = *m else { continue };
+        let Some((r, u)) = rise(c) else { continue };
+        if mean(u) < floor || mean(u) <= 0.0 {
+            continue;
+        }
+        let b = (y / BLOCK) as usize * across + (x / BLOCK) as usize;
+        if let Some(s) = sums.get_mut(b) {
+            for i in 0..3 {
+                s.0[i] += r[i];
+                s.1[i] += u[i];
+            }
+            s.2 += 1;
+        }
+    }
+    let mut ratio: Vec<Option<[f64; 3]>> = sums
+        .iter()
+        .map(|(r, u, n)| {
+            // A channel the projectors barely give (a warm room's blue) divides by a floor of
+            // a thousandth of the block's mean light, which is above zero (each pixel read
+            // rose by more than 0 on average over its channels); it pulls a ratio towards 1
+            // by at most a thousandth of the block's light.
+            let eps = 1e-3 * mean(*u);
+            (*n >= MIN_PIXELS && eps > 0.0).then(|| {
+                std::array::from_fn(|i| {
+                    ((r[i] + eps) / (u[i] + eps)).clamp(1.0 / MAX_STEP, MAX_STEP)
+                })
+            })
+        })
+        .collect();
+    fill(&mut ratio, across, down);
+    Ok(Ratios {
+        width: pw,
+        height: ph,
+        across,
+        down,
+        ratio,
+    })
+}
+
+/// Carries read ratios into unread blocks, breadth first, up to [`FILL_BLOCKS`] away.
+fn fill(ratio: &mut [Option<[f64; 3]>], across: usize, down: usize) {
+    let mut steps = vec![0u32; ratio.len()];
+    let mut queue: VecDeque<usize> = (0..ratio.len()).filter(|&b| ratio[b].is_some()).collect();
+    while let Some(b) = queue.pop_front() {
+        if steps[b] >= FILL_BLOCKS {
+            continue;
+        }
+        let (x, y) = (b % across, b / across);
+        let around = [
+            (x > 0).then(|| b - 1),
+            (x + 1 < across).then(|| b + 1),
+            (y > 0).then(|| b - across),
+            (y + 1 < down).then(|| b + across),
+        ];
+        for n in around.into_iter().flatten() {
+            if ratio[n].is_none() {
+                ratio[n] = ratio[b];
+                steps[n] = steps[b] + 1;
+                queue.push_back(n);
+            }
+        }
+    }
+}
+
+/// One projector's gains, per block and channel; its drawn light is multiplied by them,
+/// bilinear between block centres ([`Gains::at`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gains {
+    width: u32,
+    height: u32,
+    across: usize,
+    down: usize,
+    gains: Vec<[f32; 3]>,
+}
+
+impl Gains {
+    /// Every gain 1: the nodes' light as it is. `None` for an empty projector.
+    pub fn flat(width: u32, height: u32) -> Option<Self> {
+        (width > 0 && height > 0).then(|| {
+            let across = width.div_ceil(BLOCK) as usize;
+            let down = height.div_ceil(BLOCK) as usize;
+            Self {
+                width,
+                height,
+                across,
+                down,
+                gains: vec![[1.0; 3]; across * down],
+            }
+        })
+    }
+
+    /// Multiplies every read block's gain by its ratio to the power `rate` (in `(0, 1]`; a
+    /// rate outside is refused), within the bounds. Errors when `ratios` is of another
+    /// projector size.
+    pub fn step(&mut self, ratios: &Ratios, rate: f64) -> Result<(), CalibError> {
+        if (ratios.width, ratios.height) != (self.width, self.height) {
+            return Err(CalibError::Invalid {
+                field: "shading",
+                problem: format!(
+                    "ratios of a {}×{} projector for gains of a {}×{} one",
+                    ratios.width, ratios.height, self.width, self.height
+                ),
+            });
+        }
+        if !(rate > 0.0 && rate <= 1.0) {
+            return Err(CalibError::Invalid {
+                field: "shading rate",
+                problem: format!("{rate}, expected in (0, 1]"),
+            });
+        }
+        for (g, r) in self.gains.iter_mut().zip(&ratios.ratio) {
+            let Some(r) = r else { continue };
+            for i in 0..3 {
+                let next = f64::from(g[i]) * r[i].powf(rate);
+                g[i] = (next as f32).clamp(MIN_GAIN, MAX_GAIN);
+            }
+        }
+        Ok(())
+    }
+
+    /// The gain at projector pixel `(x, y)`, bilinear between block centres (clamped at the
+    /// frame's edge).
+    pub fn at(&self, x: u32, y: u32) -> [f32; 3] {
+        let b = f64::from(BLOCK);
+        let fx = ((f64::from(x) + 0.5) / b - 0.5).clamp(0.0, (self.across - 1) as f64);
+        let fy = ((f64::from(y) + 0.5) / b - 0.5).clamp(0.0, (self.down - 1) as f64);
+        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.across - 1), (y0 + 1).min(self.down - 1));
+        let (tx, ty) = ((fx - x0 as f64) as f32, (fy - y0 as f64) as f32);
+        let g = |x: usize, y: usize| self.gains[y * self.across + x];
+        std::array::from_fn(|i| {
+            let top = g(x0, y0)[i] * (1.0 - tx) + g(x1, y0)[i] * tx;
+            let bottom = g(x0, y1)[i] * (1.0 - tx) + g(x1, y1)[i] * tx;
+            top * (1.0 - ty) + bottom * ty
+        })
+    }
+
+    /// The projector's size.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// The 5th and 95th percentiles of the gains over the blocks (channels pooled).
+    pub fn spread(&self) -> (f32, f32) {
+        let mut v: Vec<f64> = self.gains.iter().flat_map(|g| g.map(f64::from)).collect();
+        let lo = quantile(&mut v, 0.05).unwrap_or(1.0);
+        let hi = quantile(&mut v, 0.95).unwrap_or(1.0);
+        (lo as f32, hi as f32)
+    }
+}
+
+/// Nearest-rank quantile `q` of `v` (reordered); `None` when empty.
+fn quantile(v: &mut [f64], q: f64) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let k = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
+    let (_, x, _) = v.select_nth_unstable_by(k, f64::total_cmp);
+    Some(*x)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,221 @@
+use super::*;
+
+/// A camera that sees a projector of the same size pixel for pixel.
+fn identity(w: u32, h: u32) -> Correspondence {
+    let n = (w * h) as usize;
+    Correspondence {
+        width: w,
+        height: h,
+        projector_width: w,
+        projector_height: h,
+        map: (0..w * h).map(|i| Some((i % w, i / w))).collect(),
+        confidence: vec![1.0; n],
+        direct: vec![1.0; n],
+        global: vec![0.0; n],
+        reach: 0.0,
+    }
+}
+
+fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> [f32; 3]) -> LinearImage {
+    LinearImage {
+        width: w,
+        height: h,
+        pixels: (0..w * h).map(|i| f(i % w, i / w)).collect(),
+    }
+}
+
+const W: u32 = 96;
+const H: u32 = 64;
+
+/// Where the reference asks twice the red and half the blue over the left half, one full step
+/// gives those gains there, 1 on the right, and the bilinear gain passes between them.
+#[test]
+fn one_full_step_gives_the_ratio_per_channel() {
+    let dark = image(W, H, |_, _| [0.01; 3]);
+    let current = image(W, H, |_, _| [0.21, 0.31, 0.41]);
+    let reference = image(W, H, |x, _| {
+        if x < W / 2 {
+            [0.41, 0.31, 0.21]
+        } else {
+            [0.21, 0.31, 0.41]
+        }
+    });
+    let excluded = vec![false; (W * H) as usize];
+    let photos = Photographs {
+        reference: &reference,
+        current: &current,
+        dark: &dark,
+        excluded: &excluded,
+        saturation: 1.0,
+    };
+    let r = ratios(&photos, &identity(W, H)).expect("ratios");
+    assert_eq!(r.read(), (6 * 4, 6 * 4));
+    let mut g = Gains::flat(W, H).expect("gains");
+    g.step(&r, 1.0).expect("step");
+    let left = g.at(8, 30);
+    let right = g.at(W - 9, 30);
+    for (got, want) in left.iter().zip([2.0, 1.0, 0.5]) {
+        // The floor under a channel's sum pulls a ratio towards 1 by a thousandth at most.
+        assert!((got - want).abs() < 2e-3 * want, "left {left:?}");
+    }
+    for got in right {
+        assert!((got - 1.0).abs() < 1e-4, "right {right:?}");
+    }
+    // Between the centres of the last left block (x 40) and the first right one (x 56).
+    let mid = g.at(47, 30)[0];
+    assert!(
+        (1.0..2.0).contains(&mid) && (mid - 1.5).abs() < 0.05,
+        "mid {mid}"
+    );
+    // Half a step: the square root.
+    let mut half = Gains::flat(W, H).expect("gains");
+    half.step(&r, 0.5).expect("step");
+    assert!((half.at(8, 30)[0] - 2f32.sqrt()).abs() < 2e-3);
+}
+
+/// A toy room with inter-reflection: every camera pixel gets its projector pixel's light
+/// times an albedo plus a fifth of the room's mean light, so one step falls short; passes of
+/// the loop bring the whole image within 1% of a reference that is reachable.
+#[test]
+fn passes_converge_through_inter_reflection() {
+    let albedo = |x: u32, y: u32| {
+        [
+            0.3 + 0.4 * x as f32 / W as f32,
+            0.5,
+            0.7 - 0.3 * y as f32 / H as f32,
+        ]
+    };
+    // The light the projector shows at each pixel, from its gains on a flat node value.
+    let render = |g: &Gains| {
+        let direct: Vec<[f32; 3]> = (0..W * H)
+            .map(|i| {
+                let (x, y) = (i % W, i / W);
+                let (a, gain) = (albedo(x, y), g.at(x, y));
+                std::array::from_fn(|c| 0.3 * gain[c] * a[c])
+            })
+            .collect();
+        let mean: [f32; 3] =
+            std::array::from_fn(|c| direct.iter().map(|p| p[c]).sum::<f32>() / direct.len() as f32);
+        LinearImage {
+            width: W,
+            height: H,
+            pixels: direct
+                .iter()
+                .map(|p| std::array::from_fn(|c| 0.02 + p[c] + 0.2 * mean[c]))
+                .collect(),
+        }
+    };
+    // The reference: what smooth gains (within the bounds) would give.
+    let mut want = Gains::flat(W, H).expect("gains");
+    for (b, g) in want.gains.iter_mut().enumerate() {
+        let (bx, by) = ((b % want.across) as f32, (b / want.across) as f32);
+        *g = [1.0 + 0.15 * bx, 1.6 - 0.1 * by, 0.6 + 0.05 * (bx + by)];
+    }
+    let reference = render(&want);
+    let dark = image(W, H, |_, _| [0.02; 3]);
+    let excluded = vec![false; (W * H) as usize];
+    let corr = identity(W, H);
+    let mut g = Gains::flat(W, H).expect("gains");
+    let worst = |g: &Gains| {
+        let now = render(g);
+        now.pixels
+            .iter()
+            .zip(&reference.pixels)
+            .flat_map(|(a, b)| (0..3).map(move |c| ((a[c] - b[c]) / b[c]).abs()))
+            .fold(0.0f32, f32::max)
+    };
+    let start = worst(&g);
+    for _ in 0..8 {
+        let current = render(&g);
+        let photos = Photographs {
+            reference: &reference,
+            current: &current,
+            dark: &dark,
+            excluded: &excluded,
+            saturation: 1.0,
+        };
+        g.step(&ratios(&photos, &corr).expect("ratios"), 0.8)
+            .expect("step");
+    }
+    let end = worst(&g);
+    assert!(start > 0.3, "the start is off by {start}");
+    assert!(end < 0.01, "after 8 passes the worst pixel is off by {end}");
+}
+
+/// What the camera cannot use moves nothing: the target's pixels, saturated ones, and blocks
+/// too far from any read one keep their gains; a reference brighter than the projector can
+/// reach stops at the bound, finite.
+#[test]
+fn unread_blocks_keep_their_gains_and_bounds_hold() {
+    let dark = image(W, H, |_, _| [0.0; 3]);
+    let current = image(W, H, |_, _| [0.1; 3]);
+    // Wild on the excluded left third, saturated on a band, asks 1000× elsewhere.
+    let reference = image(W, H, |x, y| {
+        if x < 48 {
+            [0.0, 0.5, 0.0]
+        } else if y < 16 {
+            [2000.0; 3]
+        } else {
+            [100.0; 3]
+        }
+    });
+    let excluded: Vec<bool> = (0..W * H).map(|i| i % W < 48).collect();
+    let photos = Photographs {
+        reference: &reference,
+        current: &current,
+        dark: &dark,
+        excluded: &excluded,
+        saturation: 1000.0,
+    };
+    let r = ratios(&photos, &identity(W, H)).expect("ratios");
+    let mut g = Gains::flat(W, H).expect("gains");
+    for _ in 0..10 {
+        g.step(&r, 1.0).expect("step");
+    }
+    // Block columns 0–2 are excluded, 3.. read: columns 1 and 2 are filled, column 0 is
+    // three blocks from a read one.
+    // Exact: a gain never stepped stays 1, one stepped past the bound is the bound.
+    let is = |g: [f32; 3], v: f32| g.iter().all(|x| x.to_bits() == v.to_bits());
+    assert!(is(g.gains[2 * g.across], 1.0), "an unread block moved");
+    assert!(
+        is(g.gains[2 * g.across + 1], MAX_GAIN),
+        "a block two away was not filled"
+    );
+    assert!(
+        g.gains
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite() && (MIN_GAIN..=MAX_GAIN).contains(v))
+    );
+    assert!(is(g.at(80, 40), MAX_GAIN));
+    // The saturated band's blocks were filled from the ones below: one step away.
+    assert!(is(g.gains[5], MAX_GAIN));
+}
+
+#[test]
+fn bad_input_is_refused() {
+    let small = image(4, 4, |_, _| [0.1; 3]);
+    let big = image(W, H, |_, _| [0.1; 3]);
+    let excluded = vec![false; (W * H) as usize];
+    let photos = Photographs {
+        reference: &big,
+        current: &small,
+        dark: &big,
+        excluded: &excluded,
+        saturation: 1.0,
+    };
+    let e = ratios(&photos, &identity(W, H)).expect_err("sizes differ");
+    assert!(e.to_string().contains("current"), "{e}");
+    let photos = Photographs {
+        current: &big,
+        ..photos
+    };
+    let r = ratios(&photos, &identity(W, H)).expect("ratios");
+    let mut other = Gains::flat(W + 1, H).expect("gains");
+    assert!(other.step(&r, 1.0).is_err());
+    let mut g = Gains::flat(W, H).expect("gains");
+    for rate in [0.0, -1.0, 1.5, f64::NAN] {
+        assert!(g.step(&r, rate).is_err(), "rate {rate}");
+    }
+    assert!(Gains::flat(0, 5).is_none());
+}

@@ -1,0 +1,174 @@
+//! Per-pixel shading on top of the rounds' result (issue 22 item 2), in process: what each
+//! luminaire's light becomes when it follows the LEDs' photograph pixel by pixel and channel by
+//! channel ([`roomlight_calib::shading`]), beside what the nodes alone reached.
+//!
+//! Everything the passes read is what a real room gives: the preset's LED photograph and the
+//! dark room as the camera took them (noisy), the projectors' light captured through the same
+//! noise, and each luminaire's decode from calibration. Only the figures are ground truth
+//! (noiseless renders compared pixel by pixel with the LEDs', as the report's maps are). The
+//! passes run here, not in the agents: no message carries gains to a node agent yet, so the
+//! rounds' captures to 1% are those of the nodes alone, and each pass is one capture more.
+
+use crate::pipeline::{Calibrated, FrameBuilder, image};
+use crate::whole_room::{Reach, ReachMap, WholeRoom, delta_e_map, map_image, white_luminance};
+use anyhow::{Context, Result, ensure};
+use roomlight_calib::charts::{COLUMNS, PatchStatus, ROWS};
+use roomlight_calib::shading::{Gains, Photographs, ratios};
+use roomlight_core::LinearRgb;
+use roomlight_core::metrics::patch_delta_e;
+use roomlight_sim::{CameraNoise, Capture, Frame, Room};
+
+/// Passes after the rounds: four bring the lab within its figures' noise (docs/results.md).
+pub const PASSES: usize = 4;
+
+/// Each pass moves a gain by this power of its measured ratio: inter-reflection makes a full
+/// step overshoot where neighbours rise together.
+pub const RATE: f64 = 0.8;
+
+/// The room after some passes, against the LEDs.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Pass {
+    /// Captures the passes took so far.
+    pub captures: usize,
+    pub whole_room_de00_mean: f64,
+    pub whole_room_de00_p95: f64,
+    /// The seam metric ([`crate::whole_room::Seam::excess_de00`]), if there are overlaps.
+    pub seam_excess_de00: Option<f64>,
+    /// Mean ΔE00 over the chart patches measured in both images.
+    pub chart_de00_mean: f64,
+}
+
+/// The passes' path: `passes[0]` is the rounds' result as the nodes left it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Shaded {
+    pub rate: f64,
+    pub passes: Vec<Pass>,
+    /// Per luminaire shaded: its name and the 5th and 95th percentiles of its gains at the end.
+    pub gains: Vec<(String, f32, f32)>,
+    /// The ΔE00 map after the last pass ([`crate::whole_room::map_image`]).
+    #[serde(skip)]
+    pub map: image::RgbImage,
+    /// Where the report wrote it (relative to the report).
+    pub map_file: Option<String>,
+}
+
+impl Shaded {
+    /// The last pass.
+    pub fn last(&self) -> &Pass {
+        // `shade` always records the rounds' result.
+        &self.passes[self.passes.len() - 1]
+    }
+}
+
+/// The preset shaded and the camera's photographs the passes compare with: its LEDs alone
+/// and the dark room, both as taken (noisy).
+#[derive(Debug, Clone, Copy)]
+pub struct Preset<'a> {
+    pub index: usize,
+    pub reference: &'a Capture,
+    pub dark: &'a Capture,
+}
+
+/// `passes` passes of per-pixel shading on node values `x` (the rounds' result) for `preset`:
+/// each captures the room (through `noise`), steps every decoded luminaire's gains towards the
+/// photograph, and the room is measured against the LEDs' noiseless light.
+pub fn shade(
+    room: &Room,
+    cal: &Calibrated,
+    reach: &ReachMap,
+    preset: Preset<'_>,
+    x: &[LinearRgb],
+    noise: &mut CameraNoise,
+    passes: usize,
+) -> Result<Shaded> {
+    let frames = FrameBuilder::new(room, &cal.regions, cal.responses.clone())?;
+    let black = vec![Frame::Black; room.projectors().len()];
+    let truth = room.render(&black, Some(preset.index))?;
+    let surface: Vec<bool> = reach.reach.iter().map(|r| *r != Reach::NoSurface).collect();
+    let white = white_luminance(&truth, &surface)?;
+    let charts = cal.corners.len() * COLUMNS * ROWS;
+    let measured = |c: &Capture| -> Result<Vec<Option<LinearRgb>>> {
+        Ok(cal
+            .sample_room(c)?
+            .into_iter()
+            .take(charts)
+            .map(|s| (s.status == PatchStatus::Ok).then_some(s.mean))
+            .collect())
+    };
+    let led = measured(&truth)?;
+    let mut gains: Vec<Option<Gains>> = vec![None; room.projectors().len()];
+    let mut decodes = Vec::new();
+    for m in cal.measured.iter().filter(|m| m.projector.blends()) {
+        let k = room.projector(&m.projector.id)?;
+        let pinhole = &room.projectors()[k].pinhole;
+        let size = (m.corr.projector_width, m.corr.projector_height);
+        ensure!(
+            size == (pinhole.width, pinhole.height),
+            "{}: decoded as {}×{}, the projector is {}×{}",
+            m.projector.id,
+            size.0,
+            size.1,
+            pinhole.width,
+            pinhole.height
+        );
+        gains[k] = Gains::flat(size.0, size.1);
+        decodes.push((k, &m.corr));
+    }
+    let figures = |gains: &[Option<Gains>], captures: usize| -> Result<(Pass, Vec<f64>)> {
+        let lit = room.render(&frames.frames_shaded(x, gains), None)?;
+        let de = delta_e_map(&truth, &lit, white)?;
+        let whole = WholeRoom::measure(&de, reach, white)?;
+        let (target, got): (Vec<LinearRgb>, Vec<LinearRgb>) = led
+            .iter()
+            .zip(measured(&lit)?)
+            .filter_map(|(a, b)| Some(((*a)?, b?)))
+            .unzip();
+        let pass = Pass {
+            captures,
+            whole_room_de00_mean: whole.de00_mean,
+            whole_room_de00_p95: whole.de00_p95,
+            seam_excess_de00: whole.seam.map(|s| s.excess_de00),
+            chart_de00_mean: patch_delta_e(&target, &got)
+                .context("the charts after shading")?
+                .mean,
+        };
+        Ok((pass, de))
+    };
+    let setup = cal.setup();
+    let (reference, dark) = (image(preset.reference), image(preset.dark));
+    let (first, mut de) = figures(&gains, 0)?;
+    let mut path = vec![first];
+    for pass in 1..=passes {
+        let current = image(&noise.expose(&room.render(&frames.frames_shaded(x, &gains), None)?));
+        let photographs = Photographs {
+            reference: &reference,
+            current: &current,
+            dark: &dark,
+            excluded: &setup.target_mask,
+            saturation: setup.sample.saturation,
+        };
+        for &(k, corr) in &decodes {
+            let r = ratios(&photographs, corr)?;
+            if let Some(g) = gains[k].as_mut() {
+                g.step(&r, RATE)?;
+            }
+        }
+        let (next, map) = figures(&gains, pass)?;
+        path.push(next);
+        de = map;
+    }
+    Ok(Shaded {
+        rate: RATE,
+        passes: path,
+        map: map_image(&de, reach)?,
+        map_file: None,
+        gains: decodes
+            .iter()
+            .filter_map(|&(k, _)| {
+                let g = gains[k].as_ref()?;
+                let (lo, hi) = g.spread();
+                Some((room.projectors()[k].name.clone(), lo, hi))
+            })
+            .collect(),
+    })
+}
