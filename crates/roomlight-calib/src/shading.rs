@@ -38,6 +38,22 @@ pub const BLOCK: u32 = 16;
 pub const MIN_GAIN: f32 = 1.0 / 32.0;
 pub const MAX_GAIN: f32 = 64.0;
 
+/// The light a shaded pixel starts from, at least, per unit of its nodes' summed weight: a
+/// node its chart turned (almost) off still has light to shade, where the LEDs light what only
+/// it reaches. A fiftieth of full light: with [`MAX_GAIN`] a dark node's pixels reach full
+/// light, and the first pass dims what the LEDs leave dark ([`shaded_light`]).
+pub const FLOOR: f64 = 0.02;
+
+/// A pixel's light with its gains: its nodes' light `light` (their weighted sum, `weight` the
+/// sum of their weights there), raised per channel to at least [`FLOOR`] × `weight`, times
+/// `gain`. A pixel no node drives (`weight` 0) stays as its nodes give it.
+pub fn shaded_light(light: [f64; 3], weight: f64, gain: [f32; 3]) -> [f64; 3] {
+    if weight.is_nan() || weight <= 0.0 {
+        return light;
+    }
+    std::array::from_fn(|c| light[c].max(FLOOR * weight) * f64::from(gain[c]))
+}
+
 /// One pass moves a gain by at most this factor up or down.
 pub const MAX_STEP: f64 = 4.0;
 
@@ -247,7 +263,7 @@ impl Gains {
                 ),
             });
         }
-        if !(rate > 0.0 && rate <= 1.0) {
+        if rate.is_nan() || rate <= 0.0 || rate > 1.0 {
             return Err(CalibError::Invalid {
                 field: "shading rate",
                 problem: format!("{rate}, expected in (0, 1]"),

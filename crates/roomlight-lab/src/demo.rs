@@ -225,12 +225,18 @@ fn print_shaded(name: &str, s: &crate::shaded::Shaded) {
         })
         .collect();
     let last = s.last();
+    let target = |p: &crate::shaded::Pass| {
+        p.target_light_share
+            .map_or("—".to_string(), |t| format!("{:.0}%", 100.0 * t))
+    };
     println!(
-        "{name}, per-pixel shading after the rounds (in process, {} captures): whole room ΔE00 mean / p95 {}; charts {:.2} → {:.2}",
+        "{name}, per-pixel shading after the rounds (in process, {} captures): whole room ΔE00 mean / p95 {}; charts {:.2} → {:.2}; light on the target {} → {} of the LEDs'",
         last.captures,
         path.join(" → "),
         s.passes[0].chart_de00_mean,
-        last.chart_de00_mean
+        last.chart_de00_mean,
+        target(&s.passes[0]),
+        target(last)
     );
 }
 

@@ -8,7 +8,15 @@
 //! (noiseless renders compared pixel by pixel with the LEDs', as the report's maps are). The
 //! passes run here, not in the agents: no message carries gains to a node agent yet, so the
 //! rounds' captures to 1% are those of the nodes alone, and each pass is one capture more.
+//!
+//! Only standard luminaires are shaded: a large aperture's pixels light a blurred disc each, so
+//! gains per block of them would have to undo the blur (ill-posed); it keeps its node's light.
+//! What shading cannot do: light beyond a projector's share of a blend (where one projector of
+//! an overlap is at full light, the other's weight there is 0), and keep the target as dark as
+//! a preset's dark-target weight made the rounds keep it (the target's pixels are left out of
+//! the ratios, so light reflected onto it from a brighter room is nobody's error).
 
+use crate::dark_target::target_light;
 use crate::pipeline::{Calibrated, FrameBuilder, image};
 use crate::whole_room::{Reach, ReachMap, WholeRoom, delta_e_map, map_image, white_luminance};
 use anyhow::{Context, Result, ensure};
@@ -18,8 +26,9 @@ use roomlight_core::LinearRgb;
 use roomlight_core::metrics::patch_delta_e;
 use roomlight_sim::{CameraNoise, Capture, Frame, Room};
 
-/// Passes after the rounds: four bring the lab within its figures' noise (docs/results.md).
-pub const PASSES: usize = 4;
+/// Passes after the rounds: on the lab the whole room's mean is within 3 ΔE00 of the LEDs
+/// after four, and the fifth and sixth still take 0.1–0.4 off it (docs/results.md).
+pub const PASSES: usize = 6;
 
 /// Each pass moves a gain by this power of its measured ratio: inter-reflection makes a full
 /// step overshoot where neighbours rise together.
@@ -36,6 +45,9 @@ pub struct Pass {
     pub seam_excess_de00: Option<f64>,
     /// Mean ΔE00 over the chart patches measured in both images.
     pub chart_de00_mean: f64,
+    /// The light on the projection-mapping target, a share of the LEDs' there
+    /// ([`crate::dark_target::target_light`]; `None` when the LEDs put none on it).
+    pub target_light_share: Option<f64>,
 }
 
 /// The passes' path: `passes[0]` is the rounds' result as the nodes left it.
@@ -96,6 +108,9 @@ pub fn shade(
             .collect())
     };
     let led = measured(&truth)?;
+    let dark_truth = room.render(&black, None)?;
+    let on_target: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let led_on_target = target_light(&truth, &dark_truth, &on_target)?;
     let mut gains: Vec<Option<Gains>> = vec![None; room.projectors().len()];
     let mut decodes = Vec::new();
     for m in cal.measured.iter().filter(|m| m.projector.blends()) {
@@ -131,12 +146,18 @@ pub fn shade(
             chart_de00_mean: patch_delta_e(&target, &got)
                 .context("the charts after shading")?
                 .mean,
+            // No LED light on the target: no share to give.
+            target_light_share: (led_on_target > 0.0)
+                .then(|| target_light(&lit, &dark_truth, &on_target))
+                .transpose()?
+                .map(|l| l / led_on_target),
         };
         Ok((pass, de))
     };
     let setup = cal.setup();
     let (reference, dark) = (image(preset.reference), image(preset.dark));
-    let (first, mut de) = figures(&gains, 0)?;
+    // The nodes' light as the rounds left it: no floor, no gains.
+    let (first, mut de) = figures(&[], 0)?;
     let mut path = vec![first];
     for pass in 1..=passes {
         let current = image(&noise.expose(&room.render(&frames.frames_shaded(x, &gains), None)?));

@@ -219,3 +219,21 @@ fn bad_input_is_refused() {
     }
     assert!(Gains::flat(0, 5).is_none());
 }
+
+/// A pixel's shaded light: its nodes' light floored per unit weight, times its gains; a pixel
+/// no node drives stays dark whatever its gains.
+#[test]
+fn shaded_light_floors_a_dark_node_and_leaves_undriven_pixels_alone() {
+    let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
+    assert!(close(
+        shaded_light([0.3, 0.0, 0.001], 0.5, [2.0, 4.0, 1.0]),
+        [0.6, 4.0 * FLOOR * 0.5, FLOOR * 0.5]
+    ));
+    assert!(close(shaded_light([0.0; 3], 0.0, [MAX_GAIN; 3]), [0.0; 3]));
+    assert!(close(
+        shaded_light([0.0; 3], f64::NAN, [MAX_GAIN; 3]),
+        [0.0; 3]
+    ));
+    // A dark node's full-weight pixel reaches full light at the largest gain.
+    assert!(shaded_light([0.0; 3], 1.0, [MAX_GAIN; 3])[0] >= 1.0);
+}

@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use roomlight_calib::procedure::Target;
 use roomlight_calib::response::{Encoder, Response};
-use roomlight_calib::shading::Gains;
+use roomlight_calib::shading::{Gains, shaded_light};
 use roomlight_core::optimum::Optimum;
 use roomlight_core::{LinearRgb, Problem};
 use roomlight_sim::{Frame, NodeRegion, ProjectorImage, Room};
@@ -182,16 +182,17 @@ impl FrameBuilder {
                         for (j, (code, &c)) in chunk.iter_mut().zip(&p.counts[first..]).enumerate()
                         {
                             let end = at + usize::from(c);
-                            let mut l = LinearRgb::ZERO;
+                            let (mut l, mut weight) = (LinearRgb::ZERO, 0.0);
                             for (&n, &w) in p.nodes[at..end].iter().zip(&p.weights[at..end]) {
                                 let v = x.get(usize::from(n)).copied().unwrap_or(LinearRgb::ZERO);
                                 l += v * f64::from(w);
+                                weight += f64::from(w);
                             }
                             at = end;
                             if let Some(g) = gains {
                                 let i = (first + j) as u32;
                                 let g = g.at(i % p.width, i / p.width);
-                                l = LinearRgb(std::array::from_fn(|c| l.0[c] * f64::from(g[c])));
+                                l = LinearRgb(shaded_light(l.0, weight, g));
                             }
                             let bits = l.0.map(f64::to_bits);
                             if !seen || bits != last_bits {

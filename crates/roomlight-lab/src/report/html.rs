@@ -196,8 +196,10 @@ pixels and per colour channel by gains stepped towards the LEDs' photograph, one
 (<code>roomlight_calib::shading</code>). It runs in the demo's process on what a camera gives (the \
 preset's photograph, noisy captures, the decodes); no message carries gains to a node agent yet. \
 Whole-room ΔE00 mean / p95 after each pass (the first: the rounds' result).</p>\
-<table><tr><th>preset</th><th>whole room, pass by pass</th><th>charts ΔE00 before → after</th></tr>",
+<table><tr><th>preset</th><th>whole room, pass by pass</th><th>charts ΔE00 before → after</th>\
+<th>light on the target, share of the LEDs', before → after</th></tr>",
     );
+    let share = |t: Option<f64>| t.map_or("—".to_string(), |t| format!("{:.0}%", 100.0 * t));
     for p in &report.presets {
         let s = &p.shaded;
         let path: Vec<String> = s
@@ -212,11 +214,13 @@ Whole-room ΔE00 mean / p95 after each pass (the first: the rounds' result).</p>
             .collect();
         let _ = write!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{:.2} → {:.2}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{:.2} → {:.2}</td><td>{} → {}</td></tr>",
             escape(&p.name),
             path.join(" → "),
             s.passes[0].chart_de00_mean,
-            s.last().chart_de00_mean
+            s.last().chart_de00_mean,
+            share(s.passes[0].target_light_share),
+            share(s.last().target_light_share)
         );
     }
     h.push_str("</table>");

@@ -1,7 +1,8 @@
 //! Per-pixel shading (issue 22 item 2) on the small room: from its measured model's optimum,
 //! passes of gains stepped towards the LEDs' photograph (noisy, as a camera gives it, through
 //! the measured decodes) bring the whole room's mean much closer to the LEDs, judged against
-//! the simulator's noiseless truth; the gains stay within their bounds.
+//! the simulator's noiseless truth, its 95th percentile too, at a small cost at the charts; the
+//! gains stay within their bounds.
 
 use crate::support;
 
@@ -56,24 +57,24 @@ fn shading_passes_bring_the_whole_room_to_the_leds() {
     }
     println!("gains (5th, 95th percentile) {:?}", s.gains);
     assert_eq!(s.passes.len(), 5);
+    // Measured (2026-12-07): 8.41 / 18.49 → 2.72 / 8.71, charts 2.27 → 2.54. The small room's
+    // left projector is all but off at its model's optimum (its nodes under 0.04): without the
+    // floor under a shaded pixel's light its half of the room stayed dark (4.48 / 17.66).
     assert!(
-        end.whole_room_de00_mean < 0.6 * start.whole_room_de00_mean,
+        end.whole_room_de00_mean < 0.5 * start.whole_room_de00_mean,
         "mean {:.2} → {:.2}",
         start.whole_room_de00_mean,
         end.whole_room_de00_mean
     );
-    // The small room's left projector is all but off at its model's optimum (its nodes under
-    // 0.04): gains multiply the nodes' light, so they cannot light what it alone reaches, and
-    // dimming the over-lit half takes bounce light from the under-lit one. Its 95th percentile
-    // only holds, and its charts lose a little (docs/results.md).
     assert!(
-        end.whole_room_de00_p95 <= start.whole_room_de00_p95,
+        end.whole_room_de00_p95 < 0.7 * start.whole_room_de00_p95,
         "p95 {:.2} → {:.2}",
         start.whole_room_de00_p95,
         end.whole_room_de00_p95
     );
+    // The charts lose a little here (the lab's gain: docs/results.md).
     assert!(
-        end.chart_de00_mean < start.chart_de00_mean + 0.6,
+        end.chart_de00_mean < start.chart_de00_mean + 0.5,
         "charts {:.2} → {:.2}",
         start.chart_de00_mean,
         end.chart_de00_mean
