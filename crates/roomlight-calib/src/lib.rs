@@ -19,6 +19,7 @@
 //! for the tests only).
 
 pub mod attenuation;
+mod blocks;
 pub mod centroid;
 pub mod charts;
 pub mod cone;

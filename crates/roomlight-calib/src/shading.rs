@@ -23,9 +23,9 @@
 //! Hand-written: a ratio of images binned through a correspondence, no crate does it.
 
 use crate::CalibError;
+use crate::blocks::{fill, quantile};
 use crate::graycode::Correspondence;
 use crate::image_io::LinearImage;
-use std::collections::VecDeque;
 
 /// Side of a block of projector pixels that carries one gain. A wall projector's block sees
 /// some 40 camera pixels in the lab: enough to average the camera's noise down.
@@ -188,7 +188,7 @@ pub fn ratios(photos: &Photographs<'_>, corr: &Correspondence) -> Result<Ratios,
             })
         })
         .collect();
-    fill(&mut ratio, across, down);
+    fill(&mut ratio, across, FILL_BLOCKS);
     Ok(Ratios {
         width: pw,
         height: ph,
@@ -196,31 +196,6 @@ pub fn ratios(photos: &Photographs<'_>, corr: &Correspondence) -> Result<Ratios,
         down,
         ratio,
     })
-}
-
-/// Carries read ratios into unread blocks, breadth first, up to [`FILL_BLOCKS`] away.
-fn fill(ratio: &mut [Option<[f64; 3]>], across: usize, down: usize) {
-    let mut steps = vec![0u32; ratio.len()];
-    let mut queue: VecDeque<usize> = (0..ratio.len()).filter(|&b| ratio[b].is_some()).collect();
-    while let Some(b) = queue.pop_front() {
-        if steps[b] >= FILL_BLOCKS {
-            continue;
-        }
-        let (x, y) = (b % across, b / across);
-        let around = [
-            (x > 0).then(|| b - 1),
-            (x + 1 < across).then(|| b + 1),
-            (y > 0).then(|| b - across),
-            (y + 1 < down).then(|| b + across),
-        ];
-        for n in around.into_iter().flatten() {
-            if ratio[n].is_none() {
-                ratio[n] = ratio[b];
-                steps[n] = steps[b] + 1;
-                queue.push_back(n);
-            }
-        }
-    }
 }
 
 /// One projector's gains, per block and channel; its drawn light is multiplied by them,
@@ -308,16 +283,6 @@ impl Gains {
         let hi = quantile(&mut v, 0.95).unwrap_or(1.0);
         (lo as f32, hi as f32)
     }
-}
-
-/// Nearest-rank quantile `q` of `v` (reordered); `None` when empty.
-fn quantile(v: &mut [f64], q: f64) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let k = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
-    let (_, x, _) = v.select_nth_unstable_by(k, f64::total_cmp);
-    Some(*x)
 }
 
 #[cfg(test)]

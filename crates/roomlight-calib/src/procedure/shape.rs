@@ -17,11 +17,11 @@
 
 use super::{Layout, Placed, Setup};
 use crate::CalibError;
+use crate::blocks::{fill, quantile};
 use crate::graycode::Correspondence;
 use crate::image_io::LinearImage;
 use roomlight_core::LinearRgb;
 use roomlight_core::metrics::luminance;
-use std::collections::VecDeque;
 
 /// Side of a block of projector pixels over which the ratio is read. Falloff varies slowly;
 /// a wall projector's block of 16 sees some 40 camera pixels.
@@ -188,16 +188,6 @@ fn rise(a: [f32; 3], b: [f32; 3]) -> f64 {
     luminance(LinearRgb(a.map(f64::from)) - LinearRgb(b.map(f64::from)))
 }
 
-/// Nearest-rank quantile `q` of `v` (reordered); `None` when empty.
-fn quantile(v: &mut [f64], q: f64) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let k = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
-    let (_, x, _) = v.select_nth_unstable_by(k, f64::total_cmp);
-    Some(*x)
-}
-
 /// The 99th percentile of the white's rise over dark on the decoded camera pixels (0 if none).
 fn white_p99(lit: &Lit<'_>, dark: &LinearImage) -> f64 {
     let mut v: Vec<f64> = lit
@@ -282,29 +272,8 @@ impl Grid {
             .iter()
             .map(|&(r, w, n)| (n >= 3 && w > 0.0).then(|| r / w))
             .collect();
-        let mut steps = vec![0u32; ratio.len()];
-        let mut queue: VecDeque<usize> = (0..ratio.len()).filter(|&b| ratio[b].is_some()).collect();
-        if queue.is_empty() {
+        if !fill(&mut ratio, across, FILL_BLOCKS) {
             return None;
-        }
-        while let Some(b) = queue.pop_front() {
-            if steps[b] >= FILL_BLOCKS {
-                continue;
-            }
-            let (x, y) = (b % across, b / across);
-            let around = [
-                (x > 0).then(|| b - 1),
-                (x + 1 < across).then(|| b + 1),
-                (y > 0).then(|| b - across),
-                (y + 1 < down).then(|| b + across),
-            ];
-            for n in around.into_iter().flatten() {
-                if ratio[n].is_none() {
-                    ratio[n] = ratio[b];
-                    steps[n] = steps[b] + 1;
-                    queue.push_back(n);
-                }
-            }
         }
         Some(Self {
             width: pw as usize,
