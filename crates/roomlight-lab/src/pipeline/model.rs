@@ -309,6 +309,59 @@ mod tests {
         }
     }
 
+    /// Shaded frames: flat gains change nothing where the nodes give more than the floor; a
+    /// node at black is raised to the floor in proportion to its weight; gains of another
+    /// projector's size, or none, leave the nodes' frames as they are.
+    #[test]
+    fn flat_gains_keep_the_nodes_light_and_floor_a_black_node() {
+        use roomlight_calib::shading::FLOOR;
+        let room = Room::build(roomlight_sim::scenes::small().expect("scene")).expect("room");
+        let p = &room.projectors()[0];
+        let (w, h) = (p.pinhole.width, p.pinhole.height);
+        let right: Vec<f32> = (0..w * h)
+            .map(|i| ((i % w) as f32 / w as f32 - 0.4).clamp(0.0, 0.2) * 5.0)
+            .collect();
+        let left: Vec<f32> = right.iter().map(|v| 1.0 - v).collect();
+        let regions: Vec<NodeRegion> = [&left, &right]
+            .into_iter()
+            .map(|weights| NodeRegion {
+                projector: 0,
+                weights: weights.clone(),
+            })
+            .collect();
+        let responses = vec![Response::linear(); room.projectors().len()];
+        let builder = FrameBuilder::new(&room, &regions, responses).expect("builder");
+        let image = |frames: Vec<Frame>| match frames.into_iter().next() {
+            Some(Frame::Image(img)) => img.pixels,
+            _ => panic!("an image for the projector with nodes"),
+        };
+        let lit = [LinearRgb([0.2, 0.5, 0.9]), LinearRgb([0.7, 0.1, 0.4])];
+        let flat = Gains::flat(w, h).expect("gains");
+        let plain = image(builder.frames(&lit));
+        assert_eq!(
+            image(builder.frames_shaded(&lit, &[Some(flat.clone())])),
+            plain
+        );
+        let other = Gains::flat(w + 1, h).expect("gains");
+        assert_eq!(image(builder.frames_shaded(&lit, &[Some(other)])), plain);
+        // The right node black: its pixels at the floor times its weight, the left's as they were.
+        let dark = [lit[0], LinearRgb::ZERO];
+        let shaded = image(builder.frames_shaded(&dark, &[Some(flat)]));
+        let encoder = Response::linear().encoder();
+        for (i, code) in shaded.iter().enumerate() {
+            let nodes = lit[0] * f64::from(left[i]);
+            let floor = FLOOR * f64::from(left[i] + right[i]);
+            let want = encoder.code(LinearRgb(nodes.0.map(|v| v.max(floor))));
+            assert_eq!(code.map(f32::to_bits), want.map(f32::to_bits), "pixel {i}");
+        }
+        let x = (w - 1) as usize; // the right edge: the right node alone, at black
+        assert!(
+            (f64::from(shaded[x][0]) - FLOOR).abs() < 1e-6,
+            "{:?}",
+            shaded[x]
+        );
+    }
+
     /// A pixel in 255 nodes is taken, in 256 refused with the projector named; the nodes of
     /// other projectors are not counted.
     #[test]
