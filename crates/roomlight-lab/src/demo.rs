@@ -215,7 +215,7 @@ const SHADING_SEED: u64 = 0x5ade;
 
 fn print_shaded(name: &str, s: &crate::shaded::Shaded) {
     let path: Vec<String> = s
-        .passes
+        .passes()
         .iter()
         .map(|p| {
             format!(
@@ -233,9 +233,9 @@ fn print_shaded(name: &str, s: &crate::shaded::Shaded) {
         "{name}, per-pixel shading after the rounds (in process, {} captures): whole room ΔE00 mean / p95 {}; charts {:.2} → {:.2}; light on the target {} → {} of the LEDs'",
         last.captures,
         path.join(" → "),
-        s.passes[0].chart_de00_mean,
+        s.first().chart_de00_mean,
         last.chart_de00_mean,
-        target(&s.passes[0]),
+        target(s.first()),
         target(last)
     );
 }

@@ -50,11 +50,12 @@ pub struct Pass {
     pub target_light_share: Option<f64>,
 }
 
-/// The passes' path: `passes[0]` is the rounds' result as the nodes left it.
+/// The passes' path, the first being the rounds' result as the nodes left it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Shaded {
     pub rate: f64,
-    pub passes: Vec<Pass>,
+    /// Never empty: only [`shade`] makes one, and it records the rounds' result first.
+    passes: Vec<Pass>,
     /// Per luminaire shaded: its name and the 5th and 95th percentiles of its gains at the end.
     pub gains: Vec<(String, f32, f32)>,
     /// The ΔE00 map after the last pass ([`crate::whole_room::map_image`]).
@@ -65,9 +66,18 @@ pub struct Shaded {
 }
 
 impl Shaded {
-    /// The last pass.
+    /// The rounds' result, then each pass.
+    pub fn passes(&self) -> &[Pass] {
+        &self.passes
+    }
+
+    /// The rounds' result, before any pass.
+    pub fn first(&self) -> &Pass {
+        &self.passes[0]
+    }
+
+    /// After the last pass.
     pub fn last(&self) -> &Pass {
-        // `shade` always records the rounds' result.
         &self.passes[self.passes.len() - 1]
     }
 }

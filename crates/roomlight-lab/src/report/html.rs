@@ -203,7 +203,7 @@ Whole-room ΔE00 mean / p95 after each pass (the first: the rounds' result).</p>
     for p in &report.presets {
         let s = &p.shaded;
         let path: Vec<String> = s
-            .passes
+            .passes()
             .iter()
             .map(|q| {
                 format!(
@@ -217,9 +217,9 @@ Whole-room ΔE00 mean / p95 after each pass (the first: the rounds' result).</p>
             "<tr><td>{}</td><td>{}</td><td>{:.2} → {:.2}</td><td>{} → {}</td></tr>",
             escape(&p.name),
             path.join(" → "),
-            s.passes[0].chart_de00_mean,
+            s.first().chart_de00_mean,
             s.last().chart_de00_mean,
-            share(s.passes[0].target_light_share),
+            share(s.first().target_light_share),
             share(s.last().target_light_share)
         );
     }

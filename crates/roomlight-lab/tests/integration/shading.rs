@@ -46,17 +46,17 @@ fn shading_passes_bring_the_whole_room_to_the_leds() {
     // Pass 0 is the nodes' light as the report measures it: flat gains change nothing.
     let truth = room.render(&black, Some(0)).expect("reference");
     let plain = whole_room_best::of_values(&room, &cal, &reach, &truth, &x).expect("plain");
-    let (start, end) = (&s.passes[0], s.last());
+    let (start, end) = (s.first(), s.last());
     assert!((start.whole_room_de00_mean - plain.de00_mean).abs() < 1e-9);
     assert!((start.whole_room_de00_p95 - plain.de00_p95).abs() < 1e-9);
-    for p in &s.passes {
+    for p in s.passes() {
         println!(
             "after {} passes: whole room ΔE00 {:.2} / p95 {:.2}, charts {:.2}",
             p.captures, p.whole_room_de00_mean, p.whole_room_de00_p95, p.chart_de00_mean
         );
     }
     println!("gains (5th, 95th percentile) {:?}", s.gains);
-    assert_eq!(s.passes.len(), 5);
+    assert_eq!(s.passes().len(), 5);
     // Measured (2026-12-07): 8.41 / 18.49 → 2.72 / 8.71, charts 2.27 → 2.54. The small room's
     // left projector is all but off at its model's optimum (its nodes under 0.04): without the
     // floor under a shaded pixel's light its half of the room stayed dark (4.48 / 17.66).
