@@ -23,9 +23,10 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// The whole method on the embedded lab: calibration from simulated captures, then the real
-    /// agents over loopback gRPC lighting every LED preset, a projector leaving and another
-    /// joining, the projection-mapping target's contrast; an HTML report against the exact
-    /// optimum (`--synthetic`: the update rules compared on a synthetic room).
+    /// agents over loopback gRPC lighting every LED preset, per-pixel shading passes after each
+    /// (in process), a projector leaving and another joining, the projection-mapping target's
+    /// contrast; an HTML report against the exact optimum (`--synthetic`: the update rules
+    /// compared on a synthetic room).
     Demo(DemoArgs),
     /// The simulated hardware as a process: a synthetic room served as `VirtualHardware`, or
     /// (`--scene`) the rendered room served as `RenderedRoom`.

@@ -154,6 +154,7 @@ fn demo_and_camera_help_say_what_they_run_and_print() {
     // clap wraps at the terminal's width (100 columns without one): compare words.
     let flat = demo.split_whitespace().collect::<Vec<_>>().join(" ");
     assert!(flat.contains("embedded lab"), "{demo}");
+    assert!(flat.contains("per-pixel shading passes"), "{demo}");
     assert!(
         flat.contains("15 captures per preset instead of 30"),
         "{demo}"
