@@ -8,8 +8,9 @@
 //! `cargo run --release -p roomlight-lab --example per_pixel_ceiling [lab|small] [passes]`
 
 use anyhow::{Context, Result};
-use roomlight_lab::whole_room::{Reach, ReachMap, WholeRoom, delta_e_map, white_luminance};
-use roomlight_sim::scene::ProjectorRole;
+use roomlight_lab::whole_room::{
+    Reach, ReachMap, WholeRoom, delta_e_map, luminaires, white_luminance,
+};
 use roomlight_sim::{Frame, NodeRegion, ProjectorImage, Room};
 
 /// Each pass moves a pixel by this power of its camera pixels' mean log ratio.
@@ -29,14 +30,7 @@ fn main() -> Result<()> {
     };
     let room = Room::build(scene)?;
     let n = room.projectors().len();
-    let luminaires: Vec<usize> = room
-        .scene()
-        .projectors
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| p.role == ProjectorRole::Luminaire)
-        .map(|(k, _)| k)
-        .collect();
+    let luminaires = luminaires(&room);
     let size = |k: usize| {
         let p = &room.projectors()[k].pinhole;
         (p.width, p.height)

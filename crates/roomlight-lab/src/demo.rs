@@ -210,36 +210,6 @@ fn print_whole_room(name: &str, w: &crate::whole_room::WholeRoom) {
     );
 }
 
-/// Seed of the shading passes' camera noise, mixed with the demo's.
-const SHADING_SEED: u64 = 0x5ade;
-
-fn print_shaded(name: &str, s: &crate::shaded::Shaded) {
-    let path: Vec<String> = s
-        .passes()
-        .iter()
-        .map(|p| {
-            format!(
-                "{:.2} / {:.2}",
-                p.whole_room_de00_mean, p.whole_room_de00_p95
-            )
-        })
-        .collect();
-    let last = s.last();
-    let target = |p: &crate::shaded::Pass| {
-        p.target_light_share
-            .map_or("—".to_string(), |t| format!("{:.0}%", 100.0 * t))
-    };
-    println!(
-        "{name}, per-pixel shading after the rounds (in process, {} captures): whole room ΔE00 mean / p95 {}; charts {:.2} → {:.2}; light on the target {} → {} of the LEDs'",
-        last.captures,
-        path.join(" → "),
-        s.first().chart_de00_mean,
-        last.chart_de00_mean,
-        target(s.first()),
-        target(last)
-    );
-}
-
 /// The calibrated simulated lab the demo's runs share.
 struct Lab<'a> {
     room: &'a Arc<roomlight_sim::Room>,
@@ -272,12 +242,7 @@ impl Lab<'_> {
         let mut rules = Vec::new();
         let mut kept = None;
         let tradeoff = crate::dark_target::preset(self.room.scene());
-        // The shading passes' captures draw their own noise: the rounds' figures stay those of
-        // the nodes alone, capture for capture.
-        let mut shading_noise =
-            roomlight_sim::CameraNoise::with_seed(self.room, self.options.seed ^ SHADING_SEED);
-        let black = vec![roomlight_sim::Frame::Black; self.room.projectors().len()];
-        let dark = shading_noise.expose(&self.room.render(&black, None)?);
+        let mut shading = crate::shaded::Camera::new(self.room, self.options.seed)?;
         for (preset, spec) in self.room.scene().presets.iter().enumerate() {
             let t = Instant::now();
             let (lit, photograph) = pipeline::photograph_lit(self.room, self.cal, preset, noise)?;
@@ -313,24 +278,10 @@ impl Lab<'_> {
             }
             self.phases.borrow_mut().done("pictures and whole room", t);
             let t = Instant::now();
-            let shaded = crate::shaded::shade(
-                self.room,
-                self.cal,
-                self.reach,
-                crate::shaded::Preset {
-                    index: preset,
-                    reference: &photograph,
-                    dark: &dark,
-                },
-                &result.x,
-                &mut shading_noise,
-                crate::shaded::PASSES,
-            )?;
-            let mut shaded = shaded;
-            let file = format!("{}-de00-map-shaded.png", report::pictures::slug(&spec.name));
-            report::png::write_srgb8_image(&dir.join(&file), &shaded.map)?;
-            shaded.map_file = Some(file);
-            print_shaded(&spec.name, &shaded);
+            let lab = (&**self.room, self.cal, self.reach);
+            let mut shaded = shading.shade(lab, preset, &photograph, &result.x)?;
+            shaded.write_map(dir, &spec.name)?;
+            println!("{}, {}", spec.name, shaded.summary());
             self.phases.borrow_mut().done("per-pixel shading", t);
             if preset == 0 {
                 let t = Instant::now();

@@ -25,6 +25,7 @@ use roomlight_calib::shading::{Gains, Photographs, ratios};
 use roomlight_core::LinearRgb;
 use roomlight_core::metrics::patch_delta_e;
 use roomlight_sim::{CameraNoise, Capture, Frame, Room};
+use std::path::Path;
 
 /// Passes after the rounds: on the lab the whole room's mean is within 3 ΔE00 of the LEDs
 /// after four, and the fifth and sixth still take 0.1–0.4 off it (docs/results.md).
@@ -79,6 +80,87 @@ impl Shaded {
     /// After the last pass.
     pub fn last(&self) -> &Pass {
         &self.passes[self.passes.len() - 1]
+    }
+}
+
+impl Shaded {
+    /// One line: the whole room pass by pass, the charts and the light on the target before
+    /// and after.
+    pub fn summary(&self) -> String {
+        let path: Vec<String> = self
+            .passes
+            .iter()
+            .map(|p| {
+                format!(
+                    "{:.2} / {:.2}",
+                    p.whole_room_de00_mean, p.whole_room_de00_p95
+                )
+            })
+            .collect();
+        let (first, last) = (self.first(), self.last());
+        let target = |p: &Pass| {
+            p.target_light_share
+                .map_or("—".to_string(), |t| format!("{:.0}%", 100.0 * t))
+        };
+        format!(
+            "per-pixel shading after the rounds (in process, {} captures): whole room ΔE00 mean / p95 {}; charts {:.2} → {:.2}; light on the target {} → {} of the LEDs'",
+            last.captures,
+            path.join(" → "),
+            first.chart_de00_mean,
+            last.chart_de00_mean,
+            target(first),
+            target(last)
+        )
+    }
+
+    /// Writes the map after the last pass into the report folder `dir` as
+    /// `<slug>-de00-map-shaded.png` and records its name.
+    pub fn write_map(&mut self, dir: &Path, preset: &str) -> Result<()> {
+        let file = format!(
+            "{}-de00-map-shaded.png",
+            crate::report::pictures::slug(preset)
+        );
+        crate::report::png::write_srgb8_image(&dir.join(&file), &self.map)?;
+        self.map_file = Some(file);
+        Ok(())
+    }
+}
+
+/// Seed of the passes' camera noise, mixed with the run's.
+const SEED: u64 = 0x5ade;
+
+/// The camera the passes photograph with: a noise stream of its own (the rounds' captures
+/// stay those of the nodes alone, capture for capture) and its photograph of the dark room.
+#[derive(Debug)]
+pub struct Camera {
+    noise: CameraNoise,
+    dark: Capture,
+}
+
+impl Camera {
+    /// For runs seeded `seed`; takes the dark room's photograph (one capture).
+    pub fn new(room: &Room, seed: u64) -> Result<Self> {
+        let mut noise = CameraNoise::with_seed(room, seed ^ SEED);
+        let black = vec![Frame::Black; room.projectors().len()];
+        let dark = noise.expose(&room.render(&black, None)?);
+        Ok(Self { noise, dark })
+    }
+
+    /// [`PASSES`] passes of [`shade`] on preset `index`, its LEDs photographed as `reference`.
+    pub fn shade(
+        &mut self,
+        lab: (&Room, &Calibrated, &ReachMap),
+        index: usize,
+        reference: &Capture,
+        x: &[LinearRgb],
+    ) -> Result<Shaded> {
+        let (room, cal, reach) = lab;
+        let preset = Preset {
+            index,
+            reference,
+            dark: &self.dark,
+        };
+        shade(room, cal, reach, preset, x, &mut self.noise, PASSES)
     }
 }
 

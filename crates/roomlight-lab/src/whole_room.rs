@@ -54,6 +54,17 @@ pub struct ReachMap {
     pub lit_by: Vec<u64>,
 }
 
+/// The room's luminaire projectors, as indices into its projectors.
+pub fn luminaires(room: &Room) -> Vec<usize> {
+    room.scene()
+        .projectors
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.role == ProjectorRole::Luminaire)
+        .map(|(k, _)| k)
+        .collect()
+}
+
 impl ReachMap {
     /// From the simulator's truth: each luminaire's direct light per camera pixel, the projector
     /// pixel through its lens centre, and the node `regions` (which projector pixels are driven).
@@ -64,14 +75,7 @@ impl ReachMap {
             "whole-room reach: {} projectors, at most 64 are supported",
             projectors.len()
         );
-        let luminaires: Vec<usize> = room
-            .scene()
-            .projectors
-            .iter()
-            .enumerate()
-            .filter(|(_, p)| p.role == ProjectorRole::Luminaire)
-            .map(|(k, _)| k)
-            .collect();
+        let luminaires = luminaires(room);
         // Per projector, the pixels some node drives (weight above zero).
         let mut driven: Vec<Vec<bool>> = projectors
             .iter()
@@ -656,14 +660,7 @@ mod tests {
         let mut scene = roomlight_sim::scenes::small().expect("small scene");
         scene.room.interreflection = false;
         let room = Room::build(scene).expect("room");
-        let luminaires: Vec<usize> = room
-            .scene()
-            .projectors
-            .iter()
-            .enumerate()
-            .filter(|(_, p)| p.role == ProjectorRole::Luminaire)
-            .map(|(k, _)| k)
-            .collect();
+        let luminaires = luminaires(&room);
         let first = luminaires[0];
         let regions: Vec<NodeRegion> = luminaires
             .iter()
