@@ -83,6 +83,7 @@ impl Default for SandboxBuilder {
                 stale_frames: 0,
                 model_out: None,
                 primaries: true,
+                shading_passes: 0,
             },
             start: None,
             plant: PlantConfig::default(),

@@ -87,6 +87,7 @@ impl Pattern {
 /// How a projector draws its nodes, as the camera agent measured it: the calibration rig's
 /// own type, so that what the procedure assigns is what a node agent draws.
 pub use roomlight_calib::rig::Assignment;
+pub use roomlight_calib::shading::Gains;
 
 /// A Gray bit must be one of the projector's: bit `b` of an axis of `bits` bits (a bit beyond
 /// them has no stripes to draw, and roomlight-calib's coder assumes it never comes).
@@ -172,6 +173,13 @@ pub trait Display: Send + 'static {
     /// afterwards are drawn with them). Displays that draw no pixels ignore it.
     fn assign(&mut self, assignment: &Assignment) {
         let _ = assignment;
+    }
+
+    /// Draws node values with per-pixel shading `gains` from now on (`None`: without), as
+    /// [`Assignment::draw_shaded`] does; redraws what it shows. Displays that draw no pixels
+    /// ignore it.
+    fn shade(&mut self, gains: Option<&Gains>) {
+        let _ = gains;
     }
 
     /// The projector's resolution, when the display knows it (sent in Hello).

@@ -4,7 +4,7 @@
 //! separate processes.
 
 use crate::AgentError;
-use crate::hardware::{Assignment, Camera, Display, Pattern, VirtualRoom};
+use crate::hardware::{Assignment, Camera, Display, Gains, Pattern, VirtualRoom};
 use roomlight_core::LinearRgb;
 use roomlight_proto::convert::{from_rgb, to_rgb};
 use roomlight_proto::v1;
@@ -65,6 +65,8 @@ pub enum Update {
     Value(u32, LinearRgb),
     Pattern(Pattern),
     Assign(Box<Assignment>),
+    /// Per-pixel shading gains to draw node values with (`None`: without).
+    Shade(Option<Box<Gains>>),
 }
 
 /// What a [`QueuedDisplay`] hands its background task.
@@ -143,6 +145,14 @@ impl Display for QueuedDisplay {
                 .is_ok()
     }
 
+    fn shade(&mut self, gains: Option<&Gains>) {
+        if self.resolution.is_some() {
+            let _ = self
+                .tx
+                .send(Queued::Update(Update::Shade(gains.cloned().map(Box::new))));
+        }
+    }
+
     fn assign(&mut self, assignment: &Assignment) {
         if self.resolution.is_some() {
             let _ = self
@@ -183,7 +193,7 @@ pub async fn remote_display(
                     x: Some(to_rgb(x)),
                     attenuation: None,
                 }),
-                Update::Pattern(_) | Update::Assign(_) => None,
+                Update::Pattern(_) | Update::Assign(_) | Update::Shade(_) => None,
             })
             .collect();
         let mut client = client.clone();

@@ -136,7 +136,21 @@ impl Assignment {
     /// pixel's light is the sum of its nodes' weights times their values, turned into a code
     /// through the response.
     pub fn draw(&self, values: &[(u32, LinearRgb)]) -> Vec<[f32; 3]> {
-        let mut light = vec![LinearRgb::ZERO; (self.width * self.height) as usize];
+        self.draw_shaded(values, None)
+    }
+
+    /// [`Self::draw`] with each pixel's light shaded by `gains` (per-pixel shading: the floor
+    /// and the gains of [`crate::shading::shaded_light`]); gains of another projector size, or
+    /// none, draw the nodes' light as it is.
+    pub fn draw_shaded(
+        &self,
+        values: &[(u32, LinearRgb)],
+        gains: Option<&crate::shading::Gains>,
+    ) -> Vec<[f32; 3]> {
+        let n = (self.width * self.height) as usize;
+        let mut light = vec![LinearRgb::ZERO; n];
+        let gains = gains.filter(|g| g.size() == (self.width, self.height));
+        let mut weight = vec![0.0f64; if gains.is_some() { n } else { 0 }];
         for (node, weights) in &self.nodes {
             let Some(&(_, v)) = values.iter().find(|(n, _)| n == node) else {
                 continue;
@@ -145,6 +159,20 @@ impl Assignment {
                 if let Some(l) = light.get_mut(i as usize) {
                     *l += v * f64::from(w);
                 }
+                if let Some(s) = weight.get_mut(i as usize) {
+                    *s += f64::from(w);
+                }
+            }
+        }
+        if let Some(g) = gains {
+            let width = self.width.max(1);
+            for (i, (l, w)) in light.iter_mut().zip(&weight).enumerate() {
+                let i = i as u32;
+                *l = LinearRgb(crate::shading::shaded_light(
+                    l.0,
+                    *w,
+                    g.at(i % width, i / width),
+                ));
             }
         }
         let mut last = None;
@@ -323,5 +351,71 @@ mod tests {
             distinct.insert(code.map(f32::to_bits));
         }
         assert!(distinct.len() > 10, "the feathered band has its own codes");
+    }
+
+    /// Shaded drawing: flat gains keep a lit node's codes, a black node's pixels rise to the
+    /// floor by its weight, stepped gains scale each channel's light where the camera asked,
+    /// and gains of another size are ignored.
+    #[test]
+    fn draw_shaded_applies_the_floor_and_the_gains() {
+        use crate::shading::{BLOCK, FLOOR, Gains, Ratios};
+        let (width, height) = (2 * BLOCK, BLOCK);
+        let n = width * height;
+        let a = Assignment {
+            width,
+            height,
+            response: Response::linear(),
+            // Node 1 over the left half at weight 1, node 2 over the right half at 0.5.
+            nodes: vec![
+                (
+                    1,
+                    (0..n)
+                        .filter(|i| i % width < BLOCK)
+                        .map(|i| (i, 1.0))
+                        .collect(),
+                ),
+                (
+                    2,
+                    (0..n)
+                        .filter(|i| i % width >= BLOCK)
+                        .map(|i| (i, 0.5))
+                        .collect(),
+                ),
+            ],
+        };
+        let values = [(1, LinearRgb([0.4, 0.2, 0.1])), (2, LinearRgb::ZERO)];
+        let plain = a.draw(&values);
+        let flat = Gains::flat(width, height).expect("gains");
+        let flat_codes = a.draw_shaded(&values, Some(&flat));
+        let (left, right) = (8 * width + 3, 8 * width + width - 3);
+        let bits = |c: [f32; 3]| c.map(f32::to_bits);
+        assert_eq!(bits(flat_codes[left as usize]), bits(plain[left as usize]));
+        assert_eq!(bits(plain[right as usize]), bits([0.0; 3]));
+        for c in flat_codes[right as usize] {
+            assert!((f64::from(c) - FLOOR * 0.5).abs() < 1e-6, "{c}");
+        }
+        // Double the red on the left block, the rest as it is.
+        let ratios = Ratios::from_blocks(
+            width,
+            height,
+            vec![Some([2.0, 1.0, 1.0]), Some([1.0, 1.0, 1.0])],
+        )
+        .expect("ratios");
+        let mut g = flat.clone();
+        g.step(&ratios, 1.0).expect("step");
+        let shaded = a.draw_shaded(&values, Some(&g));
+        let far_left = (8 * width) as usize;
+        assert!(
+            (shaded[far_left][0] - 0.8).abs() < 1e-6,
+            "{:?}",
+            shaded[far_left]
+        );
+        assert!((shaded[far_left][1] - 0.2).abs() < 1e-6);
+        let other = Gains::flat(width + 1, height).expect("gains");
+        let all_bits = |v: Vec<[f32; 3]>| v.into_iter().map(bits).collect::<Vec<_>>();
+        assert_eq!(
+            all_bits(a.draw_shaded(&values, Some(&other))),
+            all_bits(plain)
+        );
     }
 }

@@ -99,6 +99,57 @@ impl Ratios {
     pub fn read(&self) -> (usize, usize) {
         (self.ratio.iter().flatten().count(), self.ratio.len())
     }
+
+    /// The projector's size the blocks cover.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Each block's ratio, row-major, [`BLOCK`] pixels a side (`None`: not read).
+    pub fn blocks(&self) -> &[Option<[f64; 3]>] {
+        &self.ratio
+    }
+
+    /// Ratios received for a `width`×`height` projector (from the camera agent): one entry per
+    /// block of [`BLOCK`] pixels, row-major, each `None` or three finite ratios within
+    /// 1/[`MAX_STEP`]..[`MAX_STEP`]. Anything else is refused with the block it found.
+    pub fn from_blocks(
+        width: u32,
+        height: u32,
+        blocks: Vec<Option<[f64; 3]>>,
+    ) -> Result<Self, CalibError> {
+        let invalid = |problem: String| CalibError::Invalid {
+            field: "shading ratios",
+            problem,
+        };
+        if width == 0 || height == 0 {
+            return Err(invalid(format!("a {width}×{height} projector")));
+        }
+        let across = width.div_ceil(BLOCK) as usize;
+        let down = height.div_ceil(BLOCK) as usize;
+        if blocks.len() != across * down {
+            return Err(invalid(format!(
+                "{} blocks, a {width}×{height} projector has {across}×{down}",
+                blocks.len()
+            )));
+        }
+        let range = (1.0 / MAX_STEP)..=MAX_STEP;
+        if let Some((i, r)) = blocks.iter().enumerate().find_map(|(i, b)| {
+            b.filter(|r| !r.iter().all(|v| range.contains(v)))
+                .map(|r| (i, r))
+        }) {
+            return Err(invalid(format!(
+                "block {i} has ratios {r:?}, expected within 1/{MAX_STEP}..{MAX_STEP}"
+            )));
+        }
+        Ok(Self {
+            width,
+            height,
+            across,
+            down,
+            ratio: blocks,
+        })
+    }
 }
 
 /// The ratio of the reference's light to the current one on blocks of the projector that

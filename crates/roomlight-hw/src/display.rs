@@ -1,5 +1,6 @@
 //! `WindowDisplay`: roomlight-agent's `Display` on a real window. Node values are drawn
-//! through the assignment the camera agent measured (`Assignment::draw`), calibration patterns
+//! through the assignment the camera agent measured, with the per-pixel shading gains the node
+//! agent stepped (`Assignment::draw_shaded`), calibration patterns
 //! through `Pattern::codes`; both give projector codes in [0, 1], which are rounded to 8 bits
 //! and shown as they are (the projector's response is already in the codes). `flush` resolves
 //! once the frame is on the screen plus `settle_ms`, the projector's own latency. Its state
@@ -10,7 +11,7 @@ use crate::HwError;
 use crate::frame::Frame;
 use crate::output::OutputSelector;
 use crate::window::{DisplayState, WindowHandle};
-use roomlight_agent::hardware::{Assignment, Display, DisplayFeed, DisplayReport, Pattern};
+use roomlight_agent::hardware::{Assignment, Display, DisplayFeed, DisplayReport, Gains, Pattern};
 use roomlight_core::LinearRgb;
 use std::time::Duration;
 use tokio::sync::{oneshot, watch};
@@ -43,6 +44,8 @@ pub struct WindowDisplay {
     window: WindowHandle,
     settle: Duration,
     assignment: Option<Assignment>,
+    /// Per-pixel shading gains node values are drawn with.
+    gains: Option<Gains>,
     values: Vec<(u32, LinearRgb)>,
     content: Content,
     /// Showing the identify pattern of this projector id, over whatever else.
@@ -63,6 +66,7 @@ impl WindowDisplay {
             window,
             settle: spec.settle,
             assignment: None,
+            gains: None,
             values: Vec::new(),
             content: Content::Values,
             identify: None,
@@ -110,7 +114,9 @@ impl WindowDisplay {
                 }
             },
             Content::Values => match &self.assignment {
-                Some(a) if (a.width, a.height) == (w, h) => a.draw(&self.values),
+                Some(a) if (a.width, a.height) == (w, h) => {
+                    a.draw_shaded(&self.values, self.gains.as_ref())
+                }
                 Some(a) => {
                     tracing::warn!(
                         output = %self.output_name(),
@@ -164,6 +170,11 @@ impl Display for WindowDisplay {
 
     fn assign(&mut self, assignment: &Assignment) {
         self.assignment = Some(assignment.clone());
+        self.dirty = true;
+    }
+
+    fn shade(&mut self, gains: Option<&Gains>) {
+        self.gains = gains.cloned();
         self.dirty = true;
     }
 
@@ -270,6 +281,7 @@ mod tests {
             stale_frames: 0,
             model_out: None,
             primaries: true,
+            shading_passes: 0,
         };
         let model = RoomModel {
             problem,

@@ -743,7 +743,7 @@ fn agents_over_grpc(
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let endpoint = format!("http://{}", listener.local_addr()?);
         let cancel = CancellationToken::new();
-        let config = CameraConfig { room: "demo".into(), token: "demo".into(), heartbeat: Duration::from_millis(500), deadline: Duration::from_secs(2), model_rounds: 5, calibration_epoch: 1, stale_frames: 0, model_out: None, primaries: true };
+        let config = CameraConfig { room: "demo".into(), token: "demo".into(), heartbeat: Duration::from_millis(500), deadline: Duration::from_secs(2), model_rounds: 5, calibration_epoch: 1, stale_frames: 0, model_out: None, primaries: true, shading_passes: 0 };
         let (mut status, _handle) = camera::serve(config, RoomModel { problem: problem.clone(), owners: owners.clone(), start: None, hot: Default::default(), survey: None }, room.camera(), listener, cancel.clone());
         for id in owners.keys() {
             let config = NodeConfig { endpoint: endpoint.clone(), room: "demo".into(), token: "demo".into(), projector_id: id.clone(), kind: roomlight_proto::v1::ProjectorKind::Standard, rule: StepRule::Momentum { theta: 1.0 }, start: LinearRgb::splat(0.5), state_file: None };

@@ -22,3 +22,4 @@ pub mod shadow;
 pub mod soak;
 pub mod whole_room;
 pub mod whole_room_best;
+pub mod wire_room;

@@ -22,16 +22,25 @@ struct State {
 /// The served room and what it shows; shared with the grab mode (`process::photos`), which
 /// takes the projectors' frames from the screen instead of from `ShowImage`.
 #[derive(Clone)]
-pub(crate) struct Rendered {
+pub struct Rendered {
     room: Arc<Room>,
     state: Arc<Mutex<State>>,
     /// Frames come from the screen: `ShowImage` is refused.
     from_screen: bool,
 }
 
+impl std::fmt::Debug for Rendered {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Rendered")
+            .field("room", &self.room.scene().name)
+            .field("from_screen", &self.from_screen)
+            .finish_non_exhaustive()
+    }
+}
+
 impl Rendered {
     /// All projectors black, LEDs off, camera noise from `seed`.
-    pub(crate) fn new(room: Arc<Room>, seed: u64, from_screen: bool) -> Self {
+    pub fn new(room: Arc<Room>, seed: u64, from_screen: bool) -> Self {
         let state = State {
             frames: vec![Frame::Black; room.projectors().len()],
             preset: None,
@@ -42,6 +51,11 @@ impl Rendered {
             state: Arc::new(Mutex::new(state)),
             from_screen,
         }
+    }
+
+    /// What each projector shows now (what a test renders the noiseless truth of).
+    pub fn frames(&self) -> Vec<Frame> {
+        self.state().frames.clone()
     }
 
     fn state(&self) -> std::sync::MutexGuard<'_, State> {
@@ -209,7 +223,7 @@ pub async fn serve(
 }
 
 /// Serves `rendered` until `cancel`.
-pub(crate) async fn serve_rendered(
+pub async fn serve_rendered(
     rendered: Rendered,
     listener: tokio::net::TcpListener,
     cancel: CancellationToken,
@@ -404,14 +418,16 @@ impl FrameSpec {
 }
 
 /// The 8-bit image of node values `x` (nodes without a value are black) drawn with
-/// `assignment` ([`Assignment::draw`], as every display that draws pixels).
+/// `assignment` and shaded by `gains` ([`Assignment::draw_shaded`], as every display that
+/// draws pixels).
 fn values_image(
     assignment: &Assignment,
     x: &std::collections::HashMap<u32, roomlight_core::LinearRgb>,
+    gains: Option<&roomlight_agent::hardware::Gains>,
 ) -> Vec<u8> {
     let values: Vec<(u32, roomlight_core::LinearRgb)> = x.iter().map(|(&n, &v)| (n, v)).collect();
     assignment
-        .draw(&values)
+        .draw_shaded(&values, gains)
         .into_iter()
         .flat_map(|c| c.map(byte))
         .collect()
@@ -452,6 +468,7 @@ pub fn rendered_display(
     let mut values = std::collections::HashMap::new();
     let mut pattern: Option<Pattern> = None;
     let mut assignment = spec.map(FrameSpec::assignment);
+    let mut gains: Option<roomlight_agent::hardware::Gains> = None;
     roomlight_agent::remote::QueuedDisplay::spawn(cancel, Some((width, height)), move |batch| {
         for update in batch {
             match update {
@@ -468,11 +485,12 @@ pub fn rendered_display(
                     );
                 }
                 Update::Assign(a) => assignment = Some(*a),
+                Update::Shade(g) => gains = g.map(|g| *g),
             }
         }
         let rgb8 = match (&pattern, &assignment) {
             (Some(p), _) => pattern_image(p, width, height),
-            (None, Some(a)) => values_image(a, &values),
+            (None, Some(a)) => values_image(a, &values, gains.as_ref()),
             (None, None) => vec![0; (width * height * 3) as usize],
         };
         let request = v1::ShowImageRequest {

@@ -42,6 +42,7 @@ async fn a_node_finds_the_camera_agent_of_its_room_over_mdns_on_loopback() {
         stale_frames: 0,
         model_out: None,
         primaries: true,
+        shading_passes: 0,
     };
     let (mut status, _camera) = camera::serve(
         config,

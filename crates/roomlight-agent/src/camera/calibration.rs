@@ -19,6 +19,8 @@ use super::rig::WireRig;
 use super::{Shared, Survey};
 use crate::hardware::Camera;
 use roomlight_calib::attenuation::Attenuation;
+use roomlight_calib::graycode::Correspondence;
+use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::procedure::{
     Event, Hot, Placed, Procedure, ProcedureError, Settings, Setup, place_calibrated,
 };
@@ -47,6 +49,10 @@ struct Outcome {
     /// Which model patches every capture could measure.
     measurable: Vec<bool>,
     captures: usize,
+    /// The standard projectors' decodes (segmented now), for per-pixel shading.
+    decodes: Vec<(String, Correspondence)>,
+    /// The dark room, when this was a bring-up in the dark.
+    dark: Option<LinearImage>,
 }
 
 /// Calibrates `projector` and, at bring-up (the room still dark), every other projector waiting
@@ -99,7 +105,7 @@ async fn measure_and_install(
         Some(survey) => hot_images(shared, eye, survey, projector, nodes, notes).await,
         None => hot_patches(shared, eye, projector, nodes).await,
     };
-    let outcome = match measured {
+    let mut outcome = match measured {
         Ok(outcome) => outcome,
         Err(e) => {
             tracing::error!(%projector, error = %e, "calibration over the wire failed");
@@ -109,9 +115,11 @@ async fn measure_and_install(
     };
     notes.captures(outcome.captures);
     tracing::info!(projectors = ?outcome.projectors.iter().map(|p| &p.0).collect::<Vec<_>>(), captures = outcome.captures, "calibrated over the wire");
+    let (dark, decodes) = (outcome.dark.take(), std::mem::take(&mut outcome.decodes));
     let Some(calibrated) = install(shared, outcome, errors) else {
         return Vec::new();
     };
+    shared.shading().calibrated(dark.as_ref(), decodes);
     light(shared, &calibrated);
     calibrated.into_iter().map(|(id, _)| id).collect()
 }
@@ -363,6 +371,11 @@ async fn over_the_wire(
         .await?;
     let measured = procedure.responses(decoded, &live, &dark, &whites).await?;
     drop(whites);
+    let decodes: Vec<(String, Correspondence)> = measured
+        .iter()
+        .filter(|m| m.projector.blends())
+        .map(|m| (m.projector.id.clone(), m.corr.clone()))
+        .collect();
     let to_place = setup.clone();
     let placed = procedure
         .rig()
@@ -406,6 +419,9 @@ async fn over_the_wire(
         columns,
         measurable,
         captures: procedure.captures(),
+        decodes,
+        // Lit, `dark` holds the other projectors' light.
+        dark: (!lit).then_some(dark),
     })
 }
 
@@ -452,6 +468,8 @@ async fn hot_images(
         columns,
         measurable,
         captures: procedure.captures(),
+        decodes: Vec::new(),
+        dark: None,
     })
 }
 
@@ -592,6 +610,8 @@ async fn hot_patches(
         columns,
         measurable,
         captures: nodes.len() + 1,
+        decodes: Vec::new(),
+        dark: None,
     })
 }
 

@@ -10,7 +10,12 @@ use super::faults::{CameraHealth, CameraState};
 use crate::hardware::Camera;
 use roomlight_calib::image_io::LinearImage;
 use roomlight_core::LinearRgb;
+use std::sync::Arc;
 use std::time::{Duration, SystemTime};
+
+/// A capture of the model's patches, whether each could be measured, and (with a survey) the
+/// whole image they were sampled from.
+pub(super) type Measured = (Vec<LinearRgb>, Vec<bool>, Option<Arc<LinearImage>>);
 
 /// The camera, how many frames it has taken, and whether it works.
 pub(super) struct Captures<C> {
@@ -97,17 +102,20 @@ impl<C: Camera> Captures<C> {
         shared: &Shared,
     ) -> Option<(Vec<LinearRgb>, Vec<bool>)> {
         let outcome = self.try_measured(shared).await;
+        self.record(shared, outcome).map(|(y, ok, _)| (y, ok))
+    }
+
+    /// [`Self::measured`] with the whole image it sampled (`None` without a survey).
+    pub(super) async fn measured_image(&mut self, shared: &Shared) -> Option<Measured> {
+        let outcome = self.try_measured(shared).await;
         self.record(shared, outcome)
     }
 
-    async fn try_measured(
-        &mut self,
-        shared: &Shared,
-    ) -> Result<(Vec<LinearRgb>, Vec<bool>), String> {
+    async fn try_measured(&mut self, shared: &Shared) -> Result<Measured, String> {
         let Some(survey) = &shared.survey else {
             let y = self.fresh(shared).await?;
             let ok = vec![true; y.len()];
-            return Ok((y, ok));
+            return Ok((y, ok, None));
         };
         let timeout = self.camera.capture_timeout();
         let image = self
@@ -116,8 +124,9 @@ impl<C: Camera> Captures<C> {
         let samples =
             roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample)
                 .map_err(|e| format!("the charts could not be sampled: {e}"));
-        // The console's view of the room: the image moves, nothing is copied.
-        shared.publish_photo(image);
+        // The console's view of the room: shared, nothing is copied.
+        let image = Arc::new(image);
+        shared.publish_photo(image.clone());
         let samples = samples?;
         let mut means = Vec::with_capacity(survey.patches.len());
         let mut ok = Vec::with_capacity(survey.patches.len());
@@ -138,7 +147,7 @@ impl<C: Camera> Captures<C> {
                 means.len()
             ));
         }
-        Ok((means, ok))
+        Ok((means, ok, Some(image)))
     }
 
     /// One whole image exposed `exposure` times as long as normal (in the units of a normal

@@ -16,6 +16,7 @@
 //! - `calibration`: the calibration procedure driven over the wire (bring-up, joins, hot);
 //! - `rig`: the procedure's rig over the peers (Show and Assign messages, the camera);
 //! - `model`: the live model (attenuation, `s`, starts, patches left out) and its file;
+//! - `shading`: per-pixel shading passes once the rounds settle (what they need, the pass);
 //! - `operator`: what the installer's console sees and asks (pause, calibrate, preset,
 //!   identify, photograph), carried out by the round loop between rounds.
 
@@ -29,6 +30,7 @@ mod registry;
 mod rig;
 mod rounds;
 mod service;
+mod shading;
 
 use crate::hardware::Camera;
 pub use faults::{CameraState, RETRY_FIRST, RETRY_MAX};
@@ -93,6 +95,9 @@ pub struct CameraConfig {
     /// one group at a time in white, for projectors that do not show their primaries at once
     /// (a single-chip DLP's colour wheel photographed faster than it turns).
     pub primaries: bool,
+    /// Per-pixel shading passes per target once the rounds have settled (`shading`); 0: none.
+    /// Each takes one capture, and the rounds settle again after it.
+    pub shading_passes: usize,
 }
 
 impl std::fmt::Debug for CameraConfig {
@@ -105,6 +110,7 @@ impl std::fmt::Debug for CameraConfig {
             .field("model_rounds", &self.model_rounds)
             .field("calibration_epoch", &self.calibration_epoch)
             .field("stale_frames", &self.stale_frames)
+            .field("shading_passes", &self.shading_passes)
             .field("model_out", &self.model_out)
             .field("primaries", &self.primaries)
             .finish()
@@ -199,6 +205,8 @@ pub struct RoomStatus {
     pub camera: CameraState,
     /// Attached projectors whose node agent says its display is lost (they stay attached).
     pub displays_lost: Vec<DisplayLost>,
+    /// Per-pixel shading passes sent for the current target (`CameraConfig::shading_passes`).
+    pub shading_passes: usize,
 }
 
 /// A projector whose display is lost, as its node agent reported it.
@@ -261,6 +269,8 @@ struct Shared {
     /// The latest whole photograph, published only while someone watches.
     photos: watch::Sender<Option<Photo>>,
     photo_seq: AtomicU64,
+    /// What per-pixel shading passes need, and how many were done.
+    shading: Mutex<shading::Inputs>,
 }
 
 impl Shared {
@@ -272,19 +282,19 @@ impl Shared {
         self.live.write().unwrap_or_else(PoisonError::into_inner)
     }
 
+    fn shading(&self) -> MutexGuard<'_, shading::Inputs> {
+        self.shading.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
     fn values(&self) -> MutexGuard<'_, HashMap<u32, LinearRgb>> {
         self.values.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// Publishes a whole photograph for the console, if one watches (the image is moved, not
-    /// copied: the round loop pays one allocation).
-    fn publish_photo(&self, image: LinearImage) -> u64 {
+    /// Publishes a whole photograph for the console, if one watches (shared, not copied).
+    fn publish_photo(&self, image: Arc<LinearImage>) -> u64 {
         let seq = self.photo_seq.fetch_add(1, Ordering::Relaxed) + 1;
         if self.photos.receiver_count() > 0 {
-            self.photos.send_replace(Some(Photo {
-                seq,
-                image: Arc::new(image),
-            }));
+            self.photos.send_replace(Some(Photo { seq, image }));
         }
         seq
     }
@@ -503,6 +513,7 @@ pub fn serve_room(
         late: Mutex::new(Vec::new()),
         photos,
         photo_seq: AtomicU64::new(0),
+        shading: Mutex::new(shading::Inputs::default()),
     });
     let control = Control {
         shared: shared.clone(),

@@ -241,7 +241,14 @@ impl<C: Camera> Rounds<C> {
             let peers = shared.registry.lock();
             (peers.len(), peers.displays_lost())
         };
-        let settled = self.controller.settled();
+        let mut settled = self.controller.settled();
+        // Settled on a target: a per-pixel shading pass, when one is due. The light changes
+        // (at the charts too): the rounds settle again before the next.
+        if settled && !cancel.is_cancelled() && super::shading::pass(&shared, &mut self.eye).await {
+            self.controller.retarget();
+            settled = false;
+        }
+        let shading_passes = shared.shading().passes;
         shared.status.send_modify(|s| {
             s.round = round;
             s.captures = self.eye.count;
@@ -256,6 +263,7 @@ impl<C: Camera> Rounds<C> {
             s.calibrated_at = self.calibrated_at;
             s.camera = self.eye.state().clone();
             s.displays_lost = displays_lost;
+            s.shading_passes = shading_passes;
         });
     }
 
@@ -282,7 +290,7 @@ impl<C: Camera> Rounds<C> {
                 let photo = self.eye.photograph(&self.shared).await;
                 let _ = reply.send(photo.map(|image| {
                     let (w, h) = (image.width, image.height);
-                    (self.shared.publish_photo(image), w, h)
+                    (self.shared.publish_photo(Arc::new(image)), w, h)
                 }));
             }
         }
@@ -337,11 +345,11 @@ impl<C: Camera> Rounds<C> {
                 .await;
             rounds
                 .eye
-                .measured(&shared)
+                .measured_image(&shared)
                 .await
                 .ok_or_else(|| Refused::Camera("the capture failed (see the warnings)".into()))
         };
-        let (without, ok_without) = capture(self).await?;
+        let (without, ok_without, without_image) = capture(self).await?;
         lights
             .switch(Some(preset.clone()))
             .await
@@ -349,7 +357,7 @@ impl<C: Camera> Rounds<C> {
         let with = capture(self).await;
         // Off again whatever happened: the projectors light the room, not the LEDs.
         let off = lights.switch(None).await.map_err(Refused::Lights);
-        let (with, ok_with) = with?;
+        let (with, ok_with, with_image) = with?;
         off?;
         {
             let mut live = shared.live_mut();
@@ -373,6 +381,11 @@ impl<C: Camera> Rounds<C> {
                 .with_target(target)
                 .map_err(|e| Refused::Model(format!("the new target was refused: {e}")))?;
         }
+        // Per-pixel shading starts over on the new target: the nodes drop their gains now.
+        let flat = shared
+            .shading()
+            .retargeted(with_image.as_deref(), without_image.as_deref());
+        super::shading::reset(&shared, &flat).await;
         self.controller.retarget();
         self.restarts += 1;
         tracing::info!(%preset, "new target measured: the rounds restart");

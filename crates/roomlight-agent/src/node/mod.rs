@@ -19,6 +19,7 @@ mod state;
 mod wire;
 
 pub use state::SavedState;
+pub(crate) use wire::shade_to_wire;
 
 use crate::AgentError;
 use crate::hardware::Display;

@@ -10,9 +10,11 @@
 
 use super::NodeConfig;
 use super::state::Memory;
-use super::wire::{Wire, assignment_from_wire, display_status_to_wire, pattern_from_wire};
+use super::wire::{
+    Wire, assignment_from_wire, display_status_to_wire, pattern_from_wire, shade_from_wire,
+};
 use crate::AgentError;
-use crate::hardware::{Display, DisplayFeed};
+use crate::hardware::{Display, DisplayFeed, Gains};
 use roomlight_core::{AttenuationColumn, LinearRgb, NodeState};
 use roomlight_proto::convert::{
     from_node_errors, from_rgb, from_sparse, node_change, to_rgb, to_sparse,
@@ -129,6 +131,7 @@ pub(super) async fn run(
             Some(Body::Attenuation(a)) => session.attenuation(&a).await?,
             Some(Body::Errors(e)) => session.errors(e).await?,
             Some(Body::Show(show)) => session.show(show).await?,
+            Some(Body::Shade(shade)) => session.shade(shade).await?,
             Some(Body::Identify(i)) => {
                 let seconds = u64::from(i.seconds.clamp(1, 60));
                 session.identify(Some(Duration::from_secs(seconds))).await;
@@ -310,6 +313,10 @@ impl<D: Display> Session<'_, D> {
         // assignment ends the session (the camera agent logs the stream's end).
         if a.width > 0 {
             let assignment = assignment_from_wire(a)?;
+            // New nodes: shading starts over from their own light.
+            if self.memory.gains.take().is_some() {
+                self.display.shade(None);
+            }
             self.display.assign(&assignment);
             self.memory.assignment = Some(assignment);
             self.memory.flush();
@@ -407,6 +414,50 @@ impl<D: Display> Session<'_, D> {
     /// A calibration pattern: node values shown as they are, without touching the node states
     /// (values for nodes it does not own, or not finite, are refused), or a whole-frame
     /// pattern. One the display cannot show is not acknowledged.
+    /// A shading pass's ratios: the projector's gains step (from flat after a reset) and its
+    /// node values are drawn with them from now on; acknowledged like a pattern once on the
+    /// display. Malformed, or for a display that draws no pixels: ignored (logged) and not
+    /// acknowledged, the gains as they were.
+    async fn shade(&mut self, shade: v1::Shade) -> Result<(), AgentError> {
+        let Some(size) = self.display.resolution() else {
+            tracing::warn!(
+                seq = shade.seq,
+                "shading asked: this display draws no pixels"
+            );
+            return Ok(());
+        };
+        let step = match shade_from_wire(&shade, size) {
+            Ok(step) => step,
+            Err(e) => {
+                tracing::warn!(seq = shade.seq, error = %e, "malformed Shade: ignored");
+                return Ok(());
+            }
+        };
+        let gains = &mut self.memory.gains;
+        if step.reset || gains.as_ref().is_none_or(|g| g.size() != size) {
+            *gains = Gains::flat(size.0, size.1);
+        }
+        match (&step.ratios, gains.as_mut()) {
+            (Some(ratios), Some(g)) => {
+                if let Err(e) = g.step(ratios, step.rate) {
+                    tracing::warn!(seq = shade.seq, error = %e, "Shade refused: ignored");
+                    return Ok(());
+                }
+                let (lo, hi) = g.spread();
+                let (read, blocks) = ratios.read();
+                tracing::info!(
+                    read,
+                    blocks,
+                    "shaded: gains {lo:.2}–{hi:.2} (5th–95th percentile)"
+                );
+                self.display.shade(Some(g));
+            }
+            // A reset alone: the nodes' light as it is.
+            _ => self.display.shade(None),
+        }
+        acknowledge(self.display, &self.tx, shade.seq, true).await
+    }
+
     /// Shows the identify pattern for `seconds` (`None`: its time is up, the frame returns).
     async fn identify(&mut self, seconds: Option<Duration>) {
         let projector = self.config.projector_id.clone();

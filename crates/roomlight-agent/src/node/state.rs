@@ -9,7 +9,7 @@
 //! the camera agent does not assign to this projector are forgotten.
 
 use crate::AgentError;
-use crate::hardware::{Assignment, Display};
+use crate::hardware::{Assignment, Display, Gains};
 use roomlight_core::{AttenuationColumn, LinearRgb};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -89,6 +89,9 @@ pub(super) struct Memory {
     pub(super) assignment: Option<Assignment>,
     /// Each node's last attenuation column.
     pub(super) attenuation: HashMap<u32, AttenuationColumn>,
+    /// The per-pixel shading gains its display draws with (kept across sessions, not in the
+    /// state file: a restarted node starts flat and the camera agent's passes step it again).
+    pub(super) gains: Option<Gains>,
     path: Option<PathBuf>,
     last_write: Option<Instant>,
     /// Whose memory this is (written into the state file).
@@ -110,6 +113,7 @@ impl Memory {
             epoch: 0,
             assignment: None,
             attenuation: HashMap::new(),
+            gains: None,
             path,
             last_write: None,
             projector: projector.to_string(),

@@ -6,6 +6,7 @@
 
 use crate::AgentError;
 use crate::hardware::{Assignment, DisplayReport, Fill, Pattern, validate_assignment};
+use roomlight_calib::shading::{BLOCK, Ratios};
 use roomlight_proto::convert::{display_status, from_rgb};
 use roomlight_proto::v1;
 use std::sync::Arc;
@@ -201,11 +202,156 @@ pub(super) fn assignment_from_wire(a: &v1::Assign) -> Result<Assignment, AgentEr
     Ok(assignment)
 }
 
+/// A Shade message checked for a display of `width`×`height`: the gains to step with and
+/// how. `reset` alone (no ratios) carries no step.
+#[derive(Debug, PartialEq)]
+pub(super) struct ShadeStep {
+    pub(super) ratios: Option<Ratios>,
+    pub(super) rate: f64,
+    pub(super) reset: bool,
+}
+
+/// A Shade message's ratios for a display of `width`×`height`: the block size must be ours,
+/// the block counts the display's, the bytes 12 a block, each ratio finite within the bounds
+/// (all three 0: a block not read), the rate in (0, 1]. The reason, when refused.
+pub(super) fn shade_from_wire(
+    s: &v1::Shade,
+    (width, height): (u32, u32),
+) -> Result<ShadeStep, String> {
+    if s.ratios.is_empty() && s.reset {
+        return Ok(ShadeStep {
+            ratios: None,
+            rate: 1.0,
+            reset: true,
+        });
+    }
+    if s.block != BLOCK {
+        return Err(format!("blocks of {} pixels, expected {BLOCK}", s.block));
+    }
+    let (across, down) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
+    if (s.across, s.down) != (across, down) {
+        return Err(format!(
+            "{}×{} blocks, a {width}×{height} display has {across}×{down}",
+            s.across, s.down
+        ));
+    }
+    let blocks = across as usize * down as usize;
+    if s.ratios.len() != blocks * 12 {
+        return Err(format!(
+            "{} bytes of ratios, expected {} (12 a block)",
+            s.ratios.len(),
+            blocks * 12
+        ));
+    }
+    if !(s.rate > 0.0 && s.rate <= 1.0) {
+        return Err(format!("rate {}, expected in (0, 1]", s.rate));
+    }
+    let blocks: Vec<Option<[f64; 3]>> = s
+        .ratios
+        .chunks_exact(12)
+        .map(|b| {
+            let v: [f64; 3] = std::array::from_fn(|c| {
+                let bytes = [b[4 * c], b[4 * c + 1], b[4 * c + 2], b[4 * c + 3]];
+                f64::from(f32::from_le_bytes(bytes))
+            });
+            // All zero (not `== 0.0`: clippy's float_cmp) means unread.
+            (v.iter().any(|x| x.abs() > 0.0) || v.iter().any(|x| x.is_nan())).then_some(v)
+        })
+        .collect();
+    let ratios = Ratios::from_blocks(width, height, blocks).map_err(|e| e.to_string())?;
+    Ok(ShadeStep {
+        ratios: Some(ratios),
+        rate: s.rate,
+        reset: s.reset,
+    })
+}
+
+/// The Shade message that carries `ratios` (see [`shade_from_wire`]).
+pub(crate) fn shade_to_wire(seq: u64, ratios: &Ratios, rate: f64, reset: bool) -> v1::Shade {
+    let (width, height) = ratios.size();
+    let mut bytes = Vec::with_capacity(ratios.blocks().len() * 12);
+    for b in ratios.blocks() {
+        let v = b.unwrap_or([0.0; 3]);
+        for c in v {
+            bytes.extend_from_slice(&(c as f32).to_le_bytes());
+        }
+    }
+    v1::Shade {
+        seq,
+        block: BLOCK,
+        across: width.div_ceil(BLOCK),
+        down: height.div_ceil(BLOCK),
+        ratios: bytes,
+        rate,
+        reset,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use roomlight_core::LinearRgb;
     use roomlight_proto::convert::to_rgb;
+
+    /// Shade messages: a pass's ratios round-trip (to f32), a reset alone carries none, and a
+    /// wrong block size, block count, byte count, rate or ratio is refused with what was
+    /// expected.
+    #[test]
+    fn shade_messages_round_trip_and_are_checked() {
+        let (w, h) = (40, 20); // 3 × 2 blocks
+        let blocks = vec![
+            Some([2.0, 1.0, 0.5]),
+            None,
+            Some([1.0, 1.0, 1.0]),
+            Some([0.25, 4.0, 1.5]),
+            None,
+            Some([1.25, 0.75, 3.0]),
+        ];
+        let ratios = Ratios::from_blocks(w, h, blocks).expect("ratios");
+        let msg = shade_to_wire(7, &ratios, 0.8, true);
+        assert_eq!(msg.ratios.len(), 6 * 12);
+        let step = shade_from_wire(&msg, (w, h)).expect("valid");
+        assert_eq!(step.ratios.as_ref(), Some(&ratios), "exact in f32");
+        assert!(step.reset && (step.rate - 0.8).abs() < 1e-12);
+        let reset = v1::Shade {
+            reset: true,
+            ..Default::default()
+        };
+        assert_eq!(
+            shade_from_wire(&reset, (w, h)).expect("reset"),
+            ShadeStep {
+                ratios: None,
+                rate: 1.0,
+                reset: true
+            }
+        );
+        let refused = |edit: &dyn Fn(&mut v1::Shade), size: (u32, u32), says: &str| {
+            let mut m = msg.clone();
+            edit(&mut m);
+            let e = shade_from_wire(&m, size).expect_err(says);
+            assert!(e.contains(says), "{e}");
+        };
+        refused(&|m| m.block = 8, (w, h), "expected 16");
+        refused(&|_| {}, (w + 16, h), "has 4×2");
+        refused(&|m| m.ratios.truncate(70), (w, h), "expected 72");
+        refused(&|m| m.rate = 0.0, (w, h), "rate 0");
+        refused(&|m| m.rate = f64::NAN, (w, h), "rate NaN");
+        refused(
+            &|m| m.ratios[0..4].copy_from_slice(&f32::NAN.to_le_bytes()),
+            (w, h),
+            "block 0",
+        );
+        refused(
+            &|m| m.ratios[12..16].copy_from_slice(&9.0f32.to_le_bytes()),
+            (w, h),
+            "block 1",
+        );
+        refused(
+            &|m| m.ratios[24..28].copy_from_slice(&f32::INFINITY.to_le_bytes()),
+            (w, h),
+            "block 2",
+        );
+    }
 
     fn assign(pixels: Vec<u32>, weights: Vec<f32>, gamma: Vec<f64>) -> v1::Assign {
         v1::Assign {

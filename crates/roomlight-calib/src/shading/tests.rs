@@ -237,3 +237,35 @@ fn shaded_light_floors_a_dark_node_and_leaves_undriven_pixels_alone() {
     // A dark node's full-weight pixel reaches full light at the largest gain.
     assert!(shaded_light([0.0; 3], 1.0, [MAX_GAIN; 3])[0] >= 1.0);
 }
+
+/// Ratios from the wire: the blocks of a pass round-trip, and a wrong count, a NaN, an
+/// infinite or an out-of-bound ratio are refused naming the block.
+#[test]
+fn ratios_from_blocks_round_trip_and_refuse_what_a_pass_cannot_give() {
+    let dark = image(W, H, |_, _| [0.01; 3]);
+    let current = image(W, H, |_, _| [0.2; 3]);
+    let reference = image(W, H, |x, _| [0.1 + 0.002 * x as f32; 3]);
+    let excluded = vec![false; (W * H) as usize];
+    let photos = Photographs {
+        reference: &reference,
+        current: &current,
+        dark: &dark,
+        excluded: &excluded,
+        saturation: 1.0,
+    };
+    let r = ratios(&photos, &identity(W, H)).expect("ratios");
+    let back = Ratios::from_blocks(W, H, r.blocks().to_vec()).expect("the same blocks");
+    assert_eq!(back, r);
+    assert_eq!(back.size(), (W, H));
+    let mut blocks = r.blocks().to_vec();
+    blocks.pop();
+    let e = Ratios::from_blocks(W, H, blocks).expect_err("a block short");
+    assert!(e.to_string().contains("23 blocks"), "{e}");
+    for bad in [f64::NAN, f64::INFINITY, 0.0, MAX_STEP * 1.01] {
+        let mut blocks = r.blocks().to_vec();
+        blocks[5] = Some([1.0, bad, 1.0]);
+        let e = Ratios::from_blocks(W, H, blocks).expect_err("refused");
+        assert!(e.to_string().contains("block 5"), "{bad}: {e}");
+    }
+    assert!(Ratios::from_blocks(0, H, Vec::new()).is_err());
+}

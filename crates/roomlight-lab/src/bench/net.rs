@@ -249,6 +249,7 @@ impl SyntheticAgents {
             stale_frames: 0,
             model_out: None,
             primaries: true,
+            shading_passes: 0,
         };
         let served = camera::serve_room(
             config,

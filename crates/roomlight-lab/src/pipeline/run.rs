@@ -504,6 +504,7 @@ impl Session<'_> {
             },
             model_out: None,
             primaries: true,
+            shading_passes: 0,
         }
     }
 

@@ -11,3 +11,4 @@ mod shaped;
 mod support;
 mod walls;
 mod wire_calibration;
+mod wire_shading;

@@ -124,6 +124,7 @@ impl Wire {
             stale_frames: 0,
             model_out: None,
             primaries: true,
+            shading_passes: 0,
         };
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await

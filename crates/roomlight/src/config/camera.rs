@@ -66,6 +66,12 @@ struct CameraFile {
     /// photographed faster than it turns). A lit room is coded in white either way.
     #[serde(default = "primaries_default")]
     primaries: bool,
+    /// Per-pixel shading passes once the rounds settle on a preset (default 6; 0: none): each
+    /// takes one capture and multiplies every standard projector's light block by block
+    /// towards the LEDs' photograph, beyond the charts. Needs calibration over the wire (the
+    /// decodes) and a preset chosen (the LEDs' photograph).
+    #[serde(default = "shading_passes_default")]
+    shading_passes: usize,
     /// Advertise the camera agent over mDNS.
     #[serde(default = "mdns_default")]
     mdns: bool,
@@ -118,6 +124,9 @@ fn mdns_default() -> bool {
 }
 fn primaries_default() -> bool {
     true
+}
+fn shading_passes_default() -> usize {
+    6
 }
 
 /// The camera agent's config file, checked and turned into the process to run.
@@ -217,6 +226,13 @@ impl CameraFile {
         check(path, "stale_frames", self.stale_frames, 0..=100, "frames")?;
         check(
             path,
+            "shading_passes",
+            self.shading_passes,
+            0..=64,
+            "passes",
+        )?;
+        check(
+            path,
             "mdns_port",
             self.mdns_port,
             1..=u16::MAX,
@@ -299,6 +315,7 @@ impl CameraFile {
                 stale_frames: self.stale_frames,
                 model_out: self.model_out,
                 primaries: self.primaries,
+                shading_passes: self.shading_passes,
             },
             hardware,
             source,
@@ -366,5 +383,38 @@ mod tests {
         assert!(
             toml::from_str::<CameraFile>(&format!("{minimal}primaries = \"white\"\n")).is_err()
         );
+    }
+
+    /// Shading passes default to 6, reach the agent as the file says, and a count beyond 64 is
+    /// refused naming the field and the range.
+    #[test]
+    fn shading_passes_default_to_six_and_are_range_checked() {
+        let minimal = "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\n\
+                       hardware = { sim = \"http://127.0.0.1:1\" }\nmodel = \"m.json\"\n";
+        let file = |text: &str| toml::from_str::<CameraFile>(text).expect("camera.toml");
+        let agent = |text: &str| {
+            let hardware = CameraHardware::Sim("http://127.0.0.1:1".into());
+            file(text).into_process(hardware, "t".into(), None).agent
+        };
+        assert_eq!(agent(minimal).shading_passes, 6);
+        assert_eq!(
+            agent(&format!("{minimal}shading_passes = 0\n")).shading_passes,
+            0
+        );
+        let path = Path::new("camera.toml");
+        assert!(
+            file(&format!("{minimal}shading_passes = 64\n"))
+                .check(path)
+                .is_ok()
+        );
+        let e = file(&format!("{minimal}shading_passes = 65\n"))
+            .check(path)
+            .expect_err("65 passes");
+        let e = format!("{e:#}");
+        assert!(
+            e.contains("camera.toml") && e.contains("shading_passes"),
+            "{e}"
+        );
+        assert!(e.contains("64"), "{e}");
     }
 }

@@ -88,6 +88,7 @@ pub fn camera_config(heartbeat: Duration, deadline: Duration, model_rounds: usiz
         stale_frames: 0,
         model_out: None,
         primaries: true,
+        shading_passes: 0,
     }
 }
 

@@ -1,0 +1,269 @@
+//! Per-pixel shading over the wire (issue 22 item 2; `roomlight_calib::shading` has the
+//! method): once the rounds have settled on a target, the camera agent photographs the room's
+//! light, compares it camera pixel by camera pixel with the LEDs' photograph of that target,
+//! lands the ratios on each standard projector's blocks through its decode, and sends each node
+//! agent its projector's ratios (a `Shade` message). The node agent steps its own gains and
+//! draws with them; the rounds then settle again (the light changed at the charts' neighbours
+//! too) before the next pass, up to `CameraConfig::shading_passes` passes per target.
+//!
+//! What a pass needs, kept here: the dark room (the bring-up's dark capture), the LEDs' light
+//! (the two captures of the last preset change, with and without the LEDs), and each
+//! projector's decode from its calibration over the wire. A camera agent resumed from a model
+//! file has none of them until a projector is calibrated and a preset chosen: it does not shade
+//! (said once in the log). A projector calibrated again starts from flat gains (its nodes are
+//! new), and any calibration starts the passes over (the room's light changed).
+
+use super::Shared;
+use super::capture::Captures;
+use crate::hardware::Camera;
+use crate::node::shade_to_wire;
+use roomlight_calib::graycode::Correspondence;
+use roomlight_calib::image_io::LinearImage;
+use roomlight_calib::shading::{Photographs, Ratios, ratios};
+use roomlight_proto::v1;
+use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+/// How far a pass steps a gain towards its ratio (`Gains::step`'s exponent): the lab's passes
+/// converge in 4–6 with it, one full step overshoots where inter-reflection answers.
+pub const RATE: f64 = 0.8;
+
+/// What the passes need and how many were done for the current target.
+#[derive(Default)]
+pub(super) struct Inputs {
+    /// The room dark (every projector black, LEDs off): the bring-up's dark capture.
+    dark: Option<Arc<LinearImage>>,
+    /// The LEDs' light alone, `with − without` of the last preset change (negatives cut).
+    leds: Option<Arc<LinearImage>>,
+    /// Each standard projector's decode from its calibration over the wire.
+    decodes: HashMap<String, Arc<Correspondence>>,
+    /// Projectors whose next Shade starts from flat gains.
+    fresh: HashSet<String>,
+    /// Passes done for the current target and room.
+    pub(super) passes: usize,
+    /// Told the log why nothing is shaded.
+    said: bool,
+}
+
+impl Inputs {
+    /// A calibration over the wire measured `decodes` (standard projectors), and `dark` when it
+    /// brought up a dark room: they start from flat gains, and the passes start over.
+    pub(super) fn calibrated(
+        &mut self,
+        dark: Option<&LinearImage>,
+        decodes: impl IntoIterator<Item = (String, Correspondence)>,
+    ) {
+        if let Some(dark) = dark {
+            self.dark = Some(Arc::new(dark.clone()));
+        }
+        for (id, corr) in decodes {
+            self.fresh.insert(id.clone());
+            self.decodes.insert(id, Arc::new(corr));
+        }
+        self.passes = 0;
+    }
+
+    /// A preset change measured the LEDs' light as `with − without` (both the camera's
+    /// whole images; `None` when either is missing or their sizes differ): every projector
+    /// starts from flat gains, and the passes start over. Returns the projectors whose node
+    /// agents must drop their gains now (the rounds settle on the new target without them).
+    pub(super) fn retargeted(
+        &mut self,
+        with: Option<&LinearImage>,
+        without: Option<&LinearImage>,
+    ) -> Vec<String> {
+        self.leds = match (with, without) {
+            (Some(a), Some(b)) if a.pixels.len() == b.pixels.len() => Some(Arc::new(LinearImage {
+                width: a.width,
+                height: a.height,
+                pixels: a
+                    .pixels
+                    .iter()
+                    .zip(&b.pixels)
+                    .map(|(w, o)| std::array::from_fn(|c| (w[c] - o[c]).max(0.0)))
+                    .collect(),
+            })),
+            _ => None,
+        };
+        self.passes = 0;
+        let mut ids: Vec<String> = self.decodes.keys().cloned().collect();
+        ids.sort();
+        self.fresh.extend(ids.iter().cloned());
+        ids
+    }
+}
+
+/// Sends each of `ids` a reset to flat gains and waits (within the deadline) for them to
+/// show it.
+pub(super) async fn reset(shared: &Shared, ids: &[String]) {
+    let sent: Vec<_> = ids
+        .iter()
+        .filter_map(|id| {
+            let shade = v1::Shade {
+                reset: true,
+                ..v1::Shade::default()
+            };
+            send(shared, id, shade)
+        })
+        .collect();
+    {
+        let mut inputs = shared.shading();
+        for (id, _, _) in &sent {
+            inputs.fresh.remove(id);
+        }
+    }
+    wait_shown(shared, &sent).await;
+}
+
+/// One shading pass, when one is due (the rounds have settled, passes are configured and
+/// left, and everything a pass needs is there): one capture of the room's light, each
+/// standard projector's ratios sent, and their acknowledgements awaited. True when a pass ran
+/// (the light changed: the rounds must settle again).
+pub(super) async fn pass<C: Camera>(shared: &Shared, eye: &mut Captures<C>) -> bool {
+    let wanted = shared.config.shading_passes;
+    let (dark, leds, decodes) = {
+        let mut inputs = shared.shading();
+        if wanted == 0 || inputs.passes >= wanted {
+            return false;
+        }
+        let missing = match (&inputs.dark, &inputs.leds, inputs.decodes.is_empty()) {
+            (None, _, _) => Some("the dark room (measured at a bring-up over the wire)"),
+            (_, None, _) => Some("the LEDs' light (measured when a preset is chosen)"),
+            (_, _, true) => Some("a projector calibrated over the wire"),
+            _ => None,
+        };
+        if let Some(missing) = missing {
+            if !std::mem::replace(&mut inputs.said, true) {
+                tracing::info!("per-pixel shading waits for {missing}");
+            }
+            return false;
+        }
+        let (Some(dark), Some(leds)) = (inputs.dark.clone(), inputs.leds.clone()) else {
+            return false;
+        };
+        (dark, leds, inputs.decodes.clone())
+    };
+    let Some(survey) = &shared.survey else {
+        return false;
+    };
+    let live: Vec<(String, Arc<Correspondence>)> = {
+        let registry = shared.registry.lock();
+        let mut live: Vec<_> = decodes
+            .into_iter()
+            .filter(|(id, _)| registry.peer(id).is_some())
+            .collect();
+        live.sort_by(|a, b| a.0.cmp(&b.0));
+        live
+    };
+    if live.is_empty() {
+        return false;
+    }
+    shared
+        .registry
+        .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
+        .await;
+    let Some(current) = eye.image_exposed(shared, 1.0).await else {
+        return false;
+    };
+    let saturation = eye.limits().saturation;
+    let excluded = survey.target_mask.clone();
+    let computed = tokio::task::spawn_blocking(move || {
+        // The LEDs' photograph as the dark room plus their light.
+        let reference = LinearImage {
+            width: dark.width,
+            height: dark.height,
+            pixels: dark
+                .pixels
+                .iter()
+                .zip(&leds.pixels)
+                .map(|(d, l)| std::array::from_fn(|c| d[c] + l[c]))
+                .collect(),
+        };
+        let photos = Photographs {
+            reference: &reference,
+            current: &current,
+            dark: &dark,
+            excluded: &excluded,
+            saturation,
+        };
+        live.into_iter()
+            .map(|(id, corr)| {
+                let r = ratios(&photos, &corr);
+                (id, r)
+            })
+            .collect::<Vec<_>>()
+    })
+    .await;
+    let computed = match computed {
+        Ok(c) => c,
+        Err(e) => {
+            tracing::error!(error = %e, "shading pass failed");
+            return false;
+        }
+    };
+    let mut sent = Vec::new();
+    let mut read = (0, 0);
+    for (id, r) in computed {
+        let r: Ratios = match r {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::warn!(projector = %id, error = %e, "no shading for this projector");
+                continue;
+            }
+        };
+        let (got, all) = r.read();
+        read = (read.0 + got, read.1 + all);
+        let reset = shared.shading().fresh.remove(&id);
+        if let Some(s) = send(shared, &id, shade_to_wire(0, &r, RATE, reset)) {
+            sent.push(s);
+        }
+    }
+    wait_shown(shared, &sent).await;
+    let passes = {
+        let mut inputs = shared.shading();
+        inputs.passes += 1;
+        inputs.passes
+    };
+    tracing::info!(
+        pass = passes,
+        of = wanted,
+        projectors = sent.len(),
+        blocks_read = read.0,
+        blocks = read.1,
+        "per-pixel shading pass sent"
+    );
+    true
+}
+
+/// A Shade sent to `id` with the next pattern sequence number: its id, queue and number, or
+/// `None` when it is gone or lagging.
+fn send(shared: &Shared, id: &str, mut shade: v1::Shade) -> Option<(String, super::Outbox, u64)> {
+    let tx = shared.registry.lock().peer(id)?.tx.clone();
+    let seq = shared.pattern_seq.fetch_add(1, Ordering::Relaxed) + 1;
+    shade.seq = seq;
+    shared
+        .offer(id, &tx, vec![v1::room_message::Body::Shade(shade)])
+        .then(|| (id.to_string(), tx, seq))
+}
+
+/// Waits, within the deadline, until every projector sent a Shade has shown it (or left);
+/// one that did not is logged and the room goes on.
+async fn wait_shown(shared: &Shared, sent: &[(String, super::Outbox, u64)]) {
+    let shown = |peers: &super::registry::Peers, (id, tx, seq): &(String, super::Outbox, u64)| {
+        peers
+            .peer(id)
+            .filter(|p| p.tx.same_channel(tx))
+            .is_none_or(|p| p.pattern_shown.is_some_and(|s| s >= *seq))
+    };
+    shared
+        .registry
+        .wait_for(shared.config.deadline, |peers| {
+            sent.iter().all(|s| shown(peers, s))
+        })
+        .await;
+    let peers = shared.registry.lock();
+    for s in sent.iter().filter(|s| !shown(&peers, s)) {
+        tracing::warn!(projector = %s.0, "shading not shown within the deadline");
+    }
+}

@@ -1,0 +1,366 @@
+//! A simulated room run over the wire in one process, as a real room runs: the rendered room
+//! served on loopback (whole projector images in, noisy camera images out, LEDs switched by
+//! name), the camera agent on its camera with a survey (the room's black and first preset
+//! measured through the charts, the projection-mapping target masked) and the room's LEDs, and
+//! a node agent per luminaire projector drawing into the rendered projectors. Nothing is
+//! calibrated beforehand: the camera agent brings the room up over the wire.
+//!
+//! What it adds to the agents is the judge: the simulator's noiseless truth of what the
+//! projectors show, against the LEDs' light ([`WireRoom::judge`]). `roomlight bench shading`
+//! and the integration tests drive it.
+
+use crate::dark_target::target_light;
+use crate::pipeline::{chart_corners, sample_config};
+use crate::rendered::{self, Rendered, RenderedCamera, rendered_display};
+use crate::whole_room::{delta_e_map, luminaires, white_luminance};
+use anyhow::{Context, Result, bail, ensure};
+use roomlight_agent::AgentError;
+use roomlight_agent::camera::{
+    self, CameraConfig, Control, Extras, Lights, RoomModel, RoomStatus, Survey,
+};
+use roomlight_agent::node::{self, NodeConfig};
+use roomlight_calib::charts::{PatchStatus, sample_charts};
+use roomlight_calib::image_io::LinearImage;
+use roomlight_core::metrics::patch_delta_e;
+use roomlight_core::{LinearRgb, Problem, StepRule};
+use roomlight_proto::v1;
+use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
+use roomlight_sim::{Capture, Frame, Room};
+use std::pin::Pin;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+use tokio_util::sync::{CancellationToken, DropGuard};
+
+/// How the camera agent runs.
+#[derive(Debug, Clone, Copy)]
+pub struct Options {
+    /// Per-pixel shading passes per target (`CameraConfig::shading_passes`).
+    pub shading_passes: usize,
+    /// Model rounds per capture.
+    pub model_rounds: usize,
+    /// The rendered room's camera noise.
+    pub seed: u64,
+}
+
+/// The rendered room's LEDs, switched through its camera's client.
+struct RoomLights {
+    camera: RenderedCamera,
+    presets: Vec<String>,
+}
+
+impl Lights for RoomLights {
+    fn presets(&self) -> Vec<String> {
+        self.presets.clone()
+    }
+
+    fn switch(
+        &self,
+        preset: Option<String>,
+    ) -> Pin<Box<dyn Future<Output = Result<(), String>> + Send + '_>> {
+        Box::pin(async move {
+            self.camera
+                .set_lights(preset.as_deref().unwrap_or(""))
+                .await
+                .map_err(|e| e.to_string())
+        })
+    }
+}
+
+/// The room running over the wire; dropping it stops every agent, [`WireRoom::stop`] also
+/// joins them.
+pub struct WireRoom {
+    pub room: Arc<Room>,
+    rendered: Rendered,
+    pub status: watch::Receiver<RoomStatus>,
+    pub control: Control,
+    agent: JoinHandle<Result<(), AgentError>>,
+    nodes: Vec<JoinHandle<Result<(), AgentError>>>,
+    /// Stops the agents.
+    agents: CancellationToken,
+    /// Stops everything (the rendered room too) when dropped.
+    guard: DropGuard,
+}
+
+impl std::fmt::Debug for WireRoom {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WireRoom")
+            .field("room", &self.room.scene().name)
+            .field("status", &*self.status.borrow())
+            .finish_non_exhaustive()
+    }
+}
+
+/// The camera agent's model before any projector, as `roomlight camera` with a survey measures
+/// it: the room's black (LEDs off) and target (its first preset) through the charts, the
+/// patches both measure, and the target's camera pixels masked.
+async fn survey_model(room: &Room, camera: &RenderedCamera) -> Result<(RoomModel, Vec<usize>)> {
+    let corners = chart_corners(room)?;
+    let sample = sample_config(room);
+    let Some(preset) = room.scene().presets.first().map(|p| p.name.clone()) else {
+        bail!("{}: no LED preset to reproduce", room.scene().name);
+    };
+    let measure = async |lights: &str| -> Result<_> {
+        camera.set_lights(lights).await?;
+        Ok(sample_charts(&camera.image().await?, &corners, &sample)?)
+    };
+    let black = measure("").await?;
+    let target = measure(&preset).await?;
+    camera.set_lights("").await?;
+    let patches: Vec<usize> = (0..target.len())
+        .filter(|&i| black[i].status == PatchStatus::Ok && target[i].status == PatchStatus::Ok)
+        .collect();
+    let problem = Problem::new(
+        Vec::new(),
+        patches.iter().map(|&i| black[i].mean).collect(),
+        patches.iter().map(|&i| target[i].mean).collect(),
+        patches.iter().map(|&i| target[i].std_error).collect(),
+    )?;
+    let [w, h] = room.scene().camera.resolution;
+    let survey = Survey {
+        corners,
+        sample,
+        target_mask: room.pixels().iter().map(|p| p.target).collect(),
+        patches: patches.clone(),
+        width: w,
+        height: h,
+    };
+    let model = RoomModel {
+        problem,
+        owners: Default::default(),
+        start: None,
+        hot: Default::default(),
+        survey: Some(survey),
+    };
+    Ok((model, patches))
+}
+
+impl WireRoom {
+    /// Serves `room` and starts the camera agent and a node agent per luminaire, together.
+    pub async fn start(room: Arc<Room>, options: Options) -> Result<Self> {
+        // The rendered room stops after the agents (their displays' last frames land).
+        let served = CancellationToken::new();
+        let cancel = served.child_token();
+        let guard = served.clone().drop_guard();
+        let hardware = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+        let hardware_at = format!("http://{}", hardware.local_addr()?);
+        let rendered = Rendered::new(room.clone(), options.seed, false);
+        tokio::spawn(rendered::serve_rendered(rendered.clone(), hardware, served));
+        let client = rendered::connect(hardware_at).await?;
+        let corners = chart_corners(&room)?;
+        let sample = sample_config(&room);
+        let probe = RenderedCamera::new(client.clone(), corners.clone(), Vec::new(), sample);
+        let (model, patches) = survey_model(&room, &probe).await?;
+        let camera = RenderedCamera::new(client.clone(), corners, patches, sample);
+        let config = CameraConfig {
+            room: room.scene().name.clone(),
+            token: "wire-room".into(),
+            heartbeat: Duration::from_millis(200),
+            deadline: Duration::from_secs(10),
+            model_rounds: options.model_rounds,
+            calibration_epoch: 1,
+            stale_frames: 0,
+            model_out: None,
+            primaries: true,
+            shading_passes: options.shading_passes,
+        };
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+        let endpoint = format!("http://{}", listener.local_addr()?);
+        let extras = Extras {
+            lights: Some(Arc::new(RoomLights {
+                camera: probe,
+                presets: room
+                    .scene()
+                    .presets
+                    .iter()
+                    .map(|p| p.name.clone())
+                    .collect(),
+            })),
+            preset: room.scene().presets.first().map(|p| p.name.clone()),
+        };
+        let camera::Served {
+            status,
+            control,
+            handle,
+        } = camera::serve_room(
+            config,
+            model,
+            camera,
+            listener,
+            None,
+            extras,
+            cancel.clone(),
+        );
+        let mut nodes = Vec::new();
+        for p in room
+            .scene()
+            .projectors
+            .iter()
+            .filter(|p| p.role == ProjectorRole::Luminaire)
+        {
+            let [w, h] = p.resolution;
+            let display =
+                rendered_display(client.clone(), p.name.clone(), (w, h), None, cancel.clone());
+            let config = NodeConfig {
+                endpoint: endpoint.clone(),
+                room: room.scene().name.clone(),
+                token: "wire-room".into(),
+                projector_id: p.name.clone(),
+                kind: match p.kind {
+                    ProjectorKind::LargeAperture => v1::ProjectorKind::LargeAperture,
+                    _ => v1::ProjectorKind::Standard,
+                },
+                rule: StepRule::Momentum { theta: 1.0 },
+                start: LinearRgb::splat(0.5),
+                state_file: None,
+            };
+            nodes.push(tokio::spawn(node::run(config, display, cancel.clone())));
+        }
+        Ok(Self {
+            room,
+            rendered,
+            status,
+            control,
+            agent: handle,
+            nodes,
+            agents: cancel,
+            guard,
+        })
+    }
+
+    /// The first status for which `done` holds, within `limit`; an error naming `what` and the
+    /// last status otherwise.
+    pub async fn until(
+        &mut self,
+        limit: Duration,
+        what: &str,
+        done: impl Fn(&RoomStatus) -> bool,
+    ) -> Result<RoomStatus> {
+        let status = &mut self.status;
+        let waited = tokio::time::timeout(limit, async {
+            loop {
+                if done(&status.borrow_and_update()) {
+                    return Ok(status.borrow().clone());
+                }
+                if status.changed().await.is_err() {
+                    bail!("the camera agent stopped before {what}");
+                }
+            }
+        })
+        .await;
+        match waited {
+            Ok(status) => status,
+            Err(_) => bail!(
+                "{what}: not within {limit:?}; last status {:?}",
+                self.status.borrow()
+            ),
+        }
+    }
+
+    /// What the projectors show now, against LED preset `preset`: see [`Judged`].
+    pub fn judge(&self, preset: usize) -> Result<Judged> {
+        judge(&self.room, &self.rendered.frames(), preset)
+    }
+
+    /// Stops every agent and joins them; an error when one failed.
+    pub async fn stop(self) -> Result<()> {
+        self.agents.cancel();
+        self.agent.await.context("camera agent task")??;
+        for n in self.nodes {
+            n.await.context("node agent task")??;
+        }
+        drop(self.guard);
+        Ok(())
+    }
+}
+
+/// The room lit by the projectors against the LEDs, from the simulator's noiseless renders.
+#[derive(Debug, Clone, Copy)]
+pub struct Judged {
+    /// Mean and 95th percentile ΔE00 over the camera pixels some luminaire lights directly
+    /// (the simulator's direct factors; the target's pixels left out).
+    pub de00_mean: f64,
+    pub de00_p95: f64,
+    /// Mean ΔE00 over the charts' patches that luminaires light directly all over.
+    pub charts_de00: f64,
+    /// Light on the target as a share of the LEDs' (`None`: no target, or no LED light on it).
+    pub target_share: Option<f64>,
+}
+
+fn linear(c: &Capture) -> LinearImage {
+    LinearImage {
+        width: c.width,
+        height: c.height,
+        pixels: c.pixels.clone(),
+    }
+}
+
+/// See [`WireRoom::judge`].
+pub fn judge(room: &Room, frames: &[Frame], preset: usize) -> Result<Judged> {
+    let black = vec![Frame::Black; room.projectors().len()];
+    let truth = room.render(&black, Some(preset))?;
+    let lit = room.render(frames, None)?;
+    let dark = room.render(&black, None)?;
+    let on_target: Vec<bool> = room.pixels().iter().map(|p| p.target).collect();
+    let surface: Vec<bool> = room.pixels().iter().map(|p| p.point.is_some()).collect();
+    let white = white_luminance(&truth, &surface)?;
+    let factors: Vec<&[f32]> = luminaires(room)
+        .into_iter()
+        .map(|k| room.direct_factor(k))
+        .collect();
+    let reached =
+        |i: usize| !on_target[i] && factors.iter().any(|f| f.get(i).is_some_and(|v| *v > 0.0));
+    let de = delta_e_map(&truth, &lit, white)?;
+    let mut values: Vec<f64> = de
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| reached(*i))
+        .map(|(_, e)| *e)
+        .collect();
+    ensure!(!values.is_empty(), "no camera pixel is lit by a luminaire");
+    values.sort_by(f64::total_cmp);
+    let de00_mean = values.iter().sum::<f64>() / values.len() as f64;
+    let de00_p95 = values[(values.len() * 95 / 100).min(values.len() - 1)];
+    // Each patch's share of directly reached pixels, sampled as the charts are (a patch at
+    // half light where reached; sampling refuses saturated ones).
+    let corners = chart_corners(room)?;
+    let sample = sample_config(room);
+    let reach_image = LinearImage {
+        width: truth.width,
+        height: truth.height,
+        pixels: (0..truth.pixels.len())
+            .map(|i| [if reached(i) { 0.5 } else { 0.0 }; 3])
+            .collect(),
+    };
+    let direct: Vec<bool> = sample_charts(&reach_image, &corners, &sample)?
+        .iter()
+        .map(|s| s.status == PatchStatus::Ok && s.mean[0] > 0.495)
+        .collect();
+    let at = |c: &Capture| -> Result<Vec<LinearRgb>> {
+        Ok(sample_charts(&linear(c), &corners, &sample)?
+            .into_iter()
+            .zip(&direct)
+            .filter(|(_, d)| **d)
+            .map(|(s, _)| s.mean)
+            .collect())
+    };
+    let charts_de00 = patch_delta_e(&at(&truth)?, &at(&lit)?)
+        .context("the charts' patches lit directly")?
+        .mean;
+    let target_share = if on_target.contains(&true) {
+        let led_on_target = target_light(&truth, &dark, &on_target)?;
+        (led_on_target > 0.0)
+            .then(|| target_light(&lit, &dark, &on_target))
+            .transpose()?
+            .map(|l| l / led_on_target)
+    } else {
+        None
+    };
+    Ok(Judged {
+        de00_mean,
+        de00_p95,
+        charts_de00,
+        target_share,
+    })
+}
