@@ -250,14 +250,65 @@ pub fn ratios(photos: &Photographs<'_>, corr: &Correspondence) -> Result<Ratios,
 }
 
 /// One projector's gains, per block and channel; its drawn light is multiplied by them,
-/// bilinear between block centres ([`Gains::at`]).
-#[derive(Debug, Clone, PartialEq)]
+/// bilinear between block centres ([`Gains::at`]). Serialised as its size and its blocks'
+/// gains; read back only when they fit the size and the bounds.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "GainsFile", into = "GainsFile")]
 pub struct Gains {
     width: u32,
     height: u32,
     across: usize,
     down: usize,
     gains: Vec<[f32; 3]>,
+}
+
+/// [`Gains`] as a file holds them.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct GainsFile {
+    width: u32,
+    height: u32,
+    gains: Vec<[f32; 3]>,
+}
+
+impl From<Gains> for GainsFile {
+    fn from(g: Gains) -> Self {
+        Self {
+            width: g.width,
+            height: g.height,
+            gains: g.gains,
+        }
+    }
+}
+
+impl TryFrom<GainsFile> for Gains {
+    type Error = String;
+
+    fn try_from(f: GainsFile) -> Result<Self, String> {
+        let Some(mut g) = Gains::flat(f.width, f.height) else {
+            return Err(format!("gains of a {}×{} projector", f.width, f.height));
+        };
+        if f.gains.len() != g.gains.len() {
+            return Err(format!(
+                "{} blocks of gains, a {}×{} projector has {}",
+                f.gains.len(),
+                f.width,
+                f.height,
+                g.gains.len()
+            ));
+        }
+        if let Some((i, v)) = f
+            .gains
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !v.iter().all(|x| (MIN_GAIN..=MAX_GAIN).contains(x)))
+        {
+            return Err(format!(
+                "block {i} has gains {v:?}, expected within {MIN_GAIN}..{MAX_GAIN}"
+            ));
+        }
+        g.gains = f.gains;
+        Ok(g)
+    }
 }
 
 impl Gains {

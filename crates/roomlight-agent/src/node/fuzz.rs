@@ -1,5 +1,6 @@
 //! Fuzzing of the node agent's own decoders of a camera agent's messages — Assign weights, Show
-//! patterns and their masks, as `wire` checks them and a display then draws them — and of its
+//! patterns and their masks, Shade ratios, as `wire` checks them and a display then draws them
+//! (a shading step keeps every gain finite and bounded, the codes within [0, 1]) — and of its
 //! state file (JSON), as `state` reads it. Inputs are valid messages and files changed by
 //! bolero-generated edits (`roomlight_proto::mutate`); zero panics, and what passes the checks
 //! is drawable. The protobuf messages' common checks are fuzzed in roomlight-proto.
@@ -9,7 +10,7 @@
 //! `cargo bolero test` the same targets under libFuzzer. Test-only.
 
 use super::state::{Memory, SavedState};
-use super::wire::{Wire, assignment_from_wire, pattern_from_wire};
+use super::wire::{Wire, assignment_from_wire, pattern_from_wire, shade_from_wire};
 use crate::hardware::Display;
 use prost::Message;
 use roomlight_core::{AttenuationColumn, LinearRgb};
@@ -49,6 +50,18 @@ fn seeds() -> Vec<Vec<u8>> {
             })),
             mask: Vec::new(),
         }),
+        v1::room_message::Body::Shade(v1::Shade {
+            seq: 6,
+            block: roomlight_calib::shading::BLOCK,
+            across: 1,
+            down: 1,
+            ratios: [2.0f32, 1.0, 0.5]
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .collect(),
+            rate: 0.8,
+            reset: false,
+        }),
     ];
     bodies
         .into_iter()
@@ -76,6 +89,28 @@ fn node_reads(bytes: &[u8]) {
                 let codes = pattern.codes(5, 2).expect("an accepted pattern draws");
                 assert!(codes.iter().flatten().all(|c| (0.0..=1.0).contains(c)));
             }
+        }
+        Some(v1::room_message::Body::Shade(s)) => {
+            use roomlight_calib::shading::{Gains, MAX_GAIN, MIN_GAIN};
+            let Ok(step) = shade_from_wire(&s, (5, 2)) else {
+                return;
+            };
+            let mut gains = Gains::flat(5, 2).expect("a 5×2 projector");
+            if let Some(ratios) = &step.ratios {
+                gains.step(ratios, step.rate).expect("accepted ratios step");
+            }
+            for (x, y) in [(0, 0), (4, 1), (2, 1)] {
+                let g = gains.at(x, y);
+                assert!(g.iter().all(|v| (MIN_GAIN..=MAX_GAIN).contains(v)), "{g:?}");
+            }
+            let assignment = crate::hardware::Assignment {
+                width: 5,
+                height: 2,
+                response: roomlight_calib::response::Response::linear(),
+                nodes: vec![(1, (0..10).map(|i| (i, 0.5)).collect())],
+            };
+            let codes = assignment.draw_shaded(&[(1, LinearRgb::splat(0.3))], Some(&gains));
+            assert!(codes.iter().flatten().all(|c| (0.0..=1.0).contains(c)));
         }
         _ => {}
     }
@@ -112,6 +147,7 @@ fn fuzz_state_files() {
         assignment: None,
         attenuation: vec![(3, column)],
         projector: Some("f".into()),
+        gains: None,
     };
     let seeds = vec![serde_json::to_vec(&valid).expect("json")];
     bolero::check!().with_type::<Edits>().for_each(|edits| {

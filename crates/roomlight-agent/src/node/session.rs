@@ -455,6 +455,8 @@ impl<D: Display> Session<'_, D> {
             // A reset alone: the nodes' light as it is.
             _ => self.display.shade(None),
         }
+        // A restarted node draws with them before it reconnects.
+        self.memory.flush();
         acknowledge(self.display, &self.tx, shade.seq, true).await
     }
 

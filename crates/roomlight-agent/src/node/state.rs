@@ -35,6 +35,9 @@ pub struct SavedState {
     /// The projector whose state this is (absent in files of older builds).
     #[serde(default)]
     pub projector: Option<String>,
+    /// Its per-pixel shading gains (checked against their size and bounds when read).
+    #[serde(default)]
+    pub gains: Option<Gains>,
 }
 
 impl SavedState {
@@ -138,6 +141,9 @@ impl Memory {
         if let Some(a) = &saved.assignment {
             display.assign(a);
         }
+        if let Some(g) = &saved.gains {
+            display.shade(Some(g));
+        }
         for &(node, value) in &saved.values {
             display.show(node, value);
         }
@@ -146,6 +152,7 @@ impl Memory {
         memory.epoch = saved.calibration_epoch;
         memory.assignment = saved.assignment;
         memory.attenuation = saved.attenuation.into_iter().collect();
+        memory.gains = saved.gains;
         memory
     }
 
@@ -197,6 +204,7 @@ impl Memory {
             assignment: self.assignment.clone(),
             attenuation,
             projector: Some(self.projector.clone()),
+            gains: self.gains.clone(),
         };
         if let Err(e) = saved.save(path) {
             // The lights matter more than the file: log and carry on.
@@ -249,6 +257,7 @@ mod tests {
             assignment: None,
             attenuation: vec![(7, column)],
             projector: Some("p".into()),
+            gains: None,
         };
         saved.save(&path).expect("save");
         assert_eq!(SavedState::load(&path).expect("load"), Some(saved));
@@ -258,6 +267,57 @@ mod tests {
             .expect_err("unsorted support")
             .to_string();
         assert!(e.contains("p.state.json") && e.contains("node 7"), "{e}");
+    }
+
+    /// Shading gains survive a restart: saved, read back equal, and drawn by the display the
+    /// node relights; gains out of their bounds (or of another block count) are refused naming
+    /// the file, and the node starts flat.
+    #[test]
+    fn state_files_keep_the_shading_gains_and_check_them() {
+        use roomlight_calib::shading::{Gains, Ratios};
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("g.state.json");
+        let (w, h) = (40, 20);
+        let mut gains = Gains::flat(w, h).expect("gains");
+        let ratios = Ratios::from_blocks(w, h, vec![Some([2.0, 1.0, 0.5]); 6]).expect("ratios");
+        gains.step(&ratios, 1.0).expect("step");
+        let saved = SavedState {
+            calibration_epoch: 1,
+            values: vec![(2, LinearRgb::splat(0.3))],
+            assignment: None,
+            attenuation: Vec::new(),
+            projector: Some("g".into()),
+            gains: Some(gains.clone()),
+        };
+        saved.save(&path).expect("save");
+        assert_eq!(SavedState::load(&path).expect("load"), Some(saved));
+        struct Shaded(Option<Gains>);
+        impl Display for Shaded {
+            fn show(&mut self, _: u32, _: LinearRgb) {}
+            fn shade(&mut self, gains: Option<&Gains>) {
+                self.0 = gains.cloned();
+            }
+        }
+        let mut display = Shaded(None);
+        let memory = Memory::relight(Some(path.clone()), &mut display, "g");
+        assert_eq!(display.0.as_ref(), Some(&gains));
+        assert_eq!(memory.gains.as_ref(), Some(&gains));
+        let text = std::fs::read_to_string(&path).expect("read");
+        for (edit, says) in [
+            (
+                text.replacen("[2.0,1.0,0.5]", "[2.0,1.0,500.0]", 1),
+                "block 0",
+            ),
+            (text.replacen("[2.0,1.0,0.5],", "", 1), "5 blocks"),
+        ] {
+            assert_ne!(edit, text, "the edit applies");
+            std::fs::write(&path, &edit).expect("corrupt");
+            let e = SavedState::load(&path).expect_err(says).to_string();
+            assert!(e.contains("g.state.json") && e.contains(says), "{e}");
+        }
+        let mut display = Shaded(None);
+        let memory = Memory::relight(Some(path), &mut display, "g");
+        assert!(display.0.is_none() && memory.gains.is_none());
     }
 
     /// A missing file is no state; a file that is not JSON, or whose value is out of range
@@ -348,6 +408,7 @@ mod tests {
             assignment: None,
             attenuation: Vec::new(),
             projector: Some("p1".into()),
+            gains: None,
         };
         saved.save(&path).expect("save");
         let mut display = Recorder::default();
@@ -360,6 +421,7 @@ mod tests {
         // An older file without a projector: relit, then cut to what the camera assigns.
         let older = SavedState {
             projector: None,
+            gains: None,
             ..saved
         };
         older.save(&path).expect("save");
