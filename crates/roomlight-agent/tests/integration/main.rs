@@ -5,4 +5,5 @@ mod common;
 mod faults;
 mod hostile;
 mod lagging;
+mod shade;
 mod tls;
