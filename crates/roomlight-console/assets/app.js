@@ -483,6 +483,7 @@ function renderRoom(status) {
   setText($('excess'), formatExcess(status.excess));
   setText($('averaged'), status.averaged == null ? '–' : `${status.averaged} capture${status.averaged === 1 ? '' : 's'}`);
   setText($('restarts'), status.restarts ?? '–');
+  setText($('shading'), status.shading_passes ?? '–');
   // The camera's latency as the rounds found it: captures refused in a row as late.
   setText($('late-frames'), status.late_frames ? `${status.late_frames} (set stale_frames)` : 'none');
   setText($('settled'), status.paused ? 'paused' : status.settled ? 'settled' : 'converging');

@@ -294,6 +294,8 @@ pub fn status_json(console: &Console) -> Value {
         // The most captures refused in a row as late: the camera's latency in frames.
         "late_frames": s.late_frames,
         "settled": s.settled, "paused": o.paused, "restarts": o.restarts,
+        // Per-pixel shading passes sent for the current preset.
+        "shading_passes": s.shading_passes,
         "camera": camera,
         "preset": o.preset, "presets": console.control.presets(),
         "projectors": projectors,
