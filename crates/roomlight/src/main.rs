@@ -300,6 +300,20 @@ enum BenchCommand {
         #[arg(long)]
         white: bool,
     },
+    /// Per-pixel shading over the wire on the simulated lab: brought up over the wire with
+    /// shading off, then with it, every preset chosen in turn; the whole room's and the charts'
+    /// ΔE00 against the LEDs, the light on the target, captures.
+    Shading {
+        /// The small test room (its camera at 640x480) instead of the lab.
+        #[arg(long)]
+        quick: bool,
+        /// Shading passes per preset in the second run.
+        #[arg(long, default_value_t = 6)]
+        passes: usize,
+        /// Write the records as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     // Its help says the sizes it runs, from the constants it runs them from.
     #[command(about = net_about(), long_about = None)]
     Net {
@@ -501,6 +515,11 @@ fn bench(args: BenchArgs) -> Result<()> {
             area_only,
             white,
         }) => bench::calib::run(quick, area_only, !white),
+        Some(BenchCommand::Shading {
+            quick,
+            passes,
+            json,
+        }) => bench::shading::run(quick, passes, json.as_deref()).map(|_| ()),
         Some(BenchCommand::Console { nodes, rounds }) => {
             bench::console::run(nodes, rounds).map(|_| ())
         }

@@ -15,6 +15,7 @@ pub mod net;
 pub mod report;
 pub mod results;
 pub mod room;
+pub mod shading;
 pub mod sim;
 pub mod sparsity;
 pub mod width;
