@@ -95,7 +95,7 @@ impl std::fmt::Debug for WireRoom {
 /// The camera agent's model before any projector, as `roomlight camera` with a survey measures
 /// it: the room's black (LEDs off) and target (its first preset) through the charts, the
 /// patches both measure, and the target's camera pixels masked.
-async fn survey_model(room: &Room, camera: &RenderedCamera) -> Result<(RoomModel, Vec<usize>)> {
+pub async fn survey_model(room: &Room, camera: &RenderedCamera) -> Result<(RoomModel, Vec<usize>)> {
     let corners = chart_corners(room)?;
     let sample = sample_config(room);
     let Some(preset) = room.scene().presets.first().map(|p| p.name.clone()) else {

@@ -423,19 +423,7 @@ impl v1::room_server::Room for Fake {
 
 /// Serves `fake` on loopback until `cancel`; its endpoint.
 async fn serve_fake(fake: Fake, cancel: CancellationToken) -> String {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .expect("bind");
-    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
-    tokio::spawn(
-        tonic::transport::Server::builder()
-            .add_service(v1::room_server::RoomServer::new(fake))
-            .serve_with_incoming_shutdown(
-                tokio_stream::wrappers::TcpListenerStream::new(listener),
-                cancel.cancelled_owned(),
-            ),
-    );
-    endpoint
+    common::serve_fake_room(fake, cancel).await
 }
 
 /// Item 7: a rogue advertiser of the room that refuses everyone (as a fatal wrong token) is

@@ -4,8 +4,8 @@
 //! with and is acknowledged as a pattern, and a reset alone brings the nodes' own light back.
 
 use roomlight_agent::hardware::{Assignment, Display, Gains};
-use roomlight_agent::node::{self, NodeConfig};
-use roomlight_core::{LinearRgb, StepRule};
+use roomlight_agent::node;
+use roomlight_core::LinearRgb;
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -13,7 +13,7 @@ use tokio::sync::mpsc;
 use tokio_stream::StreamExt;
 use tokio_util::sync::CancellationToken;
 
-use crate::common::TOKEN;
+use crate::common;
 
 const W: u32 = 40;
 const H: u32 = 20;
@@ -100,7 +100,7 @@ async fn a_node_steps_its_gains_from_a_valid_shade_and_ignores_a_malformed_one()
     let script = vec![
         room(v1::room_message::Body::Welcome(v1::Welcome {
             protocol_version: PROTOCOL_VERSION,
-            room: "lab".into(),
+            room: common::ROOM.into(),
             calibration_epoch: 1,
             heartbeat_ms: 200,
             state_accepted: false,
@@ -124,29 +124,9 @@ async fn a_node_steps_its_gains_from_a_valid_shade_and_ignores_a_malformed_one()
     let (heard, mut hearing) = mpsc::unbounded_channel();
     let cancel = CancellationToken::new();
     let _stop = cancel.clone().drop_guard();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .expect("bind");
-    let endpoint = format!("http://{}", listener.local_addr().expect("address"));
-    tokio::spawn(
-        tonic::transport::Server::builder()
-            .add_service(v1::room_server::RoomServer::new(Scripted { script, heard }))
-            .serve_with_incoming_shutdown(
-                tokio_stream::wrappers::TcpListenerStream::new(listener),
-                cancel.clone().cancelled_owned(),
-            ),
-    );
+    let endpoint = common::serve_fake_room(Scripted { script, heard }, cancel.child_token()).await;
     let told: Told = Arc::default();
-    let config = NodeConfig {
-        endpoint,
-        room: "lab".into(),
-        token: TOKEN.into(),
-        projector_id: "p0".into(),
-        kind: v1::ProjectorKind::Standard,
-        rule: StepRule::Momentum { theta: 1.0 },
-        start: LinearRgb::splat(0.5),
-        state_file: None,
-    };
+    let config = common::node_config(&endpoint, "p0");
     tokio::spawn(node::run(
         config,
         Recording(told.clone()),

@@ -3,14 +3,14 @@
 //! projectors. The procedure runs over the wire as it runs in process.
 
 use roomlight_agent::AgentError;
-use roomlight_agent::camera::{self, CameraConfig, RoomModel, RoomStatus, Survey};
+use roomlight_agent::camera::{self, CameraConfig, RoomStatus};
 use roomlight_agent::hardware::{Assignment, Display, Fill, Pattern};
 use roomlight_agent::node::{self, NodeConfig};
-use roomlight_calib::charts::{PatchStatus, sample_charts};
 use roomlight_calib::graycode::{Coding, Manifest};
-use roomlight_core::{LinearRgb, Problem, StepRule};
+use roomlight_core::{LinearRgb, StepRule};
 use roomlight_lab::pipeline::{chart_corners, sample_config};
 use roomlight_lab::rendered::{self, RenderedCamera, rendered_display};
+use roomlight_lab::wire_room::survey_model;
 use roomlight_proto::v1;
 use roomlight_sim::Room;
 use std::sync::Arc;
@@ -22,48 +22,6 @@ use tokio_util::sync::{CancellationToken, DropGuard};
 
 use crate::support;
 use support::apart_scene;
-
-/// The camera agent's model before any projector: the room's black (lights off) and target
-/// (its first LED preset) through the charts, as `roomlight camera` with a survey measures them.
-async fn survey_model(room: &Room, camera: &RenderedCamera) -> (RoomModel, Vec<usize>) {
-    let corners = chart_corners(room).expect("corners");
-    let sample = sample_config(room);
-    let preset = room.scene().presets[0].name.clone();
-    let measure = async |lights: &str| {
-        camera.set_lights(lights).await.expect("lights");
-        sample_charts(&camera.image().await.expect("image"), &corners, &sample).expect("charts")
-    };
-    let black = measure("").await;
-    let target = measure(&preset).await;
-    camera.set_lights("").await.expect("lights off");
-    let patches: Vec<usize> = (0..target.len())
-        .filter(|&i| black[i].status == PatchStatus::Ok && target[i].status == PatchStatus::Ok)
-        .collect();
-    let problem = Problem::new(
-        Vec::new(),
-        patches.iter().map(|&i| black[i].mean).collect(),
-        patches.iter().map(|&i| target[i].mean).collect(),
-        patches.iter().map(|&i| target[i].std_error).collect(),
-    )
-    .expect("problem");
-    let [w, h] = room.scene().camera.resolution;
-    let survey = Survey {
-        corners,
-        sample,
-        target_mask: vec![false; w as usize * h as usize],
-        patches: patches.clone(),
-        width: w,
-        height: h,
-    };
-    let model = RoomModel {
-        problem,
-        owners: Default::default(),
-        start: None,
-        hot: Default::default(),
-        survey: Some(survey),
-    };
-    (model, patches)
-}
 
 /// Waits until `done` holds for a status (the first one that does), within `limit`.
 async fn first_status(
@@ -112,7 +70,8 @@ impl Wire {
         let corners = chart_corners(&room).expect("corners");
         let sample = sample_config(&room);
         let probe = RenderedCamera::new(client.clone(), corners.clone(), Vec::new(), sample);
-        let (model, patches) = survey_model(&room, &probe).await;
+        // The apart room has no target: its mask is empty, as the survey's of a bare room.
+        let (model, patches) = survey_model(&room, &probe).await.expect("survey");
         let camera = RenderedCamera::new(client.clone(), corners, patches, sample);
         let config = CameraConfig {
             room: "apart".into(),

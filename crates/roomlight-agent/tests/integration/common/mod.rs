@@ -76,6 +76,23 @@ pub async fn listen() -> (tokio::net::TcpListener, String) {
     (listener, endpoint)
 }
 
+/// Serves `service` (a fake camera agent) on `127.0.0.1:0` until `cancel`; its endpoint.
+pub async fn serve_fake_room<S: v1::room_server::Room>(
+    service: S,
+    cancel: tokio_util::sync::CancellationToken,
+) -> String {
+    let (listener, endpoint) = listen().await;
+    tokio::spawn(
+        tonic::transport::Server::builder()
+            .add_service(v1::room_server::RoomServer::new(service))
+            .serve_with_incoming_shutdown(
+                tokio_stream::wrappers::TcpListenerStream::new(listener),
+                cancel.cancelled_owned(),
+            ),
+    );
+    endpoint
+}
+
 /// A camera agent's config for the room: heartbeats, round deadline, model rounds.
 pub fn camera_config(heartbeat: Duration, deadline: Duration, model_rounds: usize) -> CameraConfig {
     CameraConfig {
