@@ -211,6 +211,7 @@ impl SandboxBuilder {
         let extras = camera::Extras {
             lights: self.lights.map(|l| l.0),
             preset: None,
+            photographs: None,
         };
         let served = camera::serve_room(
             self.config.clone(),

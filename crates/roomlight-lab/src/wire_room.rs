@@ -16,7 +16,7 @@ use crate::whole_room::{delta_e_map, luminaires, white_luminance};
 use anyhow::{Context, Result, bail, ensure};
 use roomlight_agent::AgentError;
 use roomlight_agent::camera::{
-    self, CameraConfig, Control, Extras, Lights, RoomModel, RoomStatus, Survey,
+    self, CameraConfig, Control, Extras, Lights, RoomModel, RoomStatus, Survey, SurveyPhotographs,
 };
 use roomlight_agent::node::{self, NodeConfig};
 use roomlight_calib::charts::{PatchStatus, sample_charts};
@@ -42,6 +42,9 @@ pub struct Options {
     pub model_rounds: usize,
     /// The rendered room's camera noise.
     pub seed: u64,
+    /// The camera agent gets the survey's photographs (dark, LEDs): shading follows the
+    /// bring-up. Without, it waits for a preset chosen from the console.
+    pub survey_photographs: bool,
 }
 
 /// The rendered room's LEDs, switched through its camera's client.
@@ -94,20 +97,25 @@ impl std::fmt::Debug for WireRoom {
 
 /// The camera agent's model before any projector, as `roomlight camera` with a survey measures
 /// it: the room's black (LEDs off) and target (its first preset) through the charts, the
-/// patches both measure, and the target's camera pixels masked.
-pub async fn survey_model(room: &Room, camera: &RenderedCamera) -> Result<(RoomModel, Vec<usize>)> {
+/// patches both measure, and the target's camera pixels masked; and the two photographs.
+pub async fn survey_model(
+    room: &Room,
+    camera: &RenderedCamera,
+) -> Result<(RoomModel, Vec<usize>, SurveyPhotographs)> {
     let corners = chart_corners(room)?;
     let sample = sample_config(room);
     let Some(preset) = room.scene().presets.first().map(|p| p.name.clone()) else {
         bail!("{}: no LED preset to reproduce", room.scene().name);
     };
-    let measure = async |lights: &str| -> Result<_> {
+    let photograph = async |lights: &str| -> Result<LinearImage> {
         camera.set_lights(lights).await?;
-        Ok(sample_charts(&camera.image().await?, &corners, &sample)?)
+        Ok(camera.image().await?)
     };
-    let black = measure("").await?;
-    let target = measure(&preset).await?;
+    let dark = photograph("").await?;
+    let leds = photograph(&preset).await?;
     camera.set_lights("").await?;
+    let black = sample_charts(&dark, &corners, &sample)?;
+    let target = sample_charts(&leds, &corners, &sample)?;
     let patches: Vec<usize> = (0..target.len())
         .filter(|&i| black[i].status == PatchStatus::Ok && target[i].status == PatchStatus::Ok)
         .collect();
@@ -133,7 +141,7 @@ pub async fn survey_model(room: &Room, camera: &RenderedCamera) -> Result<(RoomM
         hot: Default::default(),
         survey: Some(survey),
     };
-    Ok((model, patches))
+    Ok((model, patches, SurveyPhotographs { dark, leds }))
 }
 
 impl WireRoom {
@@ -151,7 +159,7 @@ impl WireRoom {
         let corners = chart_corners(&room)?;
         let sample = sample_config(&room);
         let probe = RenderedCamera::new(client.clone(), corners.clone(), Vec::new(), sample);
-        let (model, patches) = survey_model(&room, &probe).await?;
+        let (model, patches, photographs) = survey_model(&room, &probe).await?;
         let camera = RenderedCamera::new(client.clone(), corners, patches, sample);
         let config = CameraConfig {
             room: room.scene().name.clone(),
@@ -178,6 +186,7 @@ impl WireRoom {
                     .collect(),
             })),
             preset: room.scene().presets.first().map(|p| p.name.clone()),
+            photographs: options.survey_photographs.then_some(photographs),
         };
         let camera::Served {
             status,

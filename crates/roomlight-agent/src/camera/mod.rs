@@ -445,11 +445,22 @@ pub fn serve_tls(
 }
 
 /// What a camera agent may be given beyond its config: how to switch the room's LEDs (for
-/// the console's preset switch) and which preset the model's target is.
+/// the console's preset switch), which preset the model's target is, and the survey's
+/// photographs of the room before any projector.
 #[derive(Default)]
 pub struct Extras {
     pub lights: Option<Arc<dyn Lights>>,
     pub preset: Option<String>,
+    pub photographs: Option<SurveyPhotographs>,
+}
+
+/// The room as a survey photographed it before any projector joined, LEDs off (`dark`) and
+/// under the preset's LEDs (`leds`): per-pixel shading starts from them, so the passes follow
+/// the bring-up without a preset chosen again. Both the camera's size (else ignored, logged).
+#[derive(Debug, Clone)]
+pub struct SurveyPhotographs {
+    pub dark: LinearImage,
+    pub leds: LinearImage,
 }
 
 impl std::fmt::Debug for Extras {
@@ -457,6 +468,7 @@ impl std::fmt::Debug for Extras {
         f.debug_struct("Extras")
             .field("lights", &self.lights.as_ref().map(|l| l.presets()))
             .field("preset", &self.preset)
+            .field("photographs", &self.photographs.is_some())
             .finish()
     }
 }
@@ -480,6 +492,10 @@ pub fn serve_room(
     cancel: CancellationToken,
 ) -> Served {
     let (contributions, contrib_rx) = mpsc::channel(4096);
+    let shading = shading::Inputs::surveyed(
+        extras.photographs.as_ref(),
+        model.survey.as_ref().map(|s| (s.width, s.height)),
+    );
     let live = Live::new(&model);
     let max_message = max_node_message(&model);
     let connections = connection_limit(&model);
@@ -513,7 +529,7 @@ pub fn serve_room(
         late: Mutex::new(Vec::new()),
         photos,
         photo_seq: AtomicU64::new(0),
-        shading: Mutex::new(shading::Inputs::default()),
+        shading: Mutex::new(shading),
     });
     let control = Control {
         shared: shared.clone(),

@@ -6,9 +6,10 @@
 //! draws with them; the rounds then settle again (the light changed at the charts' neighbours
 //! too) before the next pass, up to `CameraConfig::shading_passes` passes per target.
 //!
-//! What a pass needs, kept here: the dark room (the bring-up's dark capture), the LEDs' light
-//! (the two captures of the last preset change, with and without the LEDs), and each
-//! projector's decode from its calibration over the wire. A camera agent resumed from a model
+//! What a pass needs, kept here: the dark room (the survey's photograph, else the bring-up's
+//! dark capture), the LEDs' light (the survey's photographs, then the two captures of each
+//! preset change, with and without the LEDs), and each projector's decode from its calibration
+//! over the wire. A camera agent resumed from a model
 //! file has none of them until a projector is calibrated and a preset chosen: it does not shade
 //! (said once in the log). A projector calibrated again starts from flat gains (its nodes are
 //! new), and any calibration starts the passes over (the room's light changed).
@@ -47,6 +48,34 @@ pub(super) struct Inputs {
 }
 
 impl Inputs {
+    /// What the survey's photographs give (the dark room, the LEDs' light) for a camera of
+    /// `size`; nothing without them, or when their size is not the camera's (logged).
+    pub(super) fn surveyed(
+        photographs: Option<&super::SurveyPhotographs>,
+        size: Option<(u32, u32)>,
+    ) -> Self {
+        let mut inputs = Self::default();
+        let Some(p) = photographs else {
+            return inputs;
+        };
+        let fits = |im: &LinearImage| {
+            Some((im.width, im.height)) == size
+                && im.pixels.len() == im.width as usize * im.height as usize
+        };
+        if !(fits(&p.dark) && fits(&p.leds)) {
+            tracing::warn!(
+                dark = ?(p.dark.width, p.dark.height),
+                leds = ?(p.leds.width, p.leds.height),
+                camera = ?size,
+                "the survey's photographs are not the camera's size: shading waits for a preset chosen"
+            );
+            return inputs;
+        }
+        inputs.dark = Some(Arc::new(p.dark.clone()));
+        inputs.retargeted(Some(&p.leds), Some(&p.dark));
+        inputs
+    }
+
     /// A calibration over the wire measured `decodes` (standard projectors), and `dark` when it
     /// brought up a dark room: they start from flat gains, and the passes start over.
     pub(super) fn calibrated(

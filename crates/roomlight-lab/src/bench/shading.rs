@@ -71,6 +71,8 @@ async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Resul
         shading_passes,
         model_rounds: MODEL_ROUNDS,
         seed: 1,
+        // Each preset is chosen as an installer would, the first too.
+        survey_photographs: false,
     };
     let names: Vec<String> = room
         .scene()

@@ -109,14 +109,15 @@ pub(super) async fn survey_model(
     };
     // The config's preset, else the one the console saved in the survey.
     let preset = preset.or(checked.survey.preset.as_deref());
-    let (model, camera, preset) = match resume {
+    let (model, camera, preset, photographs) = match resume {
         Some((path, model)) => {
             let (model, camera) = resumed(&checked, path, model, &room, eye.as_ref())?;
-            (model, camera, preset.map(str::to_string))
+            (model, camera, preset.map(str::to_string), None)
         }
         None => {
-            let (model, camera, preset) = measured(&checked, preset, &room, eye.as_ref()).await?;
-            (model, camera, Some(preset))
+            let (model, camera, preset, photographs) =
+                measured(&checked, preset, &room, eye.as_ref()).await?;
+            (model, camera, Some(preset), Some(photographs))
         }
     };
     let lights = SurveyLights {
@@ -127,6 +128,7 @@ pub(super) async fn survey_model(
     let extras = camera::Extras {
         lights: Some(Arc::new(lights)),
         preset,
+        photographs,
     };
     Ok((model, camera, extras))
 }
@@ -232,7 +234,7 @@ async fn measured(
     preset: Option<&str>,
     room: &SurveyRoom,
     eye: Option<&HwCamera>,
-) -> Result<(RoomModel, AnyCamera, String)> {
+) -> Result<(RoomModel, AnyCamera, String, camera::SurveyPhotographs)> {
     let preset = match preset {
         Some(p) if checked.presets.iter().any(|q| q == p) => p.to_string(),
         Some(p) => bail!("preset {p:?}: the room has {}", checked.presets.join(", ")),
@@ -244,7 +246,7 @@ async fn measured(
     };
     let mut camera = checked.camera(room, Vec::new(), eye)?;
     let survey = &checked.survey;
-    let mut photograph = async || -> Result<Vec<roomlight_calib::charts::PatchSample>> {
+    let mut photograph = async || -> Result<roomlight_calib::image_io::LinearImage> {
         let image = camera
             .capture_image()
             .await
@@ -258,13 +260,18 @@ async fn measured(
                 survey.camera_height
             );
         }
-        roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample)
+        Ok(image)
+    };
+    let sample = |image: &roomlight_calib::image_io::LinearImage| {
+        roomlight_calib::charts::sample_charts(image, &survey.corners, &survey.sample)
             .context("sampling the charts")
     };
     switch(room, checked, None).await?;
-    let black = photograph().await?;
+    let dark = photograph().await?;
+    let black = sample(&dark)?;
     switch(room, checked, Some(&preset)).await?;
-    let lit = photograph().await?;
+    let leds = photograph().await?;
+    let lit = sample(&leds)?;
     // The projectors replace the LEDs from here on.
     switch(room, checked, None).await?;
     // The model's patches and problem as the in-process pipeline builds them; no projector
@@ -286,7 +293,9 @@ async fn measured(
         hot: Default::default(),
         survey: Some(checked.for_patches(patches)),
     };
-    Ok((model, camera, preset))
+    // Per-pixel shading starts from them: its passes follow the bring-up.
+    let photographs = camera::SurveyPhotographs { dark, leds };
+    Ok((model, camera, preset, photographs))
 }
 
 /// Switches the room's LEDs to `preset` (`None`: off).

@@ -5,7 +5,8 @@
 //! rounds settle, and its shading passes send each node agent its projector's ratios; the node
 //! agents step their own gains and draw with them, the rounds settling again between passes.
 //! Judged against the simulator's noiseless truth of what the projectors show: the whole room
-//! comes much closer to the LEDs, and the charts stay where the rounds put them.
+//! comes much closer to the LEDs, and the charts stay where the rounds put them. Given the
+//! survey's photographs instead, the camera agent shades right after the bring-up.
 
 use crate::support::apart_scene;
 use roomlight_lab::wire_room::{Options, WireRoom};
@@ -22,8 +23,11 @@ async fn shading_passes_over_the_wire_bring_the_whole_room_to_the_leds() {
         shading_passes: PASSES,
         model_rounds: 2,
         seed: 3,
+        survey_photographs: false,
     };
-    let mut wire = WireRoom::start(room, options).await.expect("started");
+    let mut wire = WireRoom::start(room.clone(), options)
+        .await
+        .expect("started");
     let up = wire
         .until(Duration::from_secs(600), "the bring-up", |s| {
             s.calibrated_hot == 2
@@ -78,6 +82,37 @@ async fn shading_passes_over_the_wire_bring_the_whole_room_to_the_leds() {
         "charts {:.2} → {:.2}",
         before.charts_de00,
         after.charts_de00
+    );
+    wire.stop().await.expect("every agent stopped cleanly");
+
+    // Given the survey's photographs (the dark room, the LEDs), the camera agent shades after
+    // the bring-up without a preset chosen again.
+    let options = Options {
+        survey_photographs: true,
+        ..options
+    };
+    let mut wire = WireRoom::start(room, options).await.expect("started");
+    let auto = wire
+        .until(
+            Duration::from_secs(600),
+            "the passes after the bring-up",
+            |s| s.calibrated_hot == 2 && s.shading_passes == PASSES && s.settled,
+        )
+        .await
+        .expect("shaded after the bring-up");
+    let first = wire.judge(0).expect("judged");
+    eprintln!(
+        "with the survey's photographs, shaded after the bring-up at capture {}: whole room \
+         ΔE00 {:.2} / p95 {:.2}, charts {:.2}",
+        auto.captures, first.de00_mean, first.de00_p95, first.charts_de00
+    );
+    assert!(
+        first.de00_mean < 0.6 * before.de00_mean && first.de00_p95 < 0.6 * before.de00_p95,
+        "{:.2} / {:.2} against the rounds' {:.2} / {:.2}",
+        first.de00_mean,
+        first.de00_p95,
+        before.de00_mean,
+        before.de00_p95
     );
     wire.stop().await.expect("every agent stopped cleanly");
 }
