@@ -496,6 +496,7 @@ impl Lab<'_> {
                         preset: 0,
                         name: "dark-target",
                         x: &p.x,
+                        gains: &[],
                     })
                     .collect()
             })
@@ -507,18 +508,44 @@ impl Lab<'_> {
                 preset,
                 name: &p.name,
                 x: &p.result.x,
+                gains: &[],
             })
             .collect();
-        let pm = crate::pm::run(
+        // After the trade-off's, each preset's light after per-pixel shading: the board's ANSI
+        // contrast under it.
+        let extra: Vec<crate::pm::Lighting<'_>> = tradeoff
+            .iter()
+            .copied()
+            .chain(
+                lightings
+                    .iter()
+                    .zip(presets)
+                    .map(|(l, p)| crate::pm::Lighting {
+                        gains: &p.shaded.final_gains,
+                        ..*l
+                    }),
+            )
+            .collect();
+        let mut pm = crate::pm::run(
             self.room,
             self.cal,
             &lightings,
-            &tradeoff,
+            &extra,
             self.options.seed,
             &self.options.out,
             |line| println!("{line}"),
         )?;
+        let shaded_ansi = pm.tradeoff_ansi.split_off(tradeoff.len());
         drop(tradeoff);
+        println!(
+            "ANSI contrast on the board under projector lighting after per-pixel shading: {}",
+            presets
+                .iter()
+                .zip(&shaded_ansi)
+                .map(|(p, a)| format!("{} {a:.1}", p.name))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
         println!(
             "ANSI contrast on the board per preset, dark/LED/projector lighting: {}",
             pm.ansi_by_preset

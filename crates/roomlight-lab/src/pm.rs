@@ -271,6 +271,8 @@ pub struct Lighting<'a> {
     pub preset: usize,
     pub name: &'a str,
     pub x: &'a [LinearRgb],
+    /// Per-pixel shading gains per room projector (empty: the nodes' light as it is).
+    pub gains: &'a [Option<roomlight_calib::shading::Gains>],
 }
 
 /// Runs projection mapping and the contrast measurements under `lightings` (the first for the
@@ -424,7 +426,9 @@ impl<'a> View<'a> {
     /// The frames of a lighting (dark, LED, projector) with `img` on the texture projector.
     fn with_texture(&self, condition: usize, img: ProjectorImage) -> Vec<Frame> {
         let mut frames = match condition {
-            2 => self.luminaires.frames(self.lighting.x),
+            2 => self
+                .luminaires
+                .frames_shaded(self.lighting.x, self.lighting.gains),
             _ => vec![Frame::Black; self.eval.projectors().len()],
         };
         frames[self.lights.texture_k] = Frame::Linear(img);

@@ -6,8 +6,9 @@
 //! dark room as the camera took them (noisy), the projectors' light captured through the same
 //! noise, and each luminaire's decode from calibration. Only the figures are ground truth
 //! (noiseless renders compared pixel by pixel with the LEDs', as the report's maps are). The
-//! passes run here, not in the agents: no message carries gains to a node agent yet, so the
-//! rounds' captures to 1% are those of the nodes alone, and each pass is one capture more.
+//! passes run here after the demo's rounds, on the in-process calibration; the agents run the
+//! same passes over the wire (`roomlight_agent::camera`'s shading, `roomlight bench shading`).
+//! The rounds' captures to 1% are those of the nodes alone, and each pass is one capture more.
 //!
 //! Only standard luminaires are shaded: a large aperture's pixels light a blurred disc each, so
 //! gains per block of them would have to undo the blur (ill-posed); it keeps its node's light.
@@ -59,6 +60,9 @@ pub struct Shaded {
     passes: Vec<Pass>,
     /// Per luminaire shaded: its name and the 5th and 95th percentiles of its gains at the end.
     pub gains: Vec<(String, f32, f32)>,
+    /// The gains after the last pass, per room projector (`None`: not shaded).
+    #[serde(skip)]
+    pub final_gains: Vec<Option<Gains>>,
     /// The ΔE00 map after the last pass ([`crate::whole_room::map_image`]).
     #[serde(skip)]
     pub map: image::RgbImage,
@@ -283,5 +287,6 @@ pub fn shade(
                 Some((room.projectors()[k].name.clone(), lo, hi))
             })
             .collect(),
+        final_gains: gains,
     })
 }

@@ -72,6 +72,7 @@ fn a_weight_darkens_the_target_at_a_cost_and_weight_zero_is_todays_model() {
     let lightings: Vec<Lighting<'_>> = points
         .iter()
         .map(|p| Lighting {
+            gains: &[],
             preset: 0,
             name: &name,
             x: &p.x,
