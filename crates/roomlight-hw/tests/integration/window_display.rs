@@ -2,9 +2,10 @@
 //! `WindowDisplay` shows on one is read back pixel for pixel from a grab of the root window.
 //! Each test starts its own Xvfb (and fails, saying `.ci/run` installs it, when there is none).
 
-use roomlight_agent::hardware::{Assignment, Display, Fill, Pattern};
+use roomlight_agent::hardware::{Assignment, Display, Fill, Gains, Pattern};
 use roomlight_calib::graycode::{Axis, Coding, Pattern as Gray, Primary};
 use roomlight_calib::response::Response;
+use roomlight_calib::shading::Ratios;
 use roomlight_core::LinearRgb;
 use roomlight_hw::frame::to_8bit;
 use roomlight_hw::grab::Grabber;
@@ -174,6 +175,31 @@ fn a_pattern_and_node_values_land_on_their_output_pixel_for_pixel() {
             .all(|&c| c == 0),
         "A stays black"
     );
+
+    // Per-pixel shading: gains stepped by a Shade's ratios (blue halved on the left blocks,
+    // red doubled on the right) are drawn on the screen as `draw_shaded` draws them; none
+    // again brings the nodes' own light back.
+    let (across, down) = (320usize.div_ceil(16), 240usize.div_ceil(16));
+    let blocks = (0..across * down)
+        .map(|b| {
+            Some(if b % across < across / 2 {
+                [1.0, 1.0, 0.5]
+            } else {
+                [2.0, 1.0, 1.0]
+            })
+        })
+        .collect();
+    let ratios = Ratios::from_blocks(320, 240, blocks).expect("ratios");
+    let mut gains = Gains::flat(320, 240).expect("gains");
+    gains.step(&ratios, 1.0).expect("step");
+    display.shade(Some(&gains));
+    rt.block_on(display.flush());
+    let shaded = as_8bit(&assignment.draw_shaded(&values, Some(&gains)));
+    assert_ne!(shaded, expected, "the gains change the frame");
+    assert_eq!(grabber.grab(B).expect("grab B").into_raw(), shaded);
+    display.shade(None);
+    rt.block_on(display.flush());
+    assert_eq!(grabber.grab(B).expect("grab B").into_raw(), expected);
     assert!(matches!(display.state(), DisplayState::Showing { output, .. } if output.name == "B"));
 }
 
