@@ -599,7 +599,8 @@ impl Phases {
     /// (`heap::release_free`): the full demo peaked at 747–804 MB without, 683–720 MB with.
     fn done(&mut self, name: &'static str, since: Instant) {
         let s = since.elapsed().as_secs_f64();
-        let peak = peak_memory_mb();
+        // The process's peak resident memory (VmHWM), in MB of 10⁶ bytes; `None` off Linux.
+        let peak = crate::bench::memory::resident().map(|r| r.peak as f64 / 1e6);
         crate::heap::release_free();
         match self.0.iter_mut().find(|(n, ..)| *n == name) {
             Some((_, total, at)) => {
@@ -623,14 +624,6 @@ impl std::fmt::Display for Phases {
             .collect();
         write!(f, "phases: {}", list.join(", "))
     }
-}
-
-/// The process's peak resident memory (Linux's VmHWM), in MB of 10⁶ bytes; `None` elsewhere.
-fn peak_memory_mb() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024.0 / 1e6)
 }
 
 /// The synthetic-room comparison: the in-memory loop against the paper's rule, then the agents.

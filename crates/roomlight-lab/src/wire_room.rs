@@ -10,7 +10,7 @@
 //! and the integration tests drive it.
 
 use crate::dark_target::target_light;
-use crate::pipeline::{chart_corners, sample_config};
+use crate::pipeline::{chart_corners, image, sample_config};
 use crate::rendered::{self, Rendered, RenderedCamera, rendered_display};
 use crate::whole_room::{delta_e_map, luminaires, white_luminance};
 use anyhow::{Context, Result, bail, ensure};
@@ -297,14 +297,6 @@ pub struct Judged {
     pub target_share: Option<f64>,
 }
 
-fn linear(c: &Capture) -> LinearImage {
-    LinearImage {
-        width: c.width,
-        height: c.height,
-        pixels: c.pixels.clone(),
-    }
-}
-
 /// See [`WireRoom::judge`].
 pub fn judge(room: &Room, frames: &[Frame], preset: usize) -> Result<Judged> {
     let black = vec![Frame::Black; room.projectors().len()];
@@ -347,7 +339,7 @@ pub fn judge(room: &Room, frames: &[Frame], preset: usize) -> Result<Judged> {
         .map(|s| s.status == PatchStatus::Ok && s.mean[0] > 0.495)
         .collect();
     let at = |c: &Capture| -> Result<Vec<LinearRgb>> {
-        Ok(sample_charts(&linear(c), &corners, &sample)?
+        Ok(sample_charts(&image(c), &corners, &sample)?
             .into_iter()
             .zip(&direct)
             .filter(|(_, d)| **d)
