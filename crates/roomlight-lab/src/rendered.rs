@@ -265,6 +265,8 @@ pub struct RenderedCamera {
     sample: roomlight_calib::charts::SampleConfig,
     /// Where a capture clips ([`v1::RoomDescription::camera_saturation`]); NaN: unknown.
     saturation: f32,
+    /// Holds each capture until a driver has handled the camera agent's last status.
+    gate: Option<Arc<crate::pipeline::gate::Gate>>,
 }
 
 impl RenderedCamera {
@@ -280,6 +282,23 @@ impl RenderedCamera {
             patches: Arc::new(patches),
             sample,
             saturation: f32::NAN,
+            gate: None,
+        }
+    }
+
+    /// Each capture held by `gate` (a run reproducible at a fixed seed,
+    /// [`crate::pipeline::gate`]).
+    pub fn with_gate(self, gate: Arc<crate::pipeline::gate::Gate>) -> Self {
+        Self {
+            gate: Some(gate),
+            ..self
+        }
+    }
+
+    /// Waits for the gate, when there is one.
+    async fn held(&self) {
+        if let Some(gate) = &self.gate {
+            gate.wait().await;
         }
     }
 
@@ -365,7 +384,10 @@ impl roomlight_agent::hardware::Camera for RenderedCamera {
         Output = Result<roomlight_calib::image_io::LinearImage, roomlight_agent::AgentError>,
     > + Send {
         let this = self.clone();
-        async move { this.image().await }
+        async move {
+            this.held().await;
+            this.image().await
+        }
     }
 
     fn capture(
@@ -375,6 +397,7 @@ impl roomlight_agent::hardware::Camera for RenderedCamera {
         let this = self.clone();
         async move {
             let protocol = roomlight_agent::AgentError::Protocol;
+            this.held().await;
             let mut client = this.client.clone();
             let image = client.capture_image(v1::CaptureRequest {}).await?;
             let image = decode_image(image.into_inner()).map_err(protocol)?;

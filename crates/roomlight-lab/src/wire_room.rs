@@ -8,8 +8,14 @@
 //! What it adds to the agents is the judge: the simulator's noiseless truth of what the
 //! projectors show, against the LEDs' light ([`WireRoom::judge`]). `roomlight bench shading`
 //! and the integration tests drive it.
+//!
+//! A run is the same at a fixed seed on every run and machine: each capture is held until the
+//! driver has handled the camera agent's last status ([`crate::pipeline::gate`]), so a preset
+//! is chosen, and the room judged, exactly after the rounds of the capture whose status asked
+//! for it ([`WireRoom::until`], [`WireRoom::preset`]).
 
 use crate::dark_target::target_light;
+use crate::pipeline::gate::Gate;
 use crate::pipeline::{chart_corners, image, sample_config};
 use crate::rendered::{self, Rendered, RenderedCamera, rendered_display};
 use crate::whole_room::{delta_e_map, luminaires, white_luminance};
@@ -76,8 +82,12 @@ impl Lights for RoomLights {
 pub struct WireRoom {
     pub room: Arc<Room>,
     rendered: Rendered,
-    pub status: watch::Receiver<RoomStatus>,
-    pub control: Control,
+    /// The camera agent's status; read it through [`WireRoom::until`], which lets each
+    /// capture go once its status is handled.
+    status: watch::Receiver<RoomStatus>,
+    /// The console's requests; a preset through [`WireRoom::preset`], which holds the gate.
+    control: Control,
+    gate: Arc<Gate>,
     agent: JoinHandle<Result<(), AgentError>>,
     nodes: Vec<JoinHandle<Result<(), AgentError>>>,
     /// Stops the agents.
@@ -160,7 +170,9 @@ impl WireRoom {
         let sample = sample_config(&room);
         let probe = RenderedCamera::new(client.clone(), corners.clone(), Vec::new(), sample);
         let (model, patches, photographs) = survey_model(&room, &probe).await?;
-        let camera = RenderedCamera::new(client.clone(), corners, patches, sample);
+        let gate = Arc::new(Gate::new());
+        let camera =
+            RenderedCamera::new(client.clone(), corners, patches, sample).with_gate(gate.clone());
         let config = CameraConfig {
             room: room.scene().name.clone(),
             token: "wire-room".into(),
@@ -201,6 +213,7 @@ impl WireRoom {
             extras,
             cancel.clone(),
         );
+        gate.follow(status.clone());
         let mut nodes = Vec::new();
         for p in room
             .scene()
@@ -231,6 +244,7 @@ impl WireRoom {
             rendered,
             status,
             control,
+            gate,
             agent: handle,
             nodes,
             agents: cancel,
@@ -238,33 +252,84 @@ impl WireRoom {
         })
     }
 
-    /// The first status for which `done` holds, within `limit`; an error naming `what` and the
-    /// last status otherwise.
+    /// The first status for which `done` holds, within `limit`, once the camera agent holds
+    /// its next capture (what the projectors show is then final, and the status is the
+    /// driver's to act on); an error naming `what` and the last status otherwise. Every
+    /// status before it is handled (its next capture goes); that one is not, until the next
+    /// call ([`WireRoom::until`], [`WireRoom::preset`], [`WireRoom::stop`]).
     pub async fn until(
         &mut self,
         limit: Duration,
         what: &str,
         done: impl Fn(&RoomStatus) -> bool,
     ) -> Result<RoomStatus> {
+        let started = tokio::time::Instant::now();
         let status = &mut self.status;
+        let gate = &self.gate;
         let waited = tokio::time::timeout(limit, async {
             loop {
-                if done(&status.borrow_and_update()) {
-                    return Ok(status.borrow().clone());
+                let now = status.borrow_and_update().clone();
+                if done(&now) {
+                    return Ok(now);
                 }
+                gate.handled(now.captures);
                 if status.changed().await.is_err() {
                     bail!("the camera agent stopped before {what}");
                 }
             }
         })
         .await;
-        match waited {
-            Ok(status) => status,
+        let found = match waited {
+            Ok(status) => status?,
             Err(_) => bail!(
                 "{what}: not within {limit:?}; last status {:?}",
                 self.status.borrow()
             ),
-        }
+        };
+        let left = limit.saturating_sub(started.elapsed());
+        self.gate
+            .held(found.captures, left)
+            .await
+            .with_context(|| format!("after {what}"))?;
+        Ok(found)
+    }
+
+    /// Chooses LED preset `preset` from the console, as an installer would, right after the
+    /// rounds of the capture [`WireRoom::until`] last returned: it is asked for while that
+    /// capture is held, so the camera agent reads it after the capture's rounds. The statuses
+    /// meanwhile are handled; returns once the preset's light is measured.
+    pub async fn preset(&mut self, preset: &str) -> Result<()> {
+        let asked = self.control.preset(preset.to_string());
+        tokio::pin!(asked);
+        // The request is queued on the first poll (the console's queue is not awaited).
+        let answer = tokio::select! {
+            biased;
+            answer = &mut asked => Some(answer),
+            () = std::future::ready(()) => None,
+        };
+        let answer = match answer {
+            Some(answer) => answer,
+            None => {
+                self.gate.handled(self.status.borrow_and_update().captures);
+                loop {
+                    tokio::select! {
+                        answer = &mut asked => break answer,
+                        changed = self.status.changed() => {
+                            if changed.is_err() {
+                                bail!("the camera agent stopped before preset {preset}");
+                            }
+                            self.gate.handled(self.status.borrow_and_update().captures);
+                        }
+                    }
+                }
+            }
+        };
+        answer.map_err(|e| anyhow::anyhow!("preset {preset}: {e}"))
+    }
+
+    /// The camera agent's latest status.
+    pub fn status(&self) -> RoomStatus {
+        self.status.borrow().clone()
     }
 
     /// What the projectors show now, against LED preset `preset`: see [`Judged`].
@@ -274,6 +339,7 @@ impl WireRoom {
 
     /// Stops every agent and joins them; an error when one failed.
     pub async fn stop(self) -> Result<()> {
+        self.gate.open();
         self.agents.cancel();
         self.agent.await.context("camera agent task")??;
         for n in self.nodes {

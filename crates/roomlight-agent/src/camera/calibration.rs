@@ -129,7 +129,7 @@ async fn measure_and_install(
 
 /// Who is calibrated with `projector`: in a dark room, once joins have paused for a heartbeat
 /// (projectors switched on together are coded together), every projector waiting for its
-/// nodes, `projector` first and the others by id; in a lit room it alone.
+/// nodes, by id; in a lit room it alone.
 async fn batch(shared: &Shared, projector: &str) -> Vec<String> {
     let waiting = |shared: &Shared| {
         let registry = shared.registry.lock();
@@ -158,6 +158,9 @@ async fn batch(shared: &Shared, projector: &str) -> Vec<String> {
     }
     let mut batch = vec![projector.to_string()];
     batch.extend(waiting(shared).unwrap_or_default());
+    // By id, whoever joined first: the same projectors are coded the same way (their
+    // primaries, their node ids) however their joins interleaved.
+    batch.sort();
     batch
 }
 

@@ -93,12 +93,9 @@ async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Resul
     );
     let mut records = Vec::new();
     for (index, preset) in names.iter().enumerate() {
-        let at = wire.status.borrow().captures;
+        let at = wire.status().captures;
         let started = Instant::now();
-        wire.control
-            .preset(preset.clone())
-            .await
-            .map_err(|e| anyhow::anyhow!("preset {preset}: {e}"))?;
+        wire.preset(preset).await?;
         let settled = wire
             .until(Duration::from_secs(1800), preset, |s| {
                 s.settled && s.shading_passes == shading_passes && s.captures > at + 2

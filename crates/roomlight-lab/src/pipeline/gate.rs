@@ -6,6 +6,9 @@
 //! driver has handled the latest status: churn then lands between two captures, and a run
 //! stops exactly after the rounds of its last capture. A capture held here is asked for
 //! before it waits: the run's clock of the rounds ends at the request and leaves the wait out.
+//! A driver that must act where the camera agent cannot be (its console requests are read
+//! between two captures' rounds; what the projectors show is final only once they have shown
+//! the last round's values) waits for the next capture to be held ([`Gate::held`]).
 
 use roomlight_agent::camera::{Overview, ProjectorState, ProjectorStatus, RoomStatus};
 use std::sync::OnceLock;
@@ -25,6 +28,8 @@ struct Handled {
 pub struct Gate {
     status: OnceLock<watch::Receiver<RoomStatus>>,
     handled: watch::Sender<Handled>,
+    /// The status (its captures) a capture is held after, while one is.
+    holding: watch::Sender<Option<u64>>,
 }
 
 impl Gate {
@@ -60,10 +65,28 @@ impl Gate {
         };
         let seen = status.borrow().captures;
         let mut handled = self.handled.subscribe();
+        self.holding.send_replace(Some(seen));
         // The sender lives in `self`: the wait ends only when the condition holds.
         let _ = handled
             .wait_for(|h| h.open || h.captures.is_some_and(|c| c >= seen))
             .await;
+        self.holding.send_replace(None);
+    }
+
+    /// Waits, at most `limit`, until a capture is held after the status of `captures`
+    /// captures: the camera agent has shown the rounds' last values (it waits for every
+    /// projector's acknowledgement before it captures) and has read its console requests.
+    pub async fn held(&self, captures: u64, limit: Duration) -> anyhow::Result<()> {
+        let mut holding = self.holding.subscribe();
+        tokio::time::timeout(limit, holding.wait_for(|h| *h == Some(captures)))
+            .await
+            .map_err(|_| {
+                anyhow::anyhow!(
+                    "the camera agent took no capture after the status of {captures} captures within {limit:?}"
+                )
+            })?
+            .map_err(|_| anyhow::anyhow!("the gate went away"))?;
+        Ok(())
     }
 }
 
