@@ -307,8 +307,8 @@ enum BenchCommand {
         /// The small test room (its camera at 640x480) instead of the lab.
         #[arg(long)]
         quick: bool,
-        /// Shading passes per preset in the second run.
-        #[arg(long, default_value_t = 6)]
+        /// Shading passes per preset in the second run (the camera agent's default).
+        #[arg(long, default_value_t = 10)]
         passes: usize,
         /// Write the records as JSON to this file.
         #[arg(long)]

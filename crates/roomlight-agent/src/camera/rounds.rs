@@ -188,7 +188,7 @@ impl<C: Camera> Rounds<C> {
             .registry
             .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
             .await;
-        let Some((y, ok)) = self.eye.measured(&shared).await else {
+        let Some((y, ok, photograph)) = self.eye.measured_image(&shared).await else {
             // The round is abandoned (logged, the camera's state published): nothing is sent,
             // the lights stay as they are, and the loop tries again after the backoff.
             return;
@@ -242,9 +242,16 @@ impl<C: Camera> Rounds<C> {
             (peers.len(), peers.displays_lost())
         };
         let mut settled = self.controller.settled();
-        // Settled on a target: a per-pixel shading pass, when one is due. The light changes
-        // (at the charts too): the rounds settle again before the next.
-        if settled && !cancel.is_cancelled() && super::shading::pass(&shared, &mut self.eye).await {
+        // Per-pixel shading, while passes are due: the first once the rounds have settled on
+        // the target, then one on every capture, each on the photograph the rounds just
+        // measured; the rounds settle on the shaded light after the last. Settling between
+        // passes instead took the lab 32–35 captures a preset for 6 passes, this 18–21 for
+        // 10 and the same whole room (docs/results.md).
+        let shading = shared.shading().passes > 0;
+        if (settled || shading)
+            && !cancel.is_cancelled()
+            && super::shading::pass(&shared, &mut self.eye, photograph).await
+        {
             self.controller.retarget();
             settled = false;
         }

@@ -3,8 +3,11 @@
 //! light, compares it camera pixel by camera pixel with the LEDs' photograph of that target,
 //! lands the ratios on each standard projector's blocks through its decode, and sends each node
 //! agent its projector's ratios (a `Shade` message). The node agent steps its own gains and
-//! draws with them; the rounds then settle again (the light changed at the charts' neighbours
-//! too) before the next pass, up to `CameraConfig::shading_passes` passes per target.
+//! draws with them. The next pass follows on the next capture, the rounds correcting the
+//! charts meanwhile (the light changed there too), up to `CameraConfig::shading_passes`
+//! passes per target; then the rounds settle on the shaded light. A pass works on the
+//! photograph the rounds' capture took (no capture of its own, unless the camera agent has no
+//! survey and its captures are patches only).
 //!
 //! What a pass needs, kept here: the dark room (the survey's photograph, else the bring-up's
 //! dark capture), the LEDs' light (the survey's photographs, then the two captures of each
@@ -145,11 +148,16 @@ pub(super) async fn reset(shared: &Shared, ids: &[String]) {
     wait_shown(shared, &sent).await;
 }
 
-/// One shading pass, when one is due (the rounds have settled, passes are configured and
-/// left, and everything a pass needs is there): one capture of the room's light, each
-/// standard projector's ratios sent, and their acknowledgements awaited. True when a pass ran
-/// (the light changed: the rounds must settle again).
-pub(super) async fn pass<C: Camera>(shared: &Shared, eye: &mut Captures<C>) -> bool {
+/// One shading pass, when one is due (passes are configured and left, and everything a pass
+/// needs is there): on `photograph` (the room's light as the rounds' capture took it; `None`:
+/// one capture of its own), each standard projector's ratios sent, and their
+/// acknowledgements awaited. True when a pass ran (the light changed: the rounds must settle
+/// again).
+pub(super) async fn pass<C: Camera>(
+    shared: &Shared,
+    eye: &mut Captures<C>,
+    settled: Option<Arc<LinearImage>>,
+) -> bool {
     let wanted = shared.config.shading_passes;
     let (dark, leds, decodes) = {
         let mut inputs = shared.shading();
@@ -188,12 +196,18 @@ pub(super) async fn pass<C: Camera>(shared: &Shared, eye: &mut Captures<C>) -> b
     if live.is_empty() {
         return false;
     }
-    shared
-        .registry
-        .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
-        .await;
-    let Some(current) = eye.image_exposed(shared, 1.0).await else {
-        return false;
+    let current = match settled {
+        Some(image) => image,
+        None => {
+            shared
+                .registry
+                .wait_for(shared.config.deadline, |r| r.projectors().all_shown())
+                .await;
+            let Some(image) = eye.image_exposed(shared, 1.0).await else {
+                return false;
+            };
+            Arc::new(image)
+        }
     };
     let saturation = eye.limits().saturation;
     let excluded = survey.target_mask.clone();

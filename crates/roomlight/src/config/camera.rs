@@ -66,10 +66,10 @@ struct CameraFile {
     /// photographed faster than it turns). A lit room is coded in white either way.
     #[serde(default = "primaries_default")]
     primaries: bool,
-    /// Per-pixel shading passes once the rounds settle on a preset (default 6; 0: none): each
-    /// takes one capture and multiplies every standard projector's light block by block
-    /// towards the LEDs' photograph, beyond the charts. Needs calibration over the wire (the
-    /// decodes) and a preset chosen (the LEDs' photograph).
+    /// Per-pixel shading passes per preset (default 10; 0: none), the first once the rounds
+    /// settle on it, then one a capture: each multiplies every standard projector's light
+    /// block by block towards the LEDs' photograph, beyond the charts. Needs calibration over
+    /// the wire (the decodes) and a preset chosen (the LEDs' photograph).
     #[serde(default = "shading_passes_default")]
     shading_passes: usize,
     /// Advertise the camera agent over mDNS.
@@ -126,7 +126,7 @@ fn primaries_default() -> bool {
     true
 }
 fn shading_passes_default() -> usize {
-    6
+    10
 }
 
 /// The camera agent's config file, checked and turned into the process to run.
@@ -388,7 +388,7 @@ mod tests {
     /// Shading passes default to 6, reach the agent as the file says, and a count beyond 64 is
     /// refused naming the field and the range.
     #[test]
-    fn shading_passes_default_to_six_and_are_range_checked() {
+    fn shading_passes_default_to_ten_and_are_range_checked() {
         let minimal = "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\n\
                        hardware = { sim = \"http://127.0.0.1:1\" }\nmodel = \"m.json\"\n";
         let file = |text: &str| toml::from_str::<CameraFile>(text).expect("camera.toml");
@@ -396,7 +396,7 @@ mod tests {
             let hardware = CameraHardware::Sim("http://127.0.0.1:1".into());
             file(text).into_process(hardware, "t".into(), None).agent
         };
-        assert_eq!(agent(minimal).shading_passes, 6);
+        assert_eq!(agent(minimal).shading_passes, 10);
         assert_eq!(
             agent(&format!("{minimal}shading_passes = 0\n")).shading_passes,
             0
