@@ -51,9 +51,68 @@ pub struct Options {
     /// The camera agent gets the survey's photographs (dark, LEDs): shading follows the
     /// bring-up. Without, it waits for a preset chosen from the console.
     pub survey_photographs: bool,
+    /// The camera agent writes its model file (and the shading's inputs beside it) into a
+    /// temporary folder, so that it can be restarted from them ([`WireRoom::restart_camera`]).
+    pub model_file: bool,
+}
+
+/// What starting (or restarting) the camera agent takes.
+struct CameraSetup {
+    client: rendered::Client,
+    corners: Vec<roomlight_calib::charts::ChartCorners>,
+    sample: roomlight_calib::charts::SampleConfig,
+    config: CameraConfig,
+    lights: Arc<RoomLights>,
+    survey: Survey,
+    /// Where node agents reach it.
+    at: std::net::SocketAddr,
+    /// Holds the model file.
+    _folder: Option<tempfile::TempDir>,
+}
+
+impl CameraSetup {
+    /// Starts the camera agent on `model` with `patches` until `cancel`; its captures held by
+    /// a new gate.
+    async fn start(
+        &self,
+        model: RoomModel,
+        patches: Vec<usize>,
+        preset: Option<String>,
+        photographs: Option<SurveyPhotographs>,
+        cancel: CancellationToken,
+    ) -> Result<(camera::Served, Arc<Gate>)> {
+        let gate = Arc::new(Gate::new());
+        let camera = RenderedCamera::new(
+            self.client.clone(),
+            self.corners.clone(),
+            patches,
+            self.sample,
+        )
+        .with_gate(gate.clone());
+        let listener = tokio::net::TcpListener::bind(self.at)
+            .await
+            .with_context(|| format!("listening on {}", self.at))?;
+        let extras = Extras {
+            lights: Some(self.lights.clone()),
+            preset,
+            photographs,
+        };
+        let served = camera::serve_room(
+            self.config.clone(),
+            model,
+            camera,
+            listener,
+            None,
+            extras,
+            cancel,
+        );
+        gate.follow(served.status.clone());
+        Ok((served, gate))
+    }
 }
 
 /// The rendered room's LEDs, switched through its camera's client.
+#[derive(Clone)]
 struct RoomLights {
     camera: RenderedCamera,
     presets: Vec<String>,
@@ -89,6 +148,9 @@ pub struct WireRoom {
     control: Control,
     gate: Arc<Gate>,
     agent: JoinHandle<Result<(), AgentError>>,
+    /// Stops the camera agent alone.
+    camera: CancellationToken,
+    setup: CameraSetup,
     nodes: Vec<JoinHandle<Result<(), AgentError>>>,
     /// Stops the agents.
     agents: CancellationToken,
@@ -170,9 +232,11 @@ impl WireRoom {
         let sample = sample_config(&room);
         let probe = RenderedCamera::new(client.clone(), corners.clone(), Vec::new(), sample);
         let (model, patches, photographs) = survey_model(&room, &probe).await?;
-        let gate = Arc::new(Gate::new());
-        let camera =
-            RenderedCamera::new(client.clone(), corners, patches, sample).with_gate(gate.clone());
+        let folder = if options.model_file {
+            Some(tempfile::tempdir().context("a folder for the model file")?)
+        } else {
+            None
+        };
         let config = CameraConfig {
             room: room.scene().name.clone(),
             token: "wire-room".into(),
@@ -181,14 +245,23 @@ impl WireRoom {
             model_rounds: options.model_rounds,
             calibration_epoch: 1,
             stale_frames: 0,
-            model_out: None,
+            model_out: folder.as_ref().map(|f| f.path().join("model.json")),
             primaries: true,
             shading_passes: options.shading_passes,
         };
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
-        let endpoint = format!("http://{}", listener.local_addr()?);
-        let extras = Extras {
-            lights: Some(Arc::new(RoomLights {
+        let at = listener.local_addr()?;
+        drop(listener);
+        let endpoint = format!("http://{at}");
+        let Some(survey) = model.survey.clone() else {
+            bail!("the survey's model has no survey");
+        };
+        let setup = CameraSetup {
+            client: client.clone(),
+            corners,
+            sample,
+            config,
+            lights: Arc::new(RoomLights {
                 camera: probe,
                 presets: room
                     .scene()
@@ -196,24 +269,28 @@ impl WireRoom {
                     .iter()
                     .map(|p| p.name.clone())
                     .collect(),
-            })),
-            preset: room.scene().presets.first().map(|p| p.name.clone()),
-            photographs: options.survey_photographs.then_some(photographs),
+            }),
+            survey,
+            at,
+            _folder: folder,
         };
-        let camera::Served {
-            status,
-            control,
-            handle,
-        } = camera::serve_room(
-            config,
-            model,
-            camera,
-            listener,
-            None,
-            extras,
-            cancel.clone(),
-        );
-        gate.follow(status.clone());
+        let camera_cancel = cancel.child_token();
+        let (
+            camera::Served {
+                status,
+                control,
+                handle,
+            },
+            gate,
+        ) = setup
+            .start(
+                model,
+                patches,
+                room.scene().presets.first().map(|p| p.name.clone()),
+                options.survey_photographs.then_some(photographs),
+                camera_cancel.clone(),
+            )
+            .await?;
         let mut nodes = Vec::new();
         for p in room
             .scene()
@@ -246,6 +323,8 @@ impl WireRoom {
             control,
             gate,
             agent: handle,
+            camera: camera_cancel,
+            setup,
             nodes,
             agents: cancel,
             guard,
@@ -325,6 +404,43 @@ impl WireRoom {
             }
         };
         answer.map_err(|e| anyhow::anyhow!("preset {preset}: {e}"))
+    }
+
+    /// Stops the camera agent and starts it again on the same address from the model file it
+    /// wrote (and the shading's inputs beside it), as `roomlight camera` resumes after a
+    /// restart: nothing is measured again, the node agents keep their light and reconnect.
+    /// Needs [`Options::model_file`].
+    pub async fn restart_camera(&mut self) -> Result<()> {
+        let Some(path) = self.setup.config.model_out.clone() else {
+            bail!("the camera agent keeps no model file (Options::model_file)");
+        };
+        self.gate.open();
+        self.camera.cancel();
+        (&mut self.agent).await.context("camera agent task")??;
+        let file = crate::process::load_model(&path)?;
+        let patches = file
+            .patches
+            .with_context(|| format!("{}: no patches", path.display()))?;
+        let model = RoomModel {
+            problem: file.problem,
+            owners: file.owners,
+            start: file.start,
+            hot: Default::default(),
+            survey: Some(Survey {
+                patches: patches.clone(),
+                ..self.setup.survey.clone()
+            }),
+        };
+        self.camera = self.agents.child_token();
+        let (served, gate) = self
+            .setup
+            .start(model, patches, None, None, self.camera.clone())
+            .await?;
+        self.status = served.status;
+        self.control = served.control;
+        self.agent = served.handle;
+        self.gate = gate;
+        Ok(())
     }
 
     /// The camera agent's latest status.

@@ -123,6 +123,7 @@ async fn measure_and_install(
         return Vec::new();
     };
     shared.shading().calibrated(dark.as_ref(), decodes);
+    super::shading::save(shared).await;
     light(shared, &calibrated);
     calibrated.into_iter().map(|(id, _)| id).collect()
 }

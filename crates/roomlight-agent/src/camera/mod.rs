@@ -492,10 +492,17 @@ pub fn serve_room(
     cancel: CancellationToken,
 ) -> Served {
     let (contributions, contrib_rx) = mpsc::channel(4096);
-    let shading = shading::Inputs::surveyed(
-        extras.photographs.as_ref(),
-        model.survey.as_ref().map(|s| (s.width, s.height)),
-    );
+    let size = model.survey.as_ref().map(|s| (s.width, s.height));
+    // Photographed by this survey, or kept by this agent before it was restarted.
+    let shading = match (&extras.photographs, &config.model_out, size) {
+        (None, Some(out), Some(size)) => shading::Inputs::resumed(
+            out,
+            size,
+            |id| model.owners.contains_key(id),
+            config.shading_passes,
+        ),
+        (photographs, _, _) => shading::Inputs::surveyed(photographs.as_ref(), size),
+    };
     let live = Live::new(&model);
     let max_message = max_node_message(&model);
     let connections = connection_limit(&model);

@@ -85,6 +85,9 @@ impl<C: Camera> Rounds<C> {
 
     /// Runs rounds until `cancel`: a stop request ends them between two rounds, never inside one.
     pub(super) async fn run(mut self, cancel: CancellationToken) {
+        if std::mem::take(&mut self.shared.shading().unsaved) {
+            super::shading::save(&self.shared).await;
+        }
         while !cancel.is_cancelled() {
             // The console's requests, between two rounds.
             while let Ok(request) = self.requests.try_recv() {
@@ -392,6 +395,7 @@ impl<C: Camera> Rounds<C> {
         let flat = shared
             .shading()
             .retargeted(with_image.as_deref(), without_image.as_deref());
+        super::shading::save(&shared).await;
         super::shading::reset(&shared, &flat).await;
         self.controller.retarget();
         self.restarts += 1;

@@ -12,10 +12,13 @@
 //! What a pass needs, kept here: the dark room (the survey's photograph, else the bring-up's
 //! dark capture), the LEDs' light (the survey's photographs, then the two captures of each
 //! preset change, with and without the LEDs), and each projector's decode from its calibration
-//! over the wire. A camera agent resumed from a model
-//! file has none of them until a projector is calibrated and a preset chosen: it does not shade
-//! (said once in the log). A projector calibrated again starts from flat gains (its nodes are
-//! new), and any calibration starts the passes over (the room's light changed).
+//! over the wire. They are kept beside the model file (`store`): a camera agent restarted
+//! from its model file reads them back and shades the next preset chosen without calibrating
+//! anew (without the file it waits, said once in the log, for a calibration and a preset). A
+//! projector calibrated again starts from flat gains (its nodes are new), and any calibration
+//! starts the passes over (the room's light changed).
+
+mod store;
 
 use super::Shared;
 use super::capture::Captures;
@@ -48,6 +51,8 @@ pub(super) struct Inputs {
     pub(super) passes: usize,
     /// Told the log why nothing is shaded.
     said: bool,
+    /// Taken from the survey's photographs and not yet kept beside the model file.
+    pub(super) unsaved: bool,
 }
 
 impl Inputs {
@@ -76,6 +81,7 @@ impl Inputs {
         }
         inputs.dark = Some(Arc::new(p.dark.clone()));
         inputs.retargeted(Some(&p.leds), Some(&p.dark));
+        inputs.unsaved = true;
         inputs
     }
 
@@ -123,6 +129,90 @@ impl Inputs {
         ids.sort();
         self.fresh.extend(ids.iter().cloned());
         ids
+    }
+}
+
+impl Inputs {
+    /// What a camera agent wrote beside `model_out` before it was restarted, for a camera of
+    /// `size` and the projectors `known` to the resumed model; nothing when there is no such
+    /// file, or it is refused (logged, naming the file and why). The node agents kept their
+    /// gains (their state files): the current target's passes count as done (`passes`; the
+    /// file does not say how many were sent), the next preset chosen starts them over, and
+    /// its Shades start from flat gains as after any preset.
+    pub(super) fn resumed(
+        model_out: &std::path::Path,
+        size: (u32, u32),
+        known: impl Fn(&str) -> bool,
+        passes: usize,
+    ) -> Self {
+        let path = store::path(model_out);
+        if !path.exists() {
+            return Self::default();
+        }
+        let (stored, notes) = match store::Stored::read(&path, size, known) {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::warn!(error = %e, "the shading's inputs were not resumed: shading waits for a calibration and a preset chosen");
+                return Self::default();
+            }
+        };
+        for note in notes {
+            tracing::warn!(file = %path.display(), "{note}");
+        }
+        let (w, h) = size;
+        let decodes: HashMap<String, Arc<Correspondence>> = stored
+            .decodes
+            .iter()
+            .map(|d| (d.projector.clone(), Arc::new(d.correspondence(w, h))))
+            .collect();
+        let mut ids: Vec<&String> = decodes.keys().collect();
+        ids.sort();
+        tracing::info!(
+            file = %path.display(),
+            dark = stored.dark.is_some(),
+            leds = stored.leds.is_some(),
+            decodes = ?ids,
+            "shading's inputs resumed"
+        );
+        Self {
+            passes: if stored.leds.is_some() { passes } else { 0 },
+            dark: stored.image(&stored.dark).map(Arc::new),
+            leds: stored.image(&stored.leds).map(Arc::new),
+            decodes,
+            ..Self::default()
+        }
+    }
+}
+
+/// Keeps the shading's inputs beside the model file (when there is one, and a survey gives the
+/// camera's size), off the runtime; a failure is logged and the rounds go on.
+pub(super) async fn save(shared: &Shared) {
+    let (Some(model_out), Some(survey)) = (&shared.config.model_out, &shared.survey) else {
+        return;
+    };
+    let path = store::path(model_out);
+    let size = (survey.width, survey.height);
+    let (dark, leds, decodes) = {
+        let inputs = shared.shading();
+        (
+            inputs.dark.clone(),
+            inputs.leds.clone(),
+            inputs.decodes.clone(),
+        )
+    };
+    let written = tokio::task::spawn_blocking(move || {
+        let mut decodes: Vec<store::Decode> = decodes
+            .iter()
+            .map(|(id, corr)| store::Decode::of(id, corr))
+            .collect();
+        decodes.sort_by(|a, b| a.projector.cmp(&b.projector));
+        store::Stored::new(size, dark.as_deref(), leds.as_deref(), decodes).write(&path)
+    })
+    .await;
+    match written {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => tracing::warn!(error = %e, "could not keep the shading's inputs"),
+        Err(e) => tracing::warn!(error = %e, "could not keep the shading's inputs"),
     }
 }
 

@@ -73,6 +73,7 @@ async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Resul
         seed: 1,
         // Each preset is chosen as an installer would, the first too.
         survey_photographs: false,
+        model_file: false,
     };
     let names: Vec<String> = room
         .scene()

@@ -24,6 +24,7 @@ async fn shading_passes_over_the_wire_bring_the_whole_room_to_the_leds() {
         model_rounds: 2,
         seed: 3,
         survey_photographs: false,
+        model_file: false,
     };
     let mut wire = WireRoom::start(room.clone(), options)
         .await
@@ -130,6 +131,7 @@ async fn a_run_over_the_wire_is_the_same_at_a_fixed_seed() {
         model_rounds: 2,
         seed: 5,
         survey_photographs: true,
+        model_file: false,
     };
     let mut runs = Vec::new();
     for _ in 0..2 {
@@ -159,4 +161,81 @@ async fn a_run_over_the_wire_is_the_same_at_a_fixed_seed() {
         .map(f64::to_bits)
     };
     assert_eq!(bits(&a.2), bits(&b.2), "the judged room");
+}
+
+/// A camera agent restarted mid-show (its model file and the shading's inputs beside it read
+/// back) keeps the room as shaded (the node agents keep their gains) and shades the next preset
+/// chosen without calibrating anew: the decodes, the dark room and the LEDs' light come from
+/// the file it wrote. Without that file it would wait for a calibration, and no pass would be
+/// sent.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restarted_camera_agent_shades_again_from_what_it_kept() {
+    const PASSES: usize = 2;
+    let room = Arc::new(Room::build(apart_scene()).expect("room"));
+    let preset = room.scene().presets[0].name.clone();
+    let options = Options {
+        shading_passes: PASSES,
+        model_rounds: 2,
+        seed: 7,
+        survey_photographs: true,
+        model_file: true,
+    };
+    let mut wire = WireRoom::start(room.clone(), options)
+        .await
+        .expect("started");
+    wire.until(
+        Duration::from_secs(600),
+        "the passes after the bring-up",
+        |s| s.calibrated_hot == 2 && s.shading_passes == PASSES && s.settled,
+    )
+    .await
+    .expect("shaded after the bring-up");
+    let shaded = wire.judge(0).expect("judged");
+
+    wire.restart_camera().await.expect("restarted");
+    let resumed = wire
+        .until(Duration::from_secs(120), "the resumed rounds", |s| {
+            s.live_projectors == 2 && s.settled
+        })
+        .await
+        .expect("resumed");
+    // Nothing was calibrated again; the passes the node agents' gains carry count as done.
+    assert_eq!(
+        (resumed.calibrated_hot, resumed.shading_passes),
+        (0, PASSES)
+    );
+    let kept = wire.judge(0).expect("judged");
+    wire.preset(&preset).await.expect("preset");
+    let again = wire
+        .until(
+            Duration::from_secs(300),
+            "the passes after the restart",
+            |s| s.shading_passes == PASSES && s.settled,
+        )
+        .await
+        .expect("shaded again after the restart");
+    let after = wire.judge(0).expect("judged");
+    eprintln!(
+        "shaded {:.2} / {:.2}; restarted, resumed {:.2} / {:.2}; the preset chosen again and \
+         {PASSES} passes at capture {}: {:.2} / {:.2} (whole room ΔE00 mean / p95)",
+        shaded.de00_mean,
+        shaded.de00_p95,
+        kept.de00_mean,
+        kept.de00_p95,
+        again.captures,
+        after.de00_mean,
+        after.de00_p95
+    );
+    assert_eq!(again.calibrated_hot, 0, "no calibration after the restart");
+    // The preset drops the gains (the rounds settle on the new target without them); the
+    // passes bring the room back to where the shading had it.
+    assert!(
+        after.de00_mean < shaded.de00_mean + 0.5 && after.de00_p95 < shaded.de00_p95 + 1.5,
+        "{:.2} / {:.2} against {:.2} / {:.2} before the restart",
+        after.de00_mean,
+        after.de00_p95,
+        shaded.de00_mean,
+        shaded.de00_p95
+    );
+    wire.stop().await.expect("every agent stopped cleanly");
 }
