@@ -443,6 +443,11 @@ impl WireRoom {
         Ok(())
     }
 
+    /// The camera agent's model file, with [`Options::model_file`].
+    pub fn model_file(&self) -> Option<&std::path::Path> {
+        self.setup.config.model_out.as_deref()
+    }
+
     /// The camera agent's latest status.
     pub fn status(&self) -> RoomStatus {
         self.status.borrow().clone()

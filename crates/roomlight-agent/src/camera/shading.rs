@@ -201,16 +201,24 @@ pub(super) async fn save(shared: &Shared) {
         )
     };
     let written = tokio::task::spawn_blocking(move || {
+        let started = std::time::Instant::now();
         let mut decodes: Vec<store::Decode> = decodes
             .iter()
             .map(|(id, corr)| store::Decode::of(id, corr))
             .collect();
         decodes.sort_by(|a, b| a.projector.cmp(&b.projector));
-        store::Stored::new(size, dark.as_deref(), leds.as_deref(), decodes).write(&path)
+        let bytes =
+            store::Stored::new(size, dark.as_deref(), leds.as_deref(), decodes).write(&path)?;
+        Ok::<_, String>((path, bytes, started.elapsed()))
     })
     .await;
     match written {
-        Ok(Ok(())) => {}
+        Ok(Ok((path, bytes, took))) => tracing::info!(
+            file = %path.display(),
+            bytes,
+            ms = took.as_millis() as u64,
+            "shading's inputs kept"
+        ),
         Ok(Err(e)) => tracing::warn!(error = %e, "could not keep the shading's inputs"),
         Err(e) => tracing::warn!(error = %e, "could not keep the shading's inputs"),
     }

@@ -73,7 +73,8 @@ async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Resul
         seed: 1,
         // Each preset is chosen as an installer would, the first too.
         survey_photographs: false,
-        model_file: false,
+        // What a restarted camera agent would resume from, measured.
+        model_file: true,
     };
     let names: Vec<String> = room
         .scene()
@@ -121,6 +122,14 @@ async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Resul
             charts_de00: judged.charts_de00,
             target_light_share: judged.target_share,
         });
+    }
+    if let Some(model) = wire.model_file() {
+        let size = |p: &std::path::Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+        eprintln!(
+            "the camera agent's model file {} bytes, the shading's inputs beside it {} bytes",
+            size(model),
+            size(&model.with_extension("shading"))
+        );
     }
     wire.stop().await?;
     Ok(records)

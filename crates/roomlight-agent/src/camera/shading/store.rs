@@ -93,12 +93,13 @@ impl Stored {
         }
     }
 
-    /// Writes `self` to `path` (through a temporary file renamed over it).
-    pub(crate) fn write(&self, path: &Path) -> Result<(), String> {
+    /// Writes `self` to `path` (through a temporary file renamed over it); the bytes written.
+    pub(crate) fn write(&self, path: &Path) -> Result<usize, String> {
         let bytes = postcard::to_stdvec(self).map_err(|e| format!("encoding: {e}"))?;
         let tmp = path.with_extension("shading.tmp");
-        std::fs::write(&tmp, bytes).map_err(|e| format!("{}: {e}", tmp.display()))?;
-        std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+        std::fs::write(&tmp, &bytes).map_err(|e| format!("{}: {e}", tmp.display()))?;
+        std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(bytes.len())
     }
 
     /// Reads `path` for a camera of `size`. Decodes of projectors `known` does not accept are
