@@ -71,16 +71,17 @@ struct CameraSetup {
 }
 
 impl CameraSetup {
-    /// Starts the camera agent on `model` with `patches` until `cancel`; its captures held by
-    /// a new gate.
-    async fn start(
+    /// Starts the camera agent on `listener` (bound to `self.at`) with `model` and `patches`
+    /// until `cancel`; its captures held by a new gate.
+    fn start(
         &self,
+        listener: tokio::net::TcpListener,
         model: RoomModel,
         patches: Vec<usize>,
         preset: Option<String>,
         photographs: Option<SurveyPhotographs>,
         cancel: CancellationToken,
-    ) -> Result<(camera::Served, Arc<Gate>)> {
+    ) -> (camera::Served, Arc<Gate>) {
         let gate = Arc::new(Gate::new());
         let camera = RenderedCamera::new(
             self.client.clone(),
@@ -89,9 +90,6 @@ impl CameraSetup {
             self.sample,
         )
         .with_gate(gate.clone());
-        let listener = tokio::net::TcpListener::bind(self.at)
-            .await
-            .with_context(|| format!("listening on {}", self.at))?;
         let extras = Extras {
             lights: Some(self.lights.clone()),
             preset,
@@ -107,7 +105,7 @@ impl CameraSetup {
             cancel,
         );
         gate.follow(served.status.clone());
-        Ok((served, gate))
+        (served, gate)
     }
 }
 
@@ -251,7 +249,6 @@ impl WireRoom {
         };
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let at = listener.local_addr()?;
-        drop(listener);
         let endpoint = format!("http://{at}");
         let Some(survey) = model.survey.clone() else {
             bail!("the survey's model has no survey");
@@ -282,15 +279,14 @@ impl WireRoom {
                 handle,
             },
             gate,
-        ) = setup
-            .start(
-                model,
-                patches,
-                room.scene().presets.first().map(|p| p.name.clone()),
-                options.survey_photographs.then_some(photographs),
-                camera_cancel.clone(),
-            )
-            .await?;
+        ) = setup.start(
+            listener,
+            model,
+            patches,
+            room.scene().presets.first().map(|p| p.name.clone()),
+            options.survey_photographs.then_some(photographs),
+            camera_cancel.clone(),
+        );
         let mut nodes = Vec::new();
         for p in room
             .scene()
@@ -388,20 +384,16 @@ impl WireRoom {
         };
         let answer = match answer {
             Some(answer) => answer,
-            None => {
+            // Queued: the held capture goes, and every status until the answer is handled.
+            None => loop {
                 self.gate.handled(self.status.borrow_and_update().captures);
-                loop {
-                    tokio::select! {
-                        answer = &mut asked => break answer,
-                        changed = self.status.changed() => {
-                            if changed.is_err() {
-                                bail!("the camera agent stopped before preset {preset}");
-                            }
-                            self.gate.handled(self.status.borrow_and_update().captures);
-                        }
-                    }
+                tokio::select! {
+                    answer = &mut asked => break answer,
+                    changed = self.status.changed() => if changed.is_err() {
+                        bail!("the camera agent stopped before preset {preset}");
+                    },
                 }
-            }
+            },
         };
         answer.map_err(|e| anyhow::anyhow!("preset {preset}: {e}"))
     }
@@ -431,11 +423,15 @@ impl WireRoom {
                 ..self.setup.survey.clone()
             }),
         };
+        // The same address: the node agents reconnect to it.
+        let at = self.setup.at;
+        let listener = tokio::net::TcpListener::bind(at)
+            .await
+            .with_context(|| format!("listening on {at} again"))?;
         self.camera = self.agents.child_token();
-        let (served, gate) = self
-            .setup
-            .start(model, patches, None, None, self.camera.clone())
-            .await?;
+        let (served, gate) =
+            self.setup
+                .start(listener, model, patches, None, None, self.camera.clone());
         self.status = served.status;
         self.control = served.control;
         self.agent = served.handle;

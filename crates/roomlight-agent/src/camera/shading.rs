@@ -130,9 +130,7 @@ impl Inputs {
         self.fresh.extend(ids.iter().cloned());
         ids
     }
-}
 
-impl Inputs {
     /// What a camera agent wrote beside `model_out` before it was restarted, for a camera of
     /// `size` and the projectors `known` to the resumed model; nothing when there is no such
     /// file, or it is refused (logged, naming the file and why). The node agents kept their
@@ -211,15 +209,15 @@ pub(super) async fn save(shared: &Shared) {
             store::Stored::new(size, dark.as_deref(), leds.as_deref(), decodes).write(&path)?;
         Ok::<_, String>((path, bytes, started.elapsed()))
     })
-    .await;
+    .await
+    .unwrap_or_else(|e| Err(e.to_string()));
     match written {
-        Ok(Ok((path, bytes, took))) => tracing::info!(
+        Ok((path, bytes, took)) => tracing::info!(
             file = %path.display(),
             bytes,
             ms = took.as_millis() as u64,
             "shading's inputs kept"
         ),
-        Ok(Err(e)) => tracing::warn!(error = %e, "could not keep the shading's inputs"),
         Err(e) => tracing::warn!(error = %e, "could not keep the shading's inputs"),
     }
 }
@@ -254,7 +252,7 @@ pub(super) async fn reset(shared: &Shared, ids: &[String]) {
 pub(super) async fn pass<C: Camera>(
     shared: &Shared,
     eye: &mut Captures<C>,
-    settled: Option<Arc<LinearImage>>,
+    photograph: Option<Arc<LinearImage>>,
 ) -> bool {
     let wanted = shared.config.shading_passes;
     let (dark, leds, decodes) = {
@@ -294,7 +292,7 @@ pub(super) async fn pass<C: Camera>(
     if live.is_empty() {
         return false;
     }
-    let current = match settled {
+    let current = match photograph {
         Some(image) => image,
         None => {
             shared

@@ -79,6 +79,10 @@ async fn shading_passes_over_the_wire_bring_the_whole_room_to_the_leds() {
         before.de00_p95,
         after.de00_p95
     );
+    // A pass a capture once the rounds settle: settling (three captures) before each pass
+    // instead would take at least 3 + 3 · PASSES captures after the preset.
+    let captures = shaded.captures - settled.captures;
+    assert!(captures < 3 + 3 * PASSES as u64, "{captures} captures");
     assert!(
         after.charts_de00 < before.charts_de00 + 0.5,
         "charts {:.2} → {:.2}",
