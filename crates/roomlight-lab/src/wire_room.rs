@@ -28,7 +28,7 @@ use roomlight_agent::node::{self, NodeConfig};
 use roomlight_calib::charts::{PatchStatus, sample_charts};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_core::metrics::patch_delta_e;
-use roomlight_core::{LinearRgb, Problem, StepRule};
+use roomlight_core::{LinearRgb, StepRule};
 use roomlight_proto::v1;
 use roomlight_sim::scene::{ProjectorKind, ProjectorRole};
 use roomlight_sim::{Capture, Frame, Room};
@@ -54,6 +54,9 @@ pub struct Options {
     /// The camera agent writes its model file (and the shading's inputs beside it) into a
     /// temporary folder, so that it can be restarted from them ([`WireRoom::restart_camera`]).
     pub model_file: bool,
+    /// The weight of the light on the target in the luminaires' objective (`Survey::new`;
+    /// 0: the charts alone).
+    pub dark_weight: f64,
 }
 
 /// What starting (or restarting) the camera agent takes.
@@ -166,11 +169,14 @@ impl std::fmt::Debug for WireRoom {
 }
 
 /// The camera agent's model before any projector, as `roomlight camera` with a survey measures
-/// it: the room's black (LEDs off) and target (its first preset) through the charts, the
-/// patches both measure, and the target's camera pixels masked; and the two photographs.
+/// it: the room's black (LEDs off) and target (its first preset) through the charts (and with
+/// `dark_weight` > 0 the target's patches, kept at the black level with that weight,
+/// [`Survey::model`]), the patches both measure, and the target's camera pixels masked; and
+/// the two photographs.
 pub async fn survey_model(
     room: &Room,
     camera: &RenderedCamera,
+    dark_weight: f64,
 ) -> Result<(RoomModel, Vec<usize>, SurveyPhotographs)> {
     let corners = chart_corners(room)?;
     let sample = sample_config(room);
@@ -184,26 +190,17 @@ pub async fn survey_model(
     let dark = photograph("").await?;
     let leds = photograph(&preset).await?;
     camera.set_lights("").await?;
-    let black = sample_charts(&dark, &corners, &sample)?;
-    let target = sample_charts(&leds, &corners, &sample)?;
-    let patches: Vec<usize> = (0..target.len())
-        .filter(|&i| black[i].status == PatchStatus::Ok && target[i].status == PatchStatus::Ok)
-        .collect();
-    let problem = Problem::new(
-        Vec::new(),
-        patches.iter().map(|&i| black[i].mean).collect(),
-        patches.iter().map(|&i| target[i].mean).collect(),
-        patches.iter().map(|&i| target[i].std_error).collect(),
-    )?;
     let [w, h] = room.scene().camera.resolution;
-    let survey = Survey {
+    let survey = Survey::new(
         corners,
         sample,
-        target_mask: room.pixels().iter().map(|p| p.target).collect(),
-        patches: patches.clone(),
-        width: w,
-        height: h,
-    };
+        room.pixels().iter().map(|p| p.target).collect(),
+        (w, h),
+        dark_weight,
+    )?;
+    let (black, lit) = (survey.sample(&dark)?, survey.sample(&leds)?);
+    let (problem, survey) = survey.model(&black, &lit)?;
+    let patches = survey.patches.clone();
     let model = RoomModel {
         problem,
         owners: Default::default(),
@@ -229,7 +226,8 @@ impl WireRoom {
         let corners = chart_corners(&room)?;
         let sample = sample_config(&room);
         let probe = RenderedCamera::new(client.clone(), corners.clone(), Vec::new(), sample);
-        let (model, patches, photographs) = survey_model(&room, &probe).await?;
+        let (model, patches, photographs) =
+            survey_model(&room, &probe, options.dark_weight).await?;
         let folder = if options.model_file {
             Some(tempfile::tempdir().context("a folder for the model file")?)
         } else {
@@ -418,10 +416,7 @@ impl WireRoom {
             owners: file.owners,
             start: file.start,
             hot: Default::default(),
-            survey: Some(Survey {
-                patches: patches.clone(),
-                ..self.setup.survey.clone()
-            }),
+            survey: Some(self.setup.survey.clone().with_patches(patches.clone())),
         };
         // The same address: the node agents reconnect to it.
         let at = self.setup.at;
@@ -442,6 +437,12 @@ impl WireRoom {
     /// The camera agent's model file, with [`Options::model_file`].
     pub fn model_file(&self) -> Option<&std::path::Path> {
         self.setup.config.model_out.as_deref()
+    }
+
+    /// The camera agent's model now (its patches' targets, black, noise and every node's
+    /// column, weighed as it runs them).
+    pub fn problem(&self) -> roomlight_core::Problem {
+        self.control.problem()
     }
 
     /// The camera agent's latest status.

@@ -310,6 +310,10 @@ enum BenchCommand {
         /// Shading passes per preset in the second run (the camera agent's default).
         #[arg(long, default_value_t = 10)]
         passes: usize,
+        /// The weight of the light on the target in the luminaires' objective, against a chart
+        /// patch's (the camera agent's `dark_target_weight`; 0: the charts alone).
+        #[arg(long, default_value_t = roomlight_agent::camera::DEFAULT_DARK_WEIGHT)]
+        dark_weight: f64,
         /// Write the records as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -518,8 +522,9 @@ fn bench(args: BenchArgs) -> Result<()> {
         Some(BenchCommand::Shading {
             quick,
             passes,
+            dark_weight,
             json,
-        }) => bench::shading::run(quick, passes, json.as_deref()).map(|_| ()),
+        }) => bench::shading::run(quick, passes, dark_weight, json.as_deref()).map(|_| ()),
         Some(BenchCommand::Console { nodes, rounds }) => {
             bench::console::run(nodes, rounds).map(|_| ())
         }

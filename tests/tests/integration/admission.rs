@@ -202,14 +202,14 @@ async fn malformed_contributions_are_refused_without_disturbing_the_others() {
 /// not know and whose Hello gives no resolution is refused with a status that says so.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_projector_without_a_resolution_cannot_be_calibrated_over_the_wire() {
-    let survey = Survey {
-        corners: Vec::new(),
-        sample: roomlight_calib::charts::SampleConfig::default(),
-        target_mask: Vec::new(),
-        patches: Vec::new(),
-        width: 0,
-        height: 0,
-    };
+    let survey = Survey::new(
+        Vec::new(),
+        roomlight_calib::charts::SampleConfig::default(),
+        Vec::new(),
+        (0, 0),
+        0.0,
+    )
+    .expect("an empty survey");
     let sb = Sandbox::builder()
         .model_rounds(5)
         .survey(survey)

@@ -22,7 +22,7 @@ use roomlight_calib::attenuation::Attenuation;
 use roomlight_calib::graycode::Correspondence;
 use roomlight_calib::image_io::LinearImage;
 use roomlight_calib::procedure::{
-    Hot, Placed, Procedure, ProcedureError, Settings, Setup, place_calibrated,
+    Hot, Placed, Procedure, ProcedureError, Settings, place_calibrated,
 };
 use roomlight_calib::rig::{Frame, Rig, RigError};
 use roomlight_core::conventional::conventional_value;
@@ -165,18 +165,6 @@ async fn batch(shared: &Shared, projector: &str) -> Vec<String> {
     batch
 }
 
-/// The procedure's view of the survey.
-fn setup(survey: &Survey) -> Setup {
-    Setup {
-        corners: survey.corners.clone(),
-        sample: survey.sample,
-        target_mask: survey.target_mask.clone(),
-        target_patches: Vec::new(),
-        wall_patches: Vec::new(),
-        reference: None,
-    }
-}
-
 /// Brings up `batch` (a dark room) or calibrates it joining a lit room, through the procedure's
 /// steps: black offset, whites, structured light, responses, nodes beside the attached
 /// projectors' claims, then their attenuation (Hadamard against the dark capture; hot in a lit
@@ -188,7 +176,7 @@ async fn over_the_wire(
     batch: Vec<String>,
     notes: &Notes,
 ) -> Result<Outcome, Failed> {
-    let setup = setup(survey);
+    let setup = survey.setup();
     let lit = !shared.registry.lock().projectors().dark();
     let claimed = claims_beside(shared, survey, &batch);
     let first = shared.live().problem.nodes() as u32;
@@ -300,7 +288,7 @@ async fn hot_images(
     let mut rig = WireRig::new(shared, eye, vec![projector.to_string()]);
     let mut procedure = Procedure::new(&mut rig, Settings::default(), notes.reporter(shared));
     let hot = procedure
-        .hot(&setup(survey), projector, &nodes, None)
+        .hot(&survey.setup(), projector, &nodes, None)
         .await?;
     let (columns, measurable) = hot_columns(survey, &excluded, std::slice::from_ref(&hot))?;
     Ok(Outcome {
@@ -314,9 +302,10 @@ async fn hot_images(
     })
 }
 
-/// A column over the model's patches from one over the charts' patches (model patch `k` is
-/// chart patch `survey.patches[k]`): negatives clipped to 0, entries at or below `threshold`
-/// dropped, and none on a patch some capture could not measure or the model left out.
+/// A column over the model's patches from one over the room's patches (model patch `k` is
+/// room patch `survey.patches[k]`): scaled as the model's rows are ([`Survey::scale`]: a dark
+/// target's by `√w`), negatives clipped to 0, entries at or below `threshold` dropped, and none
+/// on a patch some capture could not measure or the model left out.
 fn model_column(
     survey: &Survey,
     excluded: &[bool],
@@ -324,7 +313,8 @@ fn model_column(
     threshold: &[LinearRgb],
     usable: &[bool],
 ) -> Result<AttenuationColumn, ModelError> {
-    let at = |v: &[LinearRgb], i: usize| v.get(i).copied().unwrap_or(LinearRgb::ZERO);
+    let at =
+        |v: &[LinearRgb], i: usize| v.get(i).copied().unwrap_or(LinearRgb::ZERO) * survey.scale(i);
     let dense: Vec<LinearRgb> = survey
         .patches
         .iter()

@@ -94,7 +94,8 @@ impl<C: Camera> Captures<C> {
     }
 
     /// A capture of the model's patches, with whether each could be measured: with a survey, a
-    /// whole image sampled at the charts (a saturated patch, or one an edge crosses, is not
+    /// whole image sampled at the charts and the dark target, scaled as the model's rows are
+    /// ([`super::Survey::measured`]; a saturated patch, or one an edge crosses, is not
     /// measured: its trimmed mean is not linear in the light); without, the camera's patches,
     /// all taken as measured.
     pub(super) async fn measured(
@@ -121,25 +122,13 @@ impl<C: Camera> Captures<C> {
         let image = self
             .latest(shared, timeout, async |c: &mut C| c.capture_image().await)
             .await?;
-        let samples =
-            roomlight_calib::charts::sample_charts(&image, &survey.corners, &survey.sample)
-                .map_err(|e| format!("the charts could not be sampled: {e}"));
+        let samples = survey
+            .sample(&image)
+            .map_err(|e| format!("the charts could not be sampled: {e}"));
         // The console's view of the room: shared, nothing is copied.
         let image = Arc::new(image);
         shared.publish_photo(image.clone());
-        let samples = samples?;
-        let mut means = Vec::with_capacity(survey.patches.len());
-        let mut ok = Vec::with_capacity(survey.patches.len());
-        for &i in &survey.patches {
-            let Some(sample) = samples.get(i) else {
-                return Err(format!(
-                    "the survey names patch {i}, the charts have {}",
-                    samples.len()
-                ));
-            };
-            means.push(sample.mean);
-            ok.push(sample.status == roomlight_calib::charts::PatchStatus::Ok);
-        }
+        let (means, ok) = survey.measured(&samples?)?;
         let patches = shared.live().problem.patches();
         if means.len() != patches {
             return Err(format!(

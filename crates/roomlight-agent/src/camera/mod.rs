@@ -17,6 +17,8 @@
 //! - `rig`: the procedure's rig over the peers (Show and Assign messages, the camera);
 //! - `model`: the live model (attenuation, `s`, starts, patches left out) and its file;
 //! - `shading`: per-pixel shading passes once the rounds settle (what they need, the pass);
+//! - `survey`: the installer's survey, and how a photograph becomes the model's patches (the
+//!   charts', and a dark target's, weighed);
 //! - `operator`: what the installer's console sees and asks (pause, calibrate, preset,
 //!   identify, photograph), carried out by the round loop between rounds.
 
@@ -31,6 +33,7 @@ mod rig;
 mod rounds;
 mod service;
 mod shading;
+mod survey;
 
 use crate::hardware::Camera;
 pub use faults::{CameraState, RETRY_FIRST, RETRY_MAX};
@@ -41,7 +44,6 @@ pub use operator::{
 };
 use prost::Message;
 use registry::{Outbox, Registry};
-use roomlight_calib::charts::{COLUMNS, ChartCorners, ROWS, SampleConfig};
 use roomlight_calib::image_io::LinearImage;
 use roomlight_core::{LinearRgb, Problem};
 use roomlight_proto::refusal::Refusal;
@@ -50,6 +52,7 @@ use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
 use std::time::Duration;
+pub use survey::{DEFAULT_DARK_WEIGHT, MAX_DARK_WEIGHT, Survey};
 use tokio::sync::{mpsc, watch};
 use tokio_util::sync::CancellationToken;
 use tokio_util::task::TaskTracker;
@@ -138,35 +141,6 @@ pub struct RoomModel {
     /// their attenuation, all while the other projectors keep their values. `None`: only the
     /// projectors of `owners` are admitted.
     pub survey: Option<Survey>,
-}
-
-/// What a room's installer configures once for calibration over the wire (DESIGN §4): where the
-/// charts are in the camera image, how to sample them, and which camera pixels are the target.
-#[derive(Debug, Clone)]
-pub struct Survey {
-    pub corners: Vec<ChartCorners>,
-    pub sample: SampleConfig,
-    /// The target's camera pixels (row-major, the camera's resolution): luminaires keep them
-    /// dark.
-    pub target_mask: Vec<bool>,
-    /// Room patch index (chart · patches per chart + patch) of each of the model's patches.
-    pub patches: Vec<usize>,
-    /// The camera's resolution (the target mask's size).
-    pub width: u32,
-    pub height: u32,
-}
-
-impl Survey {
-    /// The model's patches on chart `chart` (for a node's conventional start).
-    fn chart_patches(&self, chart: usize) -> Vec<u32> {
-        let per = COLUMNS * ROWS;
-        self.patches
-            .iter()
-            .enumerate()
-            .filter(|(_, i)| **i / per == chart)
-            .map(|(k, _)| k as u32)
-            .collect()
-    }
 }
 
 /// What the round loop has done so far (for tests, logs and the demo).

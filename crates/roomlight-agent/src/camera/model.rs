@@ -47,10 +47,15 @@ impl Live {
             .collect();
         let problem = model.problem.without_nodes(&unknown);
         let white = problem.white_response();
-        // A model resumed over the wire keeps its left-out patches: uncovered, target = black.
+        // A model resumed over the wire keeps its left-out patches: uncovered, target = black
+        // (a dark target's patches are that by design: a capture that cannot measure one
+        // leaves it out again).
         let excluded: Vec<bool> = (0..problem.patches())
             .map(|i| {
-                model.survey.is_some()
+                model
+                    .survey
+                    .as_ref()
+                    .is_some_and(|s| s.patches.get(i).is_some_and(|&r| !s.is_dark(r)))
                     && problem.target()[i] == problem.black()[i]
                     && problem
                         .columns()
@@ -144,6 +149,9 @@ impl Live {
             // Calibrated over the wire: the room patch of each model patch, so that a camera
             // agent restarted with the same survey resumes this model.
             "patches": survey.map(|s| &s.patches),
+            // Its target patches' rows are scaled by this weight's root: a camera agent
+            // configured with another weight must not resume them.
+            "dark_target_weight": survey.map(Survey::dark_weight),
         }))?;
         let tmp = path.with_extension("tmp");
         std::fs::write(&tmp, text)?;

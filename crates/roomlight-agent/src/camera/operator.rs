@@ -304,11 +304,17 @@ impl Control {
                 }
             }
         }
-        let rooms: Vec<usize> = match &self.shared.survey {
-            Some(survey) => survey.patches.clone(),
-            None => (0..sum.len()).collect(),
-        };
-        Some(rooms.into_iter().zip(sum).collect())
+        Some(match &self.shared.survey {
+            // The light itself, not the weighed row a dark target patch holds (its scale is
+            // never 0: a survey has target patches only at a weight above 0).
+            Some(survey) => survey
+                .patches
+                .iter()
+                .zip(sum)
+                .map(|(&r, p)| (r, p * (1.0 / survey.scale(r))))
+                .collect(),
+            None => sum.into_iter().enumerate().collect(),
+        })
     }
 
     /// The frame projector `id` shows now, as the camera agent follows its nodes' values:

@@ -338,7 +338,8 @@ impl<C: Camera> Rounds<C> {
 
     /// Reproduces the LED preset `preset` from now on: its light is measured as the difference
     /// of two captures, with and without the LEDs, while the projectors keep theirs, and the
-    /// target becomes the room's black plus it; the rounds restart.
+    /// target becomes the room's black plus it (a dark target's stays the black); the rounds
+    /// restart.
     async fn retarget(&mut self, preset: String) -> Result<(), Refused> {
         let shared = self.shared.clone();
         let Some(lights) = shared.lights.clone() else {
@@ -373,8 +374,14 @@ impl<C: Camera> Rounds<C> {
             let mut live = shared.live_mut();
             let black = live.problem.black().to_vec();
             let old = live.problem.target().to_vec();
+            let survey = shared.survey.as_ref();
             let target: Vec<LinearRgb> = (0..black.len())
                 .map(|i| {
+                    // The target kept dark: its reference stays the room's black, whatever
+                    // light the LEDs throw on it.
+                    if survey.is_some_and(|s| s.patches.get(i).is_some_and(|&r| s.is_dark(r))) {
+                        return black[i];
+                    }
                     let measured = ok_without.get(i) == Some(&true)
                         && ok_with.get(i) == Some(&true)
                         && live.excluded.get(i) != Some(&true);

@@ -219,6 +219,10 @@ impl Setup {
     }
 }
 
+/// Target patches per side of the grid over the target ([`target_patches`]): the lab's bust
+/// is about 25 camera pixels across, so 2 × 2 patches of some 100 pixels each.
+pub const TARGET_PATCH_GRID: u32 = 2;
+
 /// The target's camera pixels (`mask`, `width` wide), eroded by one pixel (its rim mixes in
 /// the background), split into up to `side × side` patches by a grid over their bounding box;
 /// patches of fewer than 4 pixels are left out. Empty when the mask is.

@@ -22,6 +22,8 @@ const MODEL_ROUNDS: usize = 5;
 pub struct Record {
     pub preset: String,
     pub shading_passes: usize,
+    /// The weight of the light on the target in the luminaires' objective.
+    pub dark_weight: f64,
     /// Captures from choosing the preset until the room settled after its last pass.
     pub captures: u64,
     pub seconds: f64,
@@ -32,7 +34,12 @@ pub struct Record {
 }
 
 /// Runs the bench; the records of both runs (shading off first).
-pub fn run(quick: bool, passes: usize, json: Option<&std::path::Path>) -> Result<Vec<Record>> {
+pub fn run(
+    quick: bool,
+    passes: usize,
+    dark_weight: f64,
+    json: Option<&std::path::Path>,
+) -> Result<Vec<Record>> {
     let scene = if quick {
         let mut s = roomlight_sim::scenes::small()?;
         s.camera.resolution = [640, 480];
@@ -50,14 +57,14 @@ pub fn run(quick: bool, passes: usize, json: Option<&std::path::Path>) -> Result
     let mut records = Vec::new();
     for shading_passes in [0, passes] {
         let started = Instant::now();
-        let run = runtime.block_on(presets(room.clone(), shading_passes))?;
+        let run = runtime.block_on(presets(room.clone(), shading_passes, dark_weight))?;
         eprintln!(
             "{name}, {shading_passes} shading passes: brought up and every preset run in {:.0} s",
             started.elapsed().as_secs_f64()
         );
         records.extend(run);
     }
-    print(&name, &records, passes);
+    print(&name, &records, passes, dark_weight);
     if let Some(path) = json {
         std::fs::write(path, serde_json::to_string_pretty(&records)?)
             .with_context(|| format!("writing {}", path.display()))?;
@@ -66,7 +73,11 @@ pub fn run(quick: bool, passes: usize, json: Option<&std::path::Path>) -> Result
 }
 
 /// Brings `room` up over the wire and runs every preset.
-async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Result<Vec<Record>> {
+async fn presets(
+    room: Arc<roomlight_sim::Room>,
+    shading_passes: usize,
+    dark_weight: f64,
+) -> Result<Vec<Record>> {
     let options = Options {
         shading_passes,
         model_rounds: MODEL_ROUNDS,
@@ -75,6 +86,7 @@ async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Resul
         survey_photographs: false,
         // What a restarted camera agent would resume from, measured.
         model_file: true,
+        dark_weight,
     };
     let names: Vec<String> = room
         .scene()
@@ -115,6 +127,7 @@ async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Resul
         records.push(Record {
             preset: preset.clone(),
             shading_passes,
+            dark_weight,
             captures: settled.captures - at,
             seconds: started.elapsed().as_secs_f64(),
             whole_room_de00_mean: judged.de00_mean,
@@ -135,8 +148,10 @@ async fn presets(room: Arc<roomlight_sim::Room>, shading_passes: usize) -> Resul
     Ok(records)
 }
 
-fn print(room: &str, records: &[Record], passes: usize) {
-    println!("per-pixel shading over the wire on the {room} room ({passes} passes per preset)");
+fn print(room: &str, records: &[Record], passes: usize, dark_weight: f64) {
+    println!(
+        "per-pixel shading over the wire on the {room} room ({passes} passes per preset, dark target weight {dark_weight})"
+    );
     println!(
         "{:<10} {:>6} {:>9} {:>8} {:>13} {:>12} {:>9} {:>9}",
         "preset", "passes", "captures", "seconds", "room ΔE00", "room p95", "charts", "target"

@@ -205,9 +205,7 @@ fn regions(room: &Room, placed: &[Placed]) -> Result<(Vec<NodeRegion>, Vec<Optio
     Ok(out.into_iter().unzip())
 }
 
-/// Target patches per side of the grid over the target ([`target_patches`]): the lab's bust
-/// is about 25 camera pixels across, so 2 × 2 patches of some 100 pixels each.
-pub const TARGET_PATCH_GRID: u32 = 2;
+pub use roomlight_calib::procedure::TARGET_PATCH_GRID;
 
 /// Weight of a wall patch's squared error against a chart patch's when the walls are asked
 /// for (issue 22 item 2; the lab has some 770 wall tiles its nodes reach, against 312 chart

@@ -95,6 +95,7 @@ fn write_calibration(room: &Arc<Room>, options: &CalibrateOptions) -> Result<()>
             owners: cal.owners(room),
             start: Some(model.conventional.clone()),
             patches: None,
+            dark_target_weight: None,
         },
     )?;
     write_json(

@@ -34,10 +34,13 @@ pub enum CameraSource {
         charts: Option<PathBuf>,
     },
     /// Calibration over the wire on a rendered room: each projector is calibrated through its
-    /// node agent as it joins; `preset` is the LED preset reproduced (default: the first).
+    /// node agent as it joins; `preset` is the LED preset reproduced (default: the first);
+    /// `dark_weight` weighs the light on the target in the luminaires' objective
+    /// (`camera::Survey::new`; 0: the charts alone).
     Survey {
         survey: PathBuf,
         preset: Option<String>,
+        dark_weight: f64,
     },
 }
 
@@ -234,7 +237,11 @@ async fn model_and_camera(
             let (model, camera) = from_model(model, charts.as_deref(), &process.hardware).await?;
             Ok((model, camera, camera::Extras::default()))
         }
-        CameraSource::Survey { survey, preset } => {
+        CameraSource::Survey {
+            survey,
+            preset,
+            dark_weight,
+        } => {
             // The model this camera agent wrote before it was restarted, if any.
             let resume: Option<(&Path, ModelFile)> = match &process.agent.model_out {
                 Some(out) if out.exists() => Some((out.as_path(), load_model(out)?)),
@@ -264,7 +271,7 @@ async fn model_and_camera(
                     bail!("calibration over the wire with a real camera needs `lights`")
                 }
             };
-            survey_model(survey, preset.as_deref(), resume, room, eye).await
+            survey_model(survey, preset.as_deref(), *dark_weight, resume, room, eye).await
         }
     }
 }

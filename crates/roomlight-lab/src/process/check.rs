@@ -166,9 +166,19 @@ pub async fn check_camera(process: &CameraProcess) -> Checklist {
                     .await;
             }
         }
-        CameraSource::Survey { survey, .. } => {
-            list.item(format!("survey {}", survey.display()), readable(survey))
-                .await;
+        CameraSource::Survey {
+            survey,
+            dark_weight,
+            ..
+        } => {
+            list.item(
+                format!(
+                    "survey {} (dark target weight {dark_weight})",
+                    survey.display()
+                ),
+                readable(survey),
+            )
+            .await;
         }
     }
     if let Some(out) = &process.agent.model_out {

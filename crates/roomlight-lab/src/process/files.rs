@@ -24,6 +24,10 @@ pub struct ModelFile {
     /// patch (a restarted camera agent resumes the model with it).
     #[serde(default)]
     pub patches: Option<Vec<usize>>,
+    /// Written with `patches`: the weight its target patches' rows were scaled with (absent:
+    /// 0, no target patches).
+    #[serde(default)]
+    pub dark_target_weight: Option<f64>,
 }
 
 /// Where the camera agent of a rendered room finds its patches in a camera image.

@@ -108,6 +108,7 @@ fn synthetic(s: &SyntheticSim) -> Result<VirtualRoom> {
         owners,
         start: None,
         patches: None,
+        dark_target_weight: None,
     };
     write_json(&s.model_out, &model)?;
     let plant = Plant::new(

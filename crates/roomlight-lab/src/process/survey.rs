@@ -11,7 +11,6 @@ use crate::rendered::{Client, RenderedCamera};
 use anyhow::{Context, Result, bail};
 use roomlight_agent::camera::{self, RoomModel};
 use roomlight_agent::hardware::Camera as _;
-use roomlight_calib::procedure::Target;
 use roomlight_camera::{Charts, HwCamera};
 use roomlight_proto::v1;
 use std::collections::HashMap;
@@ -29,35 +28,65 @@ pub enum SurveyRoom {
     Physical(ManualLights),
 }
 
-/// A survey checked against the room it was made of, with its target as a camera mask.
+/// A survey checked against the room it was made of, as the camera agent takes it.
 struct Checked {
     survey: SurveyFile,
-    target_mask: Vec<bool>,
+    /// The camera agent's survey (no patches yet): the target as a camera mask, and its
+    /// patches when it is kept dark.
+    agent: camera::Survey,
     presets: Vec<String>,
     /// Where the rendered room's camera clips, as it describes it (NaN: a physical room).
     saturation: f32,
 }
 
 impl Checked {
-    /// The camera agent's survey over `patches` (room patch indices).
-    fn for_patches(&self, patches: Vec<usize>) -> camera::Survey {
-        camera::Survey {
-            corners: self.survey.corners.clone(),
-            sample: self.survey.sample,
-            target_mask: self.target_mask.clone(),
-            patches,
-            width: self.survey.camera_width,
-            height: self.survey.camera_height,
+    fn new(
+        survey: SurveyFile,
+        path: &Path,
+        presets: Vec<String>,
+        saturation: f32,
+        dark_weight: f64,
+    ) -> Result<Self> {
+        let agent = camera::Survey::new(
+            survey.corners.clone(),
+            survey.sample,
+            survey.target_mask(),
+            (survey.camera_width, survey.camera_height),
+            dark_weight,
+        )
+        .with_context(|| format!("{}", path.display()))?;
+        if dark_weight > 0.0 && agent.dark_patches().is_empty() {
+            bail!(
+                "{}: dark_target_weight {dark_weight} asks for a dark target, and the survey's \
+                 target has no patch of 4 pixels or more to measure it on",
+                path.display()
+            );
         }
+        Ok(Self {
+            survey,
+            agent,
+            presets,
+            saturation,
+        })
     }
 
-    /// The camera sampling `patches`: `eye`, else the rendered room's.
+    /// The camera agent's survey over `patches` (room patch indices).
+    fn for_patches(&self, patches: Vec<usize>) -> camera::Survey {
+        self.agent.clone().with_patches(patches)
+    }
+
+    /// The camera sampling `patches`' chart patches: `eye`, else the rendered room's. (With a
+    /// survey the camera agent samples whole photographs itself, the target's patches too.)
     fn camera(
         &self,
         room: &SurveyRoom,
         patches: Vec<usize>,
         eye: Option<&HwCamera>,
     ) -> Result<AnyCamera> {
+        let patches: Vec<usize> = patches
+            .into_iter()
+            .filter(|&i| !self.agent.is_dark(i))
+            .collect();
         Ok(match (eye, room) {
             (Some(eye), _) => AnyCamera::Real(eye.clone().with_charts(Charts {
                 corners: Arc::new(self.survey.corners.clone()),
@@ -89,22 +118,19 @@ impl Checked {
 pub(super) async fn survey_model(
     survey_path: &Path,
     preset: Option<&str>,
+    dark_weight: f64,
     resume: Option<(&Path, ModelFile)>,
     room: SurveyRoom,
     eye: Option<HwCamera>,
 ) -> Result<(RoomModel, AnyCamera, camera::Extras)> {
     let checked = match &room {
-        SurveyRoom::Rendered(client) => check(survey_path, client).await?,
+        SurveyRoom::Rendered(client) => check(survey_path, client, dark_weight).await?,
         SurveyRoom::Physical(_) => {
             // Nothing describes a physical room: the camera's size is checked on each
             // photograph, and the preset is what the installer names.
             let survey = super::files::load_survey(survey_path)?;
-            Checked {
-                target_mask: survey.target_mask(),
-                survey,
-                presets: vec![preset.unwrap_or("the room's LEDs").to_string()],
-                saturation: f32::NAN,
-            }
+            let presets = vec![preset.unwrap_or("the room's LEDs").to_string()];
+            Checked::new(survey, survey_path, presets, f32::NAN, dark_weight)?
         }
     };
     // The config's preset, else the one the console saved in the survey.
@@ -157,9 +183,8 @@ impl camera::Lights for SurveyLights {
     }
 }
 
-async fn check(survey_path: &Path, client: &Client) -> Result<Checked> {
+async fn check(survey_path: &Path, client: &Client, dark_weight: f64) -> Result<Checked> {
     let survey = super::files::load_survey(survey_path)?;
-    let target_mask = survey.target_mask();
     let description = client
         .clone()
         .describe(v1::DescribeRequest {})
@@ -178,12 +203,13 @@ async fn check(survey_path: &Path, client: &Client) -> Result<Checked> {
             description.camera_height
         );
     }
-    Ok(Checked {
+    Checked::new(
         survey,
-        target_mask,
-        presets: description.presets,
-        saturation: description.camera_saturation,
-    })
+        survey_path,
+        description.presets,
+        description.camera_saturation,
+        dark_weight,
+    )
 }
 
 /// The model a camera agent calibrating over the wire wrote, checked against the survey.
@@ -200,12 +226,19 @@ fn resumed(
             path.display()
         )
     })?;
-    let charts = checked.survey.corners.len()
-        * roomlight_calib::charts::COLUMNS
-        * roomlight_calib::charts::ROWS;
-    if patches.len() != model.problem.patches() || patches.iter().any(|&i| i >= charts) {
+    let weight = model.dark_target_weight.unwrap_or(0.0);
+    if weight.to_bits() != checked.agent.dark_weight().to_bits() {
         bail!(
-            "{}: {} patches for a model of {}, of {charts} surveyed",
+            "{}: measured with dark_target_weight {weight}, the config asks for {}: set it \
+             back, or move the model away to survey the room again",
+            path.display(),
+            checked.agent.dark_weight()
+        );
+    }
+    let surveyed = checked.agent.room_patches();
+    if patches.len() != model.problem.patches() || patches.iter().any(|&i| i >= surveyed) {
+        bail!(
+            "{}: {} patches for a model of {}, of {surveyed} surveyed",
             path.display(),
             patches.len(),
             model.problem.patches()
@@ -263,8 +296,7 @@ async fn measured(
         Ok(image)
     };
     let sample = |image: &roomlight_calib::image_io::LinearImage| {
-        roomlight_calib::charts::sample_charts(image, &survey.corners, &survey.sample)
-            .context("sampling the charts")
+        checked.agent.sample(image).context("sampling the charts")
     };
     switch(room, checked, None).await?;
     let dark = photograph().await?;
@@ -276,14 +308,18 @@ async fn measured(
     switch(room, checked, None).await?;
     // The model's patches and problem as the in-process pipeline builds them; no projector
     // has joined, so no columns yet.
-    let target = Target::from_samples(&black, &lit)
+    let (problem, agent) = checked
+        .agent
+        .clone()
+        .model(&black, &lit)
         .context("no chart patch could be measured under both the LEDs and the dark")?;
-    let problem = target.problem(Vec::new())?;
-    let patches = target.patches;
+    let patches = agent.patches.clone();
     println!(
-        "survey: {} of {} patches measured, target from preset {preset}",
+        "survey: {} of {} patches measured ({} on the target, kept dark at weight {}), target from preset {preset}",
         patches.len(),
-        lit.len()
+        lit.len(),
+        patches.iter().filter(|&&i| agent.is_dark(i)).count(),
+        agent.dark_weight()
     );
     let camera = checked.camera(room, patches.clone(), eye)?;
     let model = RoomModel {
@@ -291,7 +327,7 @@ async fn measured(
         owners: HashMap::new(),
         start: None,
         hot: Default::default(),
-        survey: Some(checked.for_patches(patches)),
+        survey: Some(agent),
     };
     // Per-pixel shading starts from them: its passes follow the bring-up.
     let photographs = camera::SurveyPhotographs { dark, leds };

@@ -48,6 +48,7 @@ fn model() -> Value {
         .collect(),
         start: None,
         patches: Some((0..problem.patches()).collect()),
+        dark_target_weight: Some(1.0),
         problem,
     })
     .expect("a model as JSON")

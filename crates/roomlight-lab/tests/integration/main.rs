@@ -11,4 +11,5 @@ mod shaped;
 mod support;
 mod walls;
 mod wire_calibration;
+mod wire_dark_target;
 mod wire_shading;

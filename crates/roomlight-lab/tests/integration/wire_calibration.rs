@@ -71,7 +71,7 @@ impl Wire {
         let sample = sample_config(&room);
         let probe = RenderedCamera::new(client.clone(), corners.clone(), Vec::new(), sample);
         // The apart room has no target: its mask is empty, as the survey's of a bare room.
-        let (model, patches, _) = survey_model(&room, &probe).await.expect("survey");
+        let (model, patches, _) = survey_model(&room, &probe, 0.0).await.expect("survey");
         let camera = RenderedCamera::new(client.clone(), corners, patches, sample);
         let config = CameraConfig {
             room: "apart".into(),

@@ -25,6 +25,7 @@ async fn shading_passes_over_the_wire_bring_the_whole_room_to_the_leds() {
         seed: 3,
         survey_photographs: false,
         model_file: false,
+        dark_weight: 0.0,
     };
     let mut wire = WireRoom::start(room.clone(), options)
         .await
@@ -136,6 +137,7 @@ async fn a_run_over_the_wire_is_the_same_at_a_fixed_seed() {
         seed: 5,
         survey_photographs: true,
         model_file: false,
+        dark_weight: 0.0,
     };
     let mut runs = Vec::new();
     for _ in 0..2 {
@@ -183,6 +185,7 @@ async fn a_restarted_camera_agent_shades_again_from_what_it_kept() {
         seed: 7,
         survey_photographs: true,
         model_file: true,
+        dark_weight: 0.0,
     };
     let mut wire = WireRoom::start(room.clone(), options)
         .await

@@ -72,6 +72,11 @@ struct CameraFile {
     /// the wire (the decodes) and a preset chosen (the LEDs' photograph).
     #[serde(default = "shading_passes_default")]
     shading_passes: usize,
+    /// With `survey`: the weight of the light on the target in the luminaires' objective (a
+    /// target patch's squared light against a chart patch's; default 1, 0: the charts alone),
+    /// so that they keep it dark at a cost in the room's accuracy (docs/calibration.md).
+    #[serde(default = "dark_target_weight_default")]
+    dark_target_weight: f64,
     /// Advertise the camera agent over mDNS.
     #[serde(default = "mdns_default")]
     mdns: bool,
@@ -127,6 +132,9 @@ fn primaries_default() -> bool {
 }
 fn shading_passes_default() -> usize {
     10
+}
+fn dark_target_weight_default() -> f64 {
+    roomlight_agent::camera::DEFAULT_DARK_WEIGHT
 }
 
 /// The camera agent's config file, checked and turned into the process to run.
@@ -258,6 +266,15 @@ impl CameraFile {
         if self.model.is_some() && self.preset.is_some() {
             bail!("{}: preset comes with survey, not model", path.display());
         }
+        let max = roomlight_agent::camera::MAX_DARK_WEIGHT;
+        if !(self.dark_target_weight.is_finite() && (0.0..=max).contains(&self.dark_target_weight))
+        {
+            bail!(
+                "{}: dark_target_weight = {}, expected 0 to {max}",
+                path.display(),
+                self.dark_target_weight
+            );
+        }
         Ok(())
     }
 
@@ -302,6 +319,7 @@ impl CameraFile {
             (None, survey) => CameraSource::Survey {
                 survey: survey.unwrap_or_default(),
                 preset: self.preset,
+                dark_weight: self.dark_target_weight,
             },
         };
         CameraProcess {
@@ -385,7 +403,7 @@ mod tests {
         );
     }
 
-    /// Shading passes default to 6, reach the agent as the file says, and a count beyond 64 is
+    /// Shading passes default to 10, reach the agent as the file says, and a count beyond 64 is
     /// refused naming the field and the range.
     #[test]
     fn shading_passes_default_to_ten_and_are_range_checked() {
@@ -416,5 +434,36 @@ mod tests {
             "{e}"
         );
         assert!(e.contains("64"), "{e}");
+    }
+
+    /// The dark-target weight defaults to the agent's, reaches the survey as the file says, and
+    /// a negative, non-finite or too large one is refused naming the field.
+    #[test]
+    fn the_dark_target_weight_defaults_to_one_and_is_range_checked() {
+        let minimal = "room = \"r\"\ntoken = \"t\"\nlisten = \"127.0.0.1:0\"\n\
+                       hardware = { sim = \"http://127.0.0.1:1\" }\nsurvey = \"s.json\"\n\
+                       model_out = \"m.json\"\n";
+        let file = |text: &str| toml::from_str::<CameraFile>(text).expect("camera.toml");
+        let weight = |text: &str| {
+            let hardware = CameraHardware::Sim("http://127.0.0.1:1".into());
+            match file(text).into_process(hardware, "t".into(), None).source {
+                CameraSource::Survey { dark_weight, .. } => dark_weight,
+                other => panic!("not a survey: {other:?}"),
+            }
+        };
+        assert!((weight(minimal) - 1.0).abs() < 1e-12);
+        assert!(weight(&format!("{minimal}dark_target_weight = 10.0\n")) > 9.99);
+        let path = Path::new("camera.toml");
+        assert!(file(minimal).check(path).is_ok());
+        for bad in ["-1.0", "nan", "inf", "1000.5"] {
+            let e = file(&format!("{minimal}dark_target_weight = {bad}\n"))
+                .check(path)
+                .expect_err(bad);
+            let e = format!("{e:#}");
+            assert!(
+                e.contains("camera.toml") && e.contains("dark_target_weight"),
+                "{e}"
+            );
+        }
     }
 }
