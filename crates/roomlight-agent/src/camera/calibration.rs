@@ -304,8 +304,8 @@ async fn hot_images(
 
 /// A column over the model's patches from one over the room's patches (model patch `k` is
 /// room patch `survey.patches[k]`): scaled as the model's rows are ([`Survey::scale`]: a dark
-/// target's by `√w`), negatives clipped to 0, entries at or below `threshold` dropped, and none
-/// on a patch some capture could not measure or the model left out.
+/// target's by `√w`), negatives clipped to 0, entries at or below `threshold` dropped (none on
+/// a dark target), and none on a patch some capture could not measure or the model left out.
 fn model_column(
     survey: &Survey,
     excluded: &[bool],
@@ -328,7 +328,20 @@ fn model_column(
             }
         })
         .collect();
-    let threshold: Vec<LinearRgb> = survey.patches.iter().map(|&i| at(threshold, i)).collect();
+    // On a dark target every positive entry is kept, however faint (as in process,
+    // `Attenuation::columns_whole_on`): the target gets no luminaire's direct light, only what
+    // every node inter-reflects onto it, each entry below the cut and together what it weighs.
+    let threshold: Vec<LinearRgb> = survey
+        .patches
+        .iter()
+        .map(|&i| {
+            if survey.is_dark(i) {
+                LinearRgb::ZERO
+            } else {
+                at(threshold, i)
+            }
+        })
+        .collect();
     AttenuationColumn::from_dense_with_cutoff(&dense, &threshold)
 }
 

@@ -55,11 +55,14 @@ impl Checked {
             dark_weight,
         )
         .with_context(|| format!("{}", path.display()))?;
-        if dark_weight > 0.0 && agent.dark_patches().is_empty() {
-            bail!(
-                "{}: dark_target_weight {dark_weight} asks for a dark target, and the survey's \
-                 target has no patch of 4 pixels or more to measure it on",
-                path.display()
+        if dark_weight > 0.0 && agent.dark_patches().is_empty() && !survey.target_pixels.is_empty()
+        {
+            // Its luminaire pixels are black all the same; only their reflections go unweighed.
+            tracing::warn!(
+                survey = %path.display(),
+                pixels = survey.target_pixels.len(),
+                "the target is too small for a patch of 4 pixels (after a pixel's erosion): \
+                 the light reflected onto it is not weighed (dark_target_weight {dark_weight})"
             );
         }
         Ok(Self {
@@ -314,12 +317,19 @@ async fn measured(
         .model(&black, &lit)
         .context("no chart patch could be measured under both the LEDs and the dark")?;
     let patches = agent.patches.clone();
+    let kept_dark = patches.iter().filter(|&&i| agent.is_dark(i)).count();
+    let on_target = if kept_dark > 0 {
+        format!(
+            " ({kept_dark} on the target, kept dark at weight {})",
+            agent.dark_weight()
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "survey: {} of {} patches measured ({} on the target, kept dark at weight {}), target from preset {preset}",
+        "survey: {} of {} patches measured{on_target}, target from preset {preset}",
         patches.len(),
         lit.len(),
-        patches.iter().filter(|&&i| agent.is_dark(i)).count(),
-        agent.dark_weight()
     );
     let camera = checked.camera(room, patches.clone(), eye)?;
     let model = RoomModel {
