@@ -73,6 +73,33 @@ impl Checked {
         })
     }
 
+    /// The survey at the dark-target weight a model file was measured at (its target patches'
+    /// rows are scaled by it; absent, as before the weight was written: 0), so that a resumed
+    /// room goes on as it was; the config's weight applies once the room is surveyed again,
+    /// and a difference is warned about. A weight out of range is an error naming `path`.
+    fn at_weight(&mut self, measured: Option<f64>, path: &Path) -> Result<()> {
+        let weight = measured.unwrap_or(0.0);
+        let configured = self.agent.dark_weight();
+        if weight.to_bits() == configured.to_bits() {
+            return Ok(());
+        }
+        self.agent = camera::Survey::new(
+            self.survey.corners.clone(),
+            self.survey.sample,
+            self.agent.target_mask.clone(),
+            (self.survey.camera_width, self.survey.camera_height),
+            weight,
+        )
+        .with_context(|| format!("{}", path.display()))?;
+        tracing::warn!(
+            model = %path.display(),
+            "the model was measured with dark_target_weight {weight}, the config asks for \
+             {configured}: resumed at {weight}; move the model away to survey the room again \
+             at {configured}"
+        );
+        Ok(())
+    }
+
     /// The camera agent's survey over `patches` (room patch indices).
     fn for_patches(&self, patches: Vec<usize>) -> camera::Survey {
         self.agent.clone().with_patches(patches)
@@ -126,7 +153,7 @@ pub(super) async fn survey_model(
     room: SurveyRoom,
     eye: Option<HwCamera>,
 ) -> Result<(RoomModel, AnyCamera, camera::Extras)> {
-    let checked = match &room {
+    let mut checked = match &room {
         SurveyRoom::Rendered(client) => check(survey_path, client, dark_weight).await?,
         SurveyRoom::Physical(_) => {
             // Nothing describes a physical room: the camera's size is checked on each
@@ -137,10 +164,11 @@ pub(super) async fn survey_model(
         }
     };
     // The config's preset, else the one the console saved in the survey.
-    let preset = preset.or(checked.survey.preset.as_deref());
+    let saved = checked.survey.preset.clone();
+    let preset = preset.or(saved.as_deref());
     let (model, camera, preset, photographs) = match resume {
         Some((path, model)) => {
-            let (model, camera) = resumed(&checked, path, model, &room, eye.as_ref())?;
+            let (model, camera) = resumed(&mut checked, path, model, &room, eye.as_ref())?;
             (model, camera, preset.map(str::to_string), None)
         }
         None => {
@@ -215,9 +243,10 @@ async fn check(survey_path: &Path, client: &Client, dark_weight: f64) -> Result<
     )
 }
 
-/// The model a camera agent calibrating over the wire wrote, checked against the survey.
+/// The model a camera agent calibrating over the wire wrote, checked against the survey (and
+/// resumed at the dark-target weight it was measured at, whatever the config asks).
 fn resumed(
-    checked: &Checked,
+    checked: &mut Checked,
     path: &Path,
     model: ModelFile,
     room: &SurveyRoom,
@@ -229,15 +258,7 @@ fn resumed(
             path.display()
         )
     })?;
-    let weight = model.dark_target_weight.unwrap_or(0.0);
-    if weight.to_bits() != checked.agent.dark_weight().to_bits() {
-        bail!(
-            "{}: measured with dark_target_weight {weight}, the config asks for {}: set it \
-             back, or move the model away to survey the room again",
-            path.display(),
-            checked.agent.dark_weight()
-        );
-    }
+    checked.at_weight(model.dark_target_weight, path)?;
     let surveyed = checked.agent.room_patches();
     if patches.len() != model.problem.patches() || patches.iter().any(|&i| i >= surveyed) {
         bail!(
@@ -363,5 +384,61 @@ async fn switch_room(
             Ok(())
         }
         SurveyRoom::Physical(lights) => lights.switch(preset.is_some(), preset.unwrap_or("")).await,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 20 × 20 camera without charts and a 10 × 10 target, its survey at `weight`.
+    fn checked(weight: f64) -> Checked {
+        let target_pixels = (0..400u32)
+            .filter(|i| (4..14).contains(&(i % 20)) && (6..16).contains(&(i / 20)))
+            .collect();
+        let survey = SurveyFile {
+            camera_width: 20,
+            camera_height: 20,
+            corners: Vec::new(),
+            sample: roomlight_calib::charts::SampleConfig::default(),
+            target_pixels,
+            target_polygons: Vec::new(),
+            preset: None,
+        };
+        Checked::new(survey, Path::new("s.json"), Vec::new(), f32::NAN, weight).expect("checked")
+    }
+
+    #[test]
+    fn a_model_resumes_at_the_dark_weight_it_was_measured_at() {
+        let path = Path::new("model.json");
+        let mut same = checked(1.0);
+        same.at_weight(Some(1.0), path).expect("same weight");
+        assert_eq!(
+            (same.agent.dark_weight(), same.agent.dark_patches()),
+            (1.0, 0..4)
+        );
+        // Written before the weight was: resumed without target patches.
+        let mut old = checked(1.0);
+        old.at_weight(None, path).expect("no weight written");
+        assert_eq!(
+            (old.agent.dark_weight(), old.agent.dark_patches()),
+            (0.0, 0..0)
+        );
+        let mut other = checked(0.0);
+        other.at_weight(Some(10.0), path).expect("another weight");
+        assert_eq!(other.agent.dark_weight().to_bits(), 10.0f64.to_bits());
+        assert_eq!(other.agent.dark_patches(), 0..4);
+        for bad in [f64::NAN, -1.0, 1e9] {
+            let e = format!(
+                "{:#}",
+                checked(1.0)
+                    .at_weight(Some(bad), path)
+                    .expect_err("refused")
+            );
+            assert!(
+                e.contains("model.json") && e.contains("dark_target_weight"),
+                "{e}"
+            );
+        }
     }
 }
