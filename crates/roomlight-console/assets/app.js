@@ -484,6 +484,8 @@ function renderRoom(status) {
   setText($('averaged'), status.averaged == null ? '–' : `${status.averaged} capture${status.averaged === 1 ? '' : 's'}`);
   setText($('restarts'), status.restarts ?? '–');
   setText($('shading'), status.shading_passes ?? '–');
+  const dark = status.dark_target;
+  setText($('dark-target'), !dark ? '–' : dark.patches ? `weight ${dark.weight}, ${dark.patches} patch${dark.patches === 1 ? '' : 'es'}` : 'off');
   // The camera's latency as the rounds found it: captures refused in a row as late.
   setText($('late-frames'), status.late_frames ? `${status.late_frames} (set stale_frames)` : 'none');
   setText($('settled'), status.paused ? 'paused' : status.settled ? 'settled' : 'converging');

@@ -303,6 +303,9 @@ pub fn status_json(console: &Console) -> Value {
         "warnings": crate::warnings::recent(),
         "image": image,
         "survey": survey,
+        // The weight of the light on the target in the objective, and its patches measured.
+        "dark_target": console.control.dark_target()
+            .map(|(weight, patches)| json!({"weight": weight, "patches": patches})),
         "consoles": console.events.len(),
         "t": console.started.elapsed().as_secs_f64(),
     })

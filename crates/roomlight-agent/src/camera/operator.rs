@@ -280,6 +280,18 @@ impl Control {
             .unwrap_or_default()
     }
 
+    /// How dark the luminaires keep the projection-mapping target: the survey's weight and the
+    /// model's patches on the target (`None`: no survey).
+    pub fn dark_target(&self) -> Option<(f64, usize)> {
+        let survey = self.shared.survey.as_ref()?;
+        let patches = survey
+            .patches
+            .iter()
+            .filter(|&&r| survey.is_dark(r))
+            .count();
+        Some((survey.dark_weight(), patches))
+    }
+
     /// Where projector `id`'s light lands in the camera image: its share of each camera pixel
     /// (row-major, the survey's camera), as its segmentation over the wire left it.
     pub fn coverage(&self, id: &str) -> Option<(u32, u32, Vec<f32>)> {

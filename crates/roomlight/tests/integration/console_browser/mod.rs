@@ -173,7 +173,8 @@ async fn room_page(b: &Browser, room: &Room) {
         document.getElementById('objective-plot').toDataURL(), \
         document.getElementById('objective-time').toDataURL(), \
         document.getElementById('averaged').textContent, \
-        document.getElementById('late-frames').textContent]";
+        document.getElementById('late-frames').textContent, \
+        document.getElementById('dark-target').textContent]";
     let round = |v: &Value| v[0].as_str().and_then(|r| r.parse::<u64>().ok());
     let before = b
         .until("a round number", Duration::from_secs(10), async || {
@@ -198,14 +199,18 @@ async fn room_page(b: &Browser, room: &Room) {
                 && averaged
                     .is_some_and(|k| (1..2 * roomlight_core::round::AVERAGE_CAPTURES).contains(&k))
                 // The simulated camera hands over every frame at once: none refused as late.
-                && now[5] == "none";
+                && now[5] == "none"
+                // The survey's target kept dark at the default weight, on its patches.
+                && now[6].as_str().is_some_and(|d| d.starts_with("weight 1, "));
             moved.then_some(()).ok_or(format!(
-                "round {:?} then {:?}, objective {}, averaged {}, late frames {}, plots changed {} {}",
+                "round {:?} then {:?}, objective {}, averaged {}, late frames {}, dark target {}, \
+                 plots changed {} {}",
                 round(&before),
                 round(&now),
                 now[1],
                 now[4],
                 now[5],
+                now[6],
                 now[2] != before[2],
                 now[3] != before[3]
             ))
