@@ -134,8 +134,9 @@ impl Inputs {
     /// What a camera agent wrote beside `model_out` before it was restarted, for a camera of
     /// `size` and the projectors `known` to the resumed model; nothing when there is no such
     /// file, or it is refused (logged, naming the file and why). The node agents kept their
-    /// gains (their state files): the current target's passes count as done (`passes`; the
-    /// file does not say how many were sent), the next preset chosen starts them over, and
+    /// gains (their state files): the current target's passes go on from the count written
+    /// beside it (`store::read_passes`, at most `passes`, the configured count; none written:
+    /// all of them again, from the kept gains), the next preset chosen starts them over, and
     /// its Shades start from flat gains as after any preset.
     pub(super) fn resumed(
         model_out: &std::path::Path,
@@ -172,8 +173,15 @@ impl Inputs {
             decodes = ?ids,
             "shading's inputs resumed"
         );
+        let done = match store::read_passes(model_out, passes) {
+            Ok(done) => done.unwrap_or(0),
+            Err(e) => {
+                tracing::warn!(error = %e, "the shading passes sent are not known: all of them again");
+                0
+            }
+        };
         Self {
-            passes: if stored.leds.is_some() { passes } else { 0 },
+            passes: if stored.leds.is_some() { done } else { 0 },
             dark: stored.image(&stored.dark).map(Arc::new),
             leds: stored.image(&stored.leds).map(Arc::new),
             decodes,
@@ -198,8 +206,11 @@ pub(super) async fn save(shared: &Shared) {
             inputs.decodes.clone(),
         )
     };
+    let out = model_out.clone();
     let written = tokio::task::spawn_blocking(move || {
         let started = std::time::Instant::now();
+        // New inputs, no pass sent on them yet: a restart in between counts none.
+        store::forget_passes(&out)?;
         let mut decodes: Vec<store::Decode> = decodes
             .iter()
             .map(|(id, corr)| store::Decode::of(id, corr))
@@ -364,6 +375,15 @@ pub(super) async fn pass<C: Camera>(
         inputs.passes += 1;
         inputs.passes
     };
+    // Counted beside the inputs before the rounds report it: a restart goes on from here.
+    if let (Some(out), Some(_)) = (shared.config.model_out.clone(), &shared.survey) {
+        let kept = tokio::task::spawn_blocking(move || store::write_passes(&out, passes))
+            .await
+            .unwrap_or_else(|e| Err(e.to_string()));
+        if let Err(e) = kept {
+            tracing::warn!(error = %e, "could not count the shading pass beside the model");
+        }
+    }
     tracing::info!(
         pass = passes,
         of = wanted,

@@ -173,10 +173,10 @@ async fn a_run_over_the_wire_is_the_same_at_a_fixed_seed() {
 /// back) keeps the room as shaded (the node agents keep their gains) and shades the next preset
 /// chosen without calibrating anew: the decodes, the dark room and the LEDs' light come from
 /// the file it wrote. Without that file it would wait for a calibration, and no pass would be
-/// sent.
+/// sent. Restarted again between two passes, it goes on from the passes it counted.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_restarted_camera_agent_shades_again_from_what_it_kept() {
-    const PASSES: usize = 2;
+    const PASSES: usize = 3;
     let room = Arc::new(Room::build(apart_scene()).expect("room"));
     let preset = room.scene().presets[0].name.clone();
     let options = Options {
@@ -213,6 +213,28 @@ async fn a_restarted_camera_agent_shades_again_from_what_it_kept() {
     );
     let kept = wire.judge(0).expect("judged");
     wire.preset(&preset).await.expect("preset");
+    // Restarted again after the first pass on the new preset: the count kept beside the
+    // model says one was sent, and the resumed agent sends the rest.
+    wire.until(Duration::from_secs(300), "the first pass", |s| {
+        s.shading_passes == 1
+    })
+    .await
+    .expect("a pass");
+    wire.restart_camera().await.expect("restarted mid-passes");
+    let midway = wire
+        .until(Duration::from_secs(120), "the agent back", |s| {
+            s.live_projectors == 2
+        })
+        .await
+        .expect("back");
+    // Resumed at one pass, it sends the second on its first capture (a pass a capture once
+    // passes have begun): counted as all done it would send none, counting none it would be
+    // at one.
+    assert_eq!(
+        (midway.captures, midway.shading_passes),
+        (1, 2),
+        "{midway:?}"
+    );
     let again = wire
         .until(
             Duration::from_secs(300),

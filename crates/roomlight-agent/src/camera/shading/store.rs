@@ -26,6 +26,66 @@ pub(crate) fn path(model_out: &Path) -> PathBuf {
     model_out.with_extension("shading")
 }
 
+/// The file beside `model_out` that counts the passes sent on the stored inputs: written after
+/// each pass, removed before the inputs are written again (a new target, a calibration: the
+/// passes start over). A restarted agent goes on from it; without it (or unreadable) it counts
+/// none done, and passes the node agents' kept gains already carry only step them again
+/// towards the ratios they reached, which costs captures, not light.
+pub(crate) fn passes_path(model_out: &Path) -> PathBuf {
+    model_out.with_extension("shading-passes")
+}
+
+/// What [`passes_path`] holds.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Passes {
+    passes: usize,
+}
+
+/// Writes that `passes` passes were sent (through a temporary file renamed over it).
+pub(crate) fn write_passes(model_out: &Path, passes: usize) -> Result<(), String> {
+    let path = passes_path(model_out);
+    let tmp = path.with_extension("shading-passes.tmp");
+    let text = serde_json::to_string(&Passes { passes }).map_err(|e| e.to_string())?;
+    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, &path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Removes the pass count (none written is fine).
+pub(crate) fn forget_passes(model_out: &Path) -> Result<(), String> {
+    let path = passes_path(model_out);
+    match std::fs::remove_file(&path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(format!("{}: {e}", path.display()))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// The passes sent, as written, at most `max`: `Ok(None)` without a file; an error naming the
+/// file for one that is not a count (over 64 bytes, not JSON, a count above `max`).
+pub(crate) fn read_passes(model_out: &Path, max: usize) -> Result<Option<usize>, String> {
+    let path = passes_path(model_out);
+    let at = path.display();
+    let bytes = match std::fs::read(&path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("{at}: {e}")),
+    };
+    if bytes.len() > 64 {
+        return Err(format!(
+            "{at}: {} bytes, expected a pass count",
+            bytes.len()
+        ));
+    }
+    let Passes { passes } = serde_json::from_slice(&bytes)
+        .map_err(|e| format!("{at}: expected {{\"passes\": N}} ({e})"))?;
+    if passes > max {
+        return Err(format!("{at}: {passes} passes, expected at most {max}"));
+    }
+    Ok(Some(passes))
+}
+
 /// The stored inputs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(crate) struct Stored {
@@ -254,6 +314,34 @@ mod tests {
         let (back, notes) = Stored::read(&file, (4, 3), |p| p == "left").expect("read");
         assert_eq!(back.decodes.len(), 1);
         assert!(notes[0].contains("\"right\""), "{notes:?}");
+    }
+
+    #[test]
+    fn the_pass_count_is_kept_forgotten_and_checked() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let model = dir.path().join("model.json");
+        assert_eq!(read_passes(&model, 10), Ok(None));
+        write_passes(&model, 3).expect("written");
+        assert_eq!(read_passes(&model, 10), Ok(Some(3)));
+        let e = read_passes(&model, 2).expect_err("above the configured passes");
+        assert!(
+            e.contains("model.shading-passes") && e.contains("at most 2"),
+            "{e}"
+        );
+        forget_passes(&model).expect("forgotten");
+        assert_eq!(read_passes(&model, 10), Ok(None));
+        forget_passes(&model).expect("none to forget is fine");
+        for bad in [
+            "",
+            "3",
+            "{\"passes\": -1}",
+            "{\"passes\": 1, \"x\": 2}",
+            &"9".repeat(100),
+        ] {
+            std::fs::write(passes_path(&model), bad).expect("written");
+            let e = read_passes(&model, 10).expect_err(bad);
+            assert!(e.contains("model.shading-passes"), "{e}");
+        }
     }
 
     #[test]
