@@ -477,6 +477,20 @@ pub fn serve_room(
         ),
         (photographs, _, _) => shading::Inputs::surveyed(photographs.as_ref(), size),
     };
+    if let Some(weight) = model
+        .survey
+        .as_ref()
+        .map(Survey::dark_weight)
+        .filter(|&w| w > survey::SHADED_DARK_WEIGHT && config.shading_passes > 0)
+    {
+        tracing::warn!(
+            dark_target_weight = weight,
+            shading_passes = config.shading_passes,
+            "per-pixel shading brightens what the rounds dim for the dark target: above a weight \
+             of {} the two fight (docs/calibration.md); lower one of them",
+            survey::SHADED_DARK_WEIGHT
+        );
+    }
     let live = Live::new(&model);
     let max_message = max_node_message(&model);
     let connections = connection_limit(&model);

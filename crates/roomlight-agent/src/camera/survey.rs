@@ -18,6 +18,14 @@ use roomlight_core::{LinearRgb, Problem};
 /// counts as much as a chart patch (the lab's suggested weight, `roomlight_lab::dark_target`).
 pub const DEFAULT_DARK_WEIGHT: f64 = 1.0;
 
+/// Above this dark-target weight the camera agent warns that per-pixel shading fights it:
+/// shading brightens, block by block, what the rounds dim to keep the target dark (its gains
+/// reach whatever the LEDs' photograph asks, and that light reflects onto the target). On the
+/// lab at 1 every preset settled after its 10 passes; at 10 the gains grew pass after pass to
+/// 28, chart patches saturated and left the model one after another, and the rounds had not
+/// settled minutes later (docs/results.md). 3 lies between the two and was not measured.
+pub const SHADED_DARK_WEIGHT: f64 = 3.0;
+
 /// The largest dark-target weight a survey takes: at 1000 a target patch's squared light
 /// weighs as much as forty charts', far past where the room stops paying for contrast (the
 /// lab's trade-off curve ends at 100, docs/results.md).
