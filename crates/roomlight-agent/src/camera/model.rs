@@ -149,8 +149,8 @@ impl Live {
             // Calibrated over the wire: the room patch of each model patch, so that a camera
             // agent restarted with the same survey resumes this model.
             "patches": survey.map(|s| &s.patches),
-            // Its target patches' rows are scaled by this weight's root: a camera agent
-            // configured with another weight must not resume them.
+            // Its target patches' rows are scaled by this weight's root: a restarted camera
+            // agent resumes the model at it, whatever its config asks.
             "dark_target_weight": survey.map(Survey::dark_weight),
         }))?;
         let tmp = path.with_extension("tmp");
