@@ -55,7 +55,7 @@ impl Live {
                 model
                     .survey
                     .as_ref()
-                    .is_some_and(|s| s.patches.get(i).is_some_and(|&r| !s.is_dark(r)))
+                    .is_some_and(|s| i < s.patches.len() && !s.kept_dark(i))
                     && problem.target()[i] == problem.black()[i]
                     && problem
                         .columns()

@@ -379,7 +379,7 @@ impl<C: Camera> Rounds<C> {
                 .map(|i| {
                     // The target kept dark: its reference stays the room's black, whatever
                     // light the LEDs throw on it.
-                    if survey.is_some_and(|s| s.patches.get(i).is_some_and(|&r| s.is_dark(r))) {
+                    if survey.is_some_and(|s| s.kept_dark(i)) {
                         return black[i];
                     }
                     let measured = ok_without.get(i) == Some(&true)

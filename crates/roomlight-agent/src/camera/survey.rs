@@ -122,6 +122,11 @@ impl Survey {
         self.dark_patches().contains(&room)
     }
 
+    /// Whether model patch `k` (`patches[k]`) is on the target.
+    pub fn kept_dark(&self, k: usize) -> bool {
+        self.patches.get(k).is_some_and(|&r| self.is_dark(r))
+    }
+
     /// The row scale of room patch `room`: `√w` on the target, 1 on the charts.
     pub fn scale(&self, room: usize) -> f64 {
         if self.is_dark(room) {

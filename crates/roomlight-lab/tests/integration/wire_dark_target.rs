@@ -5,8 +5,8 @@
 //! show: the light on the target as a share of the LEDs', and the charts' ΔE00. A camera agent
 //! restarted from its model file keeps the target dark.
 
-use crate::support::small_scene;
-use roomlight_lab::wire_room::{Judged, Options, WireRoom};
+use crate::support::{brought_up_two, small_scene};
+use roomlight_lab::wire_room::{Judged, Options};
 use roomlight_sim::{Room, Scene};
 use std::sync::Arc;
 use std::time::Duration;
@@ -31,15 +31,7 @@ async fn run(room: &Arc<Room>, dark_weight: f64, restart: bool) -> (Judged, Opti
         model_file: restart,
         dark_weight,
     };
-    let mut wire = WireRoom::start(room.clone(), options)
-        .await
-        .expect("started");
-    let up = wire
-        .until(Duration::from_secs(600), "the bring-up", |s| {
-            s.calibrated_hot == 2
-        })
-        .await
-        .expect("brought up");
+    let (mut wire, up) = brought_up_two(room, options).await;
     wire.until(Duration::from_secs(300), "settling", |s| {
         s.settled && s.captures > up.captures + 4
     })

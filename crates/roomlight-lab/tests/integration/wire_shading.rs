@@ -8,7 +8,7 @@
 //! comes much closer to the LEDs, and the charts stay where the rounds put them. Given the
 //! survey's photographs instead, the camera agent shades right after the bring-up.
 
-use crate::support::apart_scene;
+use crate::support::{apart_scene, brought_up_two};
 use roomlight_lab::wire_room::{Options, WireRoom};
 use roomlight_sim::Room;
 use std::sync::Arc;
@@ -27,15 +27,7 @@ async fn shading_passes_over_the_wire_bring_the_whole_room_to_the_leds() {
         model_file: false,
         dark_weight: 0.0,
     };
-    let mut wire = WireRoom::start(room.clone(), options)
-        .await
-        .expect("started");
-    let up = wire
-        .until(Duration::from_secs(600), "the bring-up", |s| {
-            s.calibrated_hot == 2
-        })
-        .await
-        .expect("brought up");
+    let (mut wire, up) = brought_up_two(&room, options).await;
     let settled = wire
         .until(Duration::from_secs(300), "settling", |s| {
             s.settled && s.captures > up.captures + 2

@@ -29,3 +29,24 @@ pub fn apart_scene() -> Scene {
     right.fov_deg = 35.0;
     scene
 }
+
+/// `room` started over the wire (`roomlight_lab::wire_room`) with `options`, once its two
+/// luminaires are brought up; the status then.
+pub async fn brought_up_two(
+    room: &std::sync::Arc<roomlight_sim::Room>,
+    options: roomlight_lab::wire_room::Options,
+) -> (
+    roomlight_lab::wire_room::WireRoom,
+    roomlight_agent::camera::RoomStatus,
+) {
+    let mut wire = roomlight_lab::wire_room::WireRoom::start(room.clone(), options)
+        .await
+        .expect("started");
+    let up = wire
+        .until(std::time::Duration::from_secs(600), "the bring-up", |s| {
+            s.calibrated_hot == 2
+        })
+        .await
+        .expect("brought up");
+    (wire, up)
+}
