@@ -147,6 +147,20 @@ impl Assignment {
         values: &[(u32, LinearRgb)],
         gains: Option<&crate::shading::Gains>,
     ) -> Vec<[f32; 3]> {
+        let mut last = None;
+        self.light_shaded(values, gains)
+            .into_iter()
+            .map(|l| self.response.to_code_after(l, &mut last))
+            .collect()
+    }
+
+    /// Each pixel's light as [`Self::draw_shaded`] draws it, before the response turns it into
+    /// a code (so not clipped at full light).
+    pub fn light_shaded(
+        &self,
+        values: &[(u32, LinearRgb)],
+        gains: Option<&crate::shading::Gains>,
+    ) -> Vec<LinearRgb> {
         let n = (self.width * self.height) as usize;
         let mut light = vec![LinearRgb::ZERO; n];
         let gains = gains.filter(|g| g.size() == (self.width, self.height));
@@ -175,11 +189,7 @@ impl Assignment {
                 ));
             }
         }
-        let mut last = None;
         light
-            .into_iter()
-            .map(|l| self.response.to_code_after(l, &mut last))
-            .collect()
     }
 }
 

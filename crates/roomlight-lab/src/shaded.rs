@@ -21,8 +21,10 @@ use crate::dark_target::target_light;
 use crate::pipeline::{Calibrated, FrameBuilder, image};
 use crate::whole_room::{Reach, ReachMap, WholeRoom, delta_e_map, map_image, white_luminance};
 use anyhow::{Context, Result, ensure};
+use rayon::prelude::*;
 use roomlight_calib::charts::{COLUMNS, PatchStatus, ROWS};
-use roomlight_calib::shading::{Gains, Photographs, ratios};
+use roomlight_calib::response::Response;
+use roomlight_calib::shading::{self, Gains, Photographs, ratios};
 use roomlight_core::LinearRgb;
 use roomlight_core::metrics::patch_delta_e;
 use roomlight_sim::{CameraNoise, Capture, Frame, Room};
@@ -256,7 +258,8 @@ pub fn shade(
     let (first, mut de) = figures(&[], 0)?;
     let mut path = vec![first];
     for pass in 1..=passes {
-        let current = image(&noise.expose(&room.render(&frames.frames_shaded(x, &gains), None)?));
+        let drawn = frames.frames_shaded(x, &gains);
+        let current = image(&noise.expose(&room.render(&drawn, None)?));
         let photographs = Photographs {
             reference: &reference,
             current: &current,
@@ -264,12 +267,21 @@ pub fn shade(
             excluded: &setup.target_mask,
             saturation: setup.sample.saturation,
         };
-        for &(k, corr) in &decodes {
-            let r = ratios(&photographs, corr)?;
-            if let Some(g) = gains[k].as_mut() {
-                g.step(&r, RATE)?;
-            }
-        }
+        let white = shading::white(&photographs);
+        // Each projector steps its own gains, as each node agent does: side by side.
+        gains
+            .par_iter_mut()
+            .enumerate()
+            .filter_map(|(k, g)| {
+                let (_, corr) = decodes.iter().find(|(d, _)| *d == k)?;
+                Some((k, g.as_mut()?, corr))
+            })
+            .try_for_each(|(k, g, corr)| -> Result<()> {
+                let r = ratios(&photographs, corr)?.relative_to(white);
+                let room = headroom_of(&drawn[k], cal.responses.get(k));
+                g.step_within(&r, RATE, room.as_deref())?;
+                Ok(())
+            })?;
         let (next, map) = figures(&gains, pass)?;
         path.push(next);
         de = map;
@@ -289,4 +301,32 @@ pub fn shade(
             .collect(),
         final_gains: gains,
     })
+}
+
+/// Per block of a drawn frame, the headroom of its light ([`shading::headroom`]): each code
+/// turned back into its light through the projector's measured `response` (linear without), by
+/// a table of 4 096 steps a channel, linear between them (within 1e-6 of the power; a frame's
+/// powers were a third of the shading's time).
+fn headroom_of(frame: &Frame, response: Option<&Response>) -> Option<Vec<[f64; 3]>> {
+    const STEPS: usize = 4096;
+    let Frame::Image(image) = frame else {
+        return None;
+    };
+    let linear = Response::linear();
+    let response = response.unwrap_or(&linear);
+    let table: Vec<[f64; 3]> = (0..=STEPS)
+        .map(|i| response.to_share([(i as f64 / STEPS as f64) as f32; 3]).0)
+        .collect();
+    let share = |code: f32, c: usize| {
+        let at = f64::from(code).clamp(0.0, 1.0) * STEPS as f64;
+        let i = (at.floor() as usize).min(STEPS - 1);
+        let t = at - i as f64;
+        table[i][c] * (1.0 - t) + table[i + 1][c] * t
+    };
+    let shares: Vec<[f64; 3]> = image
+        .pixels
+        .iter()
+        .map(|code| std::array::from_fn(|c| share(code[c], c)))
+        .collect();
+    shading::headroom(&shares, image.width, image.height)
 }

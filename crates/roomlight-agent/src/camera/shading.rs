@@ -337,9 +337,12 @@ pub(super) async fn pass<C: Camera>(
             excluded: &excluded,
             saturation,
         };
+        // Each block's light goes with its ratios in units of the LEDs' white, so that a node
+        // short of headroom can choose the closest colour it can still give.
+        let white = roomlight_calib::shading::white(&photos);
         live.into_iter()
             .map(|(id, corr)| {
-                let r = ratios(&photos, &corr);
+                let r = ratios(&photos, &corr).map(|r| r.relative_to(white));
                 (id, r)
             })
             .collect::<Vec<_>>()

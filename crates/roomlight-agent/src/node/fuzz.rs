@@ -61,6 +61,7 @@ fn seeds() -> Vec<Vec<u8>> {
                 .collect(),
             rate: 0.8,
             reset: false,
+            light: Vec::new(),
         }),
     ];
     bodies

@@ -437,17 +437,47 @@ impl<D: Display> Session<'_, D> {
         if step.reset || gains.as_ref().is_none_or(|g| g.size() != size) {
             *gains = Gains::flat(size.0, size.1);
         }
-        match (&step.ratios, gains.as_mut()) {
-            (Some(ratios), Some(g)) => {
-                if let Err(e) = g.step(ratios, step.rate) {
-                    tracing::warn!(seq = shade.seq, error = %e, "Shade refused: ignored");
-                    return Ok(());
-                }
+        match (step.ratios, gains.clone()) {
+            (Some(ratios), Some(mut g)) => {
+                // The nodes' values now (a node not stepped yet shows its start).
+                let mut values: HashMap<u32, LinearRgb> = self.memory.values.clone();
+                values.extend(self.nodes.iter().map(|(n, s)| (*n, s.shown())));
+                let assignment = self.memory.assignment.clone();
+                let rate = step.rate;
+                // A whole frame drawn and a colour chosen per block short of headroom: off the
+                // runtime's threads, so that heartbeats go on meanwhile.
+                let stepped = tokio::task::spawn_blocking(move || {
+                    let headroom = assignment.and_then(|a| {
+                        let values: Vec<(u32, LinearRgb)> = values.into_iter().collect();
+                        let light: Vec<[f64; 3]> = a
+                            .light_shaded(&values, Some(&g))
+                            .into_iter()
+                            .map(|l| l.0)
+                            .collect();
+                        roomlight_calib::shading::headroom(&light, a.width, a.height)
+                    });
+                    let known = headroom.is_some();
+                    g.step_within(&ratios, rate, headroom.as_deref())
+                        .map(|short| (g, ratios.read(), known.then_some(short)))
+                })
+                .await;
+                let (g, (read, blocks), short) = match stepped {
+                    Ok(Ok(stepped)) => stepped,
+                    Ok(Err(e)) => {
+                        tracing::warn!(seq = shade.seq, error = %e, "Shade refused: ignored");
+                        return Ok(());
+                    }
+                    Err(e) => {
+                        tracing::error!(seq = shade.seq, error = %e, "shading step failed: ignored");
+                        return Ok(());
+                    }
+                };
+                let g = self.memory.gains.insert(g);
                 let (lo, hi) = g.spread();
-                let (read, blocks) = ratios.read();
                 tracing::info!(
                     read,
                     blocks,
+                    short_of_headroom = ?short,
                     "shaded: gains {lo:.2}–{hi:.2} (5th–95th percentile)"
                 );
                 self.display.shade(Some(g));

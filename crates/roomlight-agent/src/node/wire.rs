@@ -258,7 +258,30 @@ pub(super) fn shade_from_wire(
             (v.iter().any(|x| x.abs() > 0.0) || v.iter().any(|x| x.is_nan())).then_some(v)
         })
         .collect();
-    let ratios = Ratios::from_blocks(width, height, blocks).map_err(|e| e.to_string())?;
+    let mut ratios = Ratios::from_blocks(width, height, blocks).map_err(|e| e.to_string())?;
+    if !s.light.is_empty() {
+        if s.light.len() != ratios.blocks().len() * 24 {
+            return Err(format!(
+                "{} bytes of light, expected {} (24 a block) or none",
+                s.light.len(),
+                ratios.blocks().len() * 24
+            ));
+        }
+        let light = s
+            .light
+            .chunks_exact(24)
+            .map(|b| {
+                let v: [f64; 6] = std::array::from_fn(|c| {
+                    let bytes = [b[4 * c], b[4 * c + 1], b[4 * c + 2], b[4 * c + 3]];
+                    f64::from(f32::from_le_bytes(bytes))
+                });
+                // All zero (or not a number, refused below) is unknown.
+                (v.iter().any(|x| x.abs() > 0.0 || x.is_nan()))
+                    .then(|| [[v[0], v[1], v[2]], [v[3], v[4], v[5]]])
+            })
+            .collect();
+        ratios = ratios.with_light(light).map_err(|e| e.to_string())?;
+    }
     Ok(ShadeStep {
         ratios: Some(ratios),
         rate: s.rate,
@@ -276,6 +299,15 @@ pub(crate) fn shade_to_wire(seq: u64, ratios: &Ratios, rate: f64, reset: bool) -
             bytes.extend_from_slice(&(c as f32).to_le_bytes());
         }
     }
+    let mut light = Vec::new();
+    if ratios.light().iter().any(Option::is_some) {
+        light.reserve(ratios.light().len() * 24);
+        for l in ratios.light() {
+            for c in l.unwrap_or([[0.0; 3]; 2]).into_iter().flatten() {
+                light.extend_from_slice(&(c as f32).to_le_bytes());
+            }
+        }
+    }
     v1::Shade {
         seq,
         block: BLOCK,
@@ -284,6 +316,7 @@ pub(crate) fn shade_to_wire(seq: u64, ratios: &Ratios, rate: f64, reset: bool) -
         ratios: bytes,
         rate,
         reset,
+        light,
     }
 }
 
@@ -351,6 +384,34 @@ mod tests {
             (w, h),
             "block 2",
         );
+        // No light known: none sent, none taken.
+        assert!(msg.light.is_empty());
+        // Each read block's light goes with its ratios, exact in f32; an unread one is zeros.
+        let light = vec![
+            Some([[0.5, 0.25, 0.125], [0.25, 0.25, 0.25]]),
+            None,
+            Some([[1.0, 2.0, 0.0], [1.0, 1.0, 64.0]]),
+            None,
+            None,
+            Some([[0.75; 3], [0.5; 3]]),
+        ];
+        let lit = ratios.clone().with_light(light).expect("light");
+        let msg = shade_to_wire(8, &lit, 0.8, false);
+        assert_eq!(msg.light.len(), 6 * 24);
+        let step = shade_from_wire(&msg, (w, h)).expect("valid");
+        assert_eq!(step.ratios.as_ref(), Some(&lit), "exact in f32");
+        refused(
+            &|m| m.light = vec![0; 100],
+            (w, h),
+            "expected 144 (24 a block)",
+        );
+        let mut bad = msg.clone();
+        bad.light[48..52].copy_from_slice(&(-1.0f32).to_le_bytes());
+        let e = shade_from_wire(&bad, (w, h)).expect_err("negative light");
+        assert!(e.contains("block 2"), "{e}");
+        bad.light[48..52].copy_from_slice(&f32::NAN.to_le_bytes());
+        let e = shade_from_wire(&bad, (w, h)).expect_err("light not a number");
+        assert!(e.contains("block 2"), "{e}");
     }
 
     fn assign(pixels: Vec<u32>, weights: Vec<f32>, gamma: Vec<f64>) -> v1::Assign {

@@ -2,10 +2,13 @@
 //! its Welcome and an Assign with weights, a Shade that does not fit its display is ignored and
 //! not acknowledged (the display keeps its gains), a valid one steps the gains the display draws
 //! with and is acknowledged as a pattern, and a reset alone brings the nodes' own light back.
+//! With the blocks' light sent and its node at full red, a step asking more red takes the
+//! closest colour the display can still give.
 
 use roomlight_agent::hardware::{Assignment, Display, Gains};
 use roomlight_agent::node;
 use roomlight_core::LinearRgb;
+use roomlight_proto::convert::{to_rgb, to_sparse};
 use roomlight_proto::{PROTOCOL_VERSION, v1};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -84,17 +87,28 @@ fn ratios(block: u32) -> Vec<u8> {
         .collect()
 }
 
+/// A Shade of every block's ratios `r` at rate 1, no light.
+fn shade_message(seq: u64, r: [f32; 3]) -> v1::Shade {
+    v1::Shade {
+        seq,
+        block: 16,
+        across: 3,
+        down: 2,
+        ratios: r.repeat(6).iter().flat_map(|v| v.to_le_bytes()).collect(),
+        rate: 1.0,
+        reset: false,
+        light: Vec::new(),
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_node_steps_its_gains_from_a_valid_shade_and_ignores_a_malformed_one() {
     let shade = |seq, block, ratios: Vec<u8>, reset| {
         room(v1::room_message::Body::Shade(v1::Shade {
-            seq,
             block,
-            across: 3,
-            down: 2,
             ratios,
-            rate: 1.0,
             reset,
+            ..shade_message(seq, [1.0; 3])
         }))
     };
     let script = vec![
@@ -120,6 +134,22 @@ async fn a_node_steps_its_gains_from_a_valid_shade_and_ignores_a_malformed_one()
         shade(1, 8, ratios(8), false),
         shade(2, 16, ratios(16), false),
         shade(3, 0, Vec::new(), true),
+        // The node at full red, asked for twice its red and a third more green.
+        room(v1::room_message::Body::Attenuation(v1::Attenuation {
+            node: 0,
+            p: Some(to_sparse(&[0], &[LinearRgb::splat(0.5)])),
+            s: Some(to_sparse(&[0], &[LinearRgb::splat(0.5)])),
+            start: Some(to_rgb(LinearRgb([1.0, 0.4, 0.1]))),
+        })),
+        room(v1::room_message::Body::Shade(v1::Shade {
+            light: [[0.36f32, 0.14, 0.03], [0.18, 0.105, 0.03]]
+                .concat()
+                .repeat(6)
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .collect(),
+            ..shade_message(4, [2.0, 0.14 / 0.105, 1.0])
+        })),
     ];
     let (heard, mut hearing) = mpsc::unbounded_channel();
     let cancel = CancellationToken::new();
@@ -140,7 +170,7 @@ async fn a_node_steps_its_gains_from_a_valid_shade_and_ignores_a_malformed_one()
                 && s.pattern
             {
                 shown.push(s.seq);
-                if s.seq == 3 {
+                if s.seq == 4 {
                     return shown;
                 }
             }
@@ -148,10 +178,14 @@ async fn a_node_steps_its_gains_from_a_valid_shade_and_ignores_a_malformed_one()
         shown
     })
     .await
-    .expect("the reset acknowledged within the deadline");
-    assert_eq!(shown, vec![2, 3], "the malformed Shade is not acknowledged");
+    .expect("the last Shade acknowledged within the deadline");
+    assert_eq!(
+        shown,
+        vec![2, 3, 4],
+        "the malformed Shade is not acknowledged"
+    );
     let told = told.lock().expect("display log").clone();
-    assert_eq!(told.len(), 2, "{told:?}");
+    assert_eq!(told.len(), 3, "{told:?}");
     let stepped = told[0].as_ref().expect("gains drawn with");
     for (x, y) in [(0, 0), (W - 1, H - 1), (20, 10)] {
         let g = stepped.at(x, y);
@@ -161,4 +195,9 @@ async fn a_node_steps_its_gains_from_a_valid_shade_and_ignores_a_malformed_one()
         );
     }
     assert!(told[1].is_none(), "a reset draws the nodes' own light");
+    // Red is drawn at full light: its gain holds; green comes down from the 1.33 its ratio
+    // asks (the LEDs' hue is closer that way) rather than up to it.
+    let closest = told[2].as_ref().expect("gains drawn with").at(20, 10);
+    assert!((closest[0] - 1.0).abs() < 1e-3, "{closest:?}");
+    assert!(closest[1] < 1.0, "{closest:?}");
 }

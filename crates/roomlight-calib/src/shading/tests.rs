@@ -254,7 +254,9 @@ fn ratios_from_blocks_round_trip_and_refuse_what_a_pass_cannot_give() {
         saturation: 1.0,
     };
     let r = ratios(&photos, &identity(W, H)).expect("ratios");
-    let back = Ratios::from_blocks(W, H, r.blocks().to_vec()).expect("the same blocks");
+    let back = Ratios::from_blocks(W, H, r.blocks().to_vec())
+        .and_then(|b| b.with_light(r.light().to_vec()))
+        .expect("the same blocks");
     assert_eq!(back, r);
     assert_eq!(back.size(), (W, H));
     let mut blocks = r.blocks().to_vec();
@@ -268,4 +270,172 @@ fn ratios_from_blocks_round_trip_and_refuse_what_a_pass_cannot_give() {
         assert!(e.to_string().contains("block 5"), "{bad}: {e}");
     }
     assert!(Ratios::from_blocks(0, H, Vec::new()).is_err());
+}
+
+/// ΔE00 between the LEDs' light and the current light stepped by `step`, white 1.
+fn de_after(reference: [f64; 3], current: [f64; 3], step: [f64; 3]) -> f64 {
+    ciede2000(
+        lab_from_linear_rgb(LinearRgb(reference), 1.0),
+        lab_from_linear_rgb(
+            LinearRgb(std::array::from_fn(|c| current[c] * step[c])),
+            1.0,
+        ),
+    )
+}
+
+/// With headroom for the plain ratio, the closest colour is the plain ratio; where red is short
+/// of it (a warm wall one projector reaches at full red), red takes all it has and green
+/// comes down with it: closer in ΔE00 than matching them channel by channel, and than
+/// keeping the hue exactly, within the bounds; inputs that are not light give bounded steps.
+#[test]
+fn short_of_headroom_the_closest_colour_beats_channel_by_channel() {
+    let (reference, current) = ([0.36, 0.14, 0.03], [0.21, 0.11, 0.029]);
+    let plain: [f64; 3] = std::array::from_fn(|c| reference[c] / current[c]);
+    let roomy = closest_within(reference, current, [4.0; 3]);
+    for c in 0..3 {
+        assert!(
+            (roomy[c] - plain[c]).abs() < 2e-3 * plain[c],
+            "{roomy:?} {plain:?}"
+        );
+    }
+    // Red can give 1.2 times what it gives, not the 1.71 asked.
+    let most = [1.2, 4.0, 4.0];
+    let best = closest_within(reference, current, most);
+    assert!(
+        (best[0] - 1.2).abs() < 1e-6,
+        "red takes all it has: {best:?}"
+    );
+    assert!(
+        best[1] < 0.9 * plain[1],
+        "green comes down: {best:?} {plain:?}"
+    );
+    let by_channel = [1.2, plain[1], plain[2]];
+    let same_hue = [1.2, plain[1] * 1.2 / plain[0], plain[2] * 1.2 / plain[0]];
+    let (b, c, h) = (
+        de_after(reference, current, best),
+        de_after(reference, current, by_channel),
+        de_after(reference, current, same_hue),
+    );
+    assert!(
+        b < c - 0.5 && b <= h,
+        "closest {b:.2}, by channel {c:.2}, same hue {h:.2}"
+    );
+    for bad in [
+        closest_within([f64::NAN; 3], current, most),
+        closest_within(reference, [0.0; 3], most),
+        closest_within(reference, current, [f64::NAN, -1.0, f64::INFINITY]),
+    ] {
+        assert!(
+            bad.iter()
+                .all(|v| v.is_finite() && (1.0 / MAX_STEP..=MAX_STEP).contains(v)),
+            "{bad:?}"
+        );
+    }
+}
+
+/// The headroom of a block is 1 over its mean drawn light (clipped at full light) over the
+/// pixels that draw any, infinite where it is black; a frame of the wrong size has none.
+#[test]
+fn headroom_is_one_over_a_blocks_mean_light() {
+    let (w, h) = (2 * BLOCK, BLOCK);
+    let shares: Vec<[f64; 3]> = (0..w * h)
+        .map(|i| {
+            if i % w < BLOCK {
+                // Half the pixels asked for twice full light (drawn at full), half at a half.
+                if i % 2 == 0 {
+                    [2.0, 0.5, 0.0]
+                } else {
+                    [0.5, 0.5, 0.0]
+                }
+            } else if i / w < BLOCK / 2 {
+                [0.25, 0.0, f64::NAN]
+            } else {
+                // Undriven: counted for nothing.
+                [0.0; 3]
+            }
+        })
+        .collect();
+    let room = headroom(&shares, w, h).expect("headroom");
+    assert_eq!(room.len(), 2);
+    assert!((room[0][0] - 1.0 / 0.75).abs() < 1e-9 && (room[0][1] - 2.0).abs() < 1e-9);
+    assert!(room[0][2].is_infinite() && room[1][1].is_infinite());
+    assert!((room[1][0] - 4.0).abs() < 1e-9, "{room:?}");
+    // A pixel that is not a number counts as full light: no headroom promised.
+    assert!((room[1][2] - 1.0).abs() < 1e-9, "{room:?}");
+    assert!(headroom(&shares[1..], w, h).is_none());
+}
+
+/// A pass's ratios carry each read block's light; a block short of headroom steps by the
+/// closest colour, the others by their ratios; light from the wire is checked.
+#[test]
+fn a_step_within_headroom_changes_only_the_blocks_short_of_it() {
+    let dark = image(W, H, |_, _| [0.0; 3]);
+    let current = image(W, H, |_, _| [0.21, 0.11, 0.029]);
+    let reference = image(W, H, |_, _| [0.36, 0.14, 0.03]);
+    let excluded = vec![false; (W * H) as usize];
+    let photos = Photographs {
+        reference: &reference,
+        current: &current,
+        dark: &dark,
+        excluded: &excluded,
+        saturation: 1.0,
+    };
+    let want = luminance(LinearRgb([0.36, 0.14, 0.03]));
+    // A camera without a saturation level (not a number) leaves nothing out, as `ratios` does.
+    for saturation in [1.0, f32::NAN] {
+        let white = white(&Photographs {
+            saturation,
+            ..photos
+        });
+        assert!(
+            (white - want).abs() < 1e-6,
+            "white {white}, expected {want}"
+        );
+    }
+    let white = white(&photos);
+    let r = ratios(&photos, &identity(W, H))
+        .expect("ratios")
+        .relative_to(white);
+    let [lr, lc] = r.light()[0].expect("read blocks carry their light");
+    assert!((lr[0] - 0.36 / white).abs() < 1e-6 && (lc[1] - 0.11 / white).abs() < 1e-6);
+    let blocks = r.blocks().len();
+    // The first block has red for 1.2 times its light, the others room for anything.
+    let mut room = vec![[f64::INFINITY; 3]; blocks];
+    room[0] = [1.2, 4.0, 4.0];
+    let (mut plain, mut within) = (
+        Gains::flat(W, H).expect("gains"),
+        Gains::flat(W, H).expect("gains"),
+    );
+    plain.step(&r, 1.0).expect("step");
+    within.step_within(&r, 1.0, Some(&room)).expect("step");
+    assert_eq!(plain.gains[1..], within.gains[1..]);
+    assert!((within.gains[0][0] - 1.2).abs() < 1e-5 && within.gains[0][1] < plain.gains[0][1]);
+    // Headroom of another length is ignored.
+    let mut ignored = Gains::flat(W, H).expect("gains");
+    ignored
+        .step_within(&r, 1.0, Some(&room[1..]))
+        .expect("step");
+    assert_eq!(ignored, plain);
+    // Light is checked: a count, a value out of range.
+    let fresh = || Ratios::from_blocks(W, H, r.blocks().to_vec()).expect("blocks");
+    let e = fresh()
+        .with_light(vec![None; blocks - 1])
+        .expect_err("count")
+        .to_string();
+    assert!(e.contains(&format!("{blocks}")), "{e}");
+    let mut bad = vec![None; blocks];
+    bad[3] = Some([[0.1, f64::NAN, 0.1], [0.1; 3]]);
+    let e = fresh()
+        .with_light(bad)
+        .expect_err("not a number")
+        .to_string();
+    assert!(e.contains("block 3"), "{e}");
+    assert!(fresh().light().iter().all(Option::is_none));
+    assert!(
+        r.clone()
+            .relative_to(0.0)
+            .light()
+            .iter()
+            .all(Option::is_none)
+    );
 }
