@@ -14,6 +14,11 @@
 //! ratio, so overlaps keep their blend: a multiplicative step of all the light a pixel receives.
 //! Inter-reflection makes one step fall short; a few passes converge (docs/results.md).
 //!
+//! A block that cannot give what its ratio asks in some channel (already at full light there:
+//! its headroom, [`headroom`], from what it draws) steps instead to the colour closest in ΔE00
+//! to the LEDs' that it can still give ([`closest_within`], [`Gains::step_within`]), from the
+//! block's light that [`ratios`] keeps beside its ratio.
+//!
 //! Bounds: a pass moves a block's gain by at most [`MAX_STEP`] either way, and a gain stays
 //! within [`MIN_GAIN`]..[`MAX_GAIN`]; a block the camera does not read (too few decoded pixels,
 //! too dim in the current light, saturated, on the target) is filled from read blocks up to
