@@ -246,18 +246,8 @@ pub(super) fn shade_from_wire(
     if !(s.rate > 0.0 && s.rate <= 1.0) {
         return Err(format!("rate {}, expected in (0, 1]", s.rate));
     }
-    let blocks: Vec<Option<[f64; 3]>> = s
-        .ratios
-        .chunks_exact(12)
-        .map(|b| {
-            let v: [f64; 3] = std::array::from_fn(|c| {
-                let bytes = [b[4 * c], b[4 * c + 1], b[4 * c + 2], b[4 * c + 3]];
-                f64::from(f32::from_le_bytes(bytes))
-            });
-            // All zero (not `== 0.0`: clippy's float_cmp) means unread.
-            (v.iter().any(|x| x.abs() > 0.0) || v.iter().any(|x| x.is_nan())).then_some(v)
-        })
-        .collect();
+    // All zero means unread.
+    let blocks: Vec<Option<[f64; 3]>> = per_block(&s.ratios).collect();
     let mut ratios = Ratios::from_blocks(width, height, blocks).map_err(|e| e.to_string())?;
     if !s.light.is_empty() {
         if s.light.len() != ratios.blocks().len() * 24 {
@@ -267,18 +257,9 @@ pub(super) fn shade_from_wire(
                 ratios.blocks().len() * 24
             ));
         }
-        let light = s
-            .light
-            .chunks_exact(24)
-            .map(|b| {
-                let v: [f64; 6] = std::array::from_fn(|c| {
-                    let bytes = [b[4 * c], b[4 * c + 1], b[4 * c + 2], b[4 * c + 3]];
-                    f64::from(f32::from_le_bytes(bytes))
-                });
-                // All zero (or not a number, refused below) is unknown.
-                (v.iter().any(|x| x.abs() > 0.0 || x.is_nan()))
-                    .then(|| [[v[0], v[1], v[2]], [v[3], v[4], v[5]]])
-            })
+        // All zero is unknown.
+        let light = per_block::<6>(&s.light)
+            .map(|b| b.map(|v| [[v[0], v[1], v[2]], [v[3], v[4], v[5]]]))
             .collect();
         ratios = ratios.with_light(light).map_err(|e| e.to_string())?;
     }
@@ -286,6 +267,19 @@ pub(super) fn shade_from_wire(
         ratios: Some(ratios),
         rate: s.rate,
         reset: s.reset,
+    })
+}
+
+/// `bytes` as blocks of `N` little-endian f32 (a length not a multiple of `4 N` is checked by
+/// the caller; a rest is dropped): `None` for a block of zeros, else its values, a NaN kept
+/// for the caller to refuse (not `== 0.0`: clippy's float_cmp).
+fn per_block<const N: usize>(bytes: &[u8]) -> impl Iterator<Item = Option<[f64; N]>> + '_ {
+    bytes.chunks_exact(4 * N).map(|b| {
+        let v: [f64; N] = std::array::from_fn(|c| {
+            let bytes = [b[4 * c], b[4 * c + 1], b[4 * c + 2], b[4 * c + 3]];
+            f64::from(f32::from_le_bytes(bytes))
+        });
+        v.iter().any(|x| x.abs() > 0.0 || x.is_nan()).then_some(v)
     })
 }
 
