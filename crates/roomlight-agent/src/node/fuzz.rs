@@ -1,5 +1,5 @@
 //! Fuzzing of the node agent's own decoders of a camera agent's messages — Assign weights, Show
-//! patterns and their masks, Shade ratios, as `wire` checks them and a display then draws them
+//! patterns and their masks, Shade ratios and light, as `wire` checks them and a display then draws them
 //! (a shading step keeps every gain finite and bounded, the codes within [0, 1]) — and of its
 //! state file (JSON), as `state` reads it. Inputs are valid messages and files changed by
 //! bolero-generated edits (`roomlight_proto::mutate`); zero panics, and what passes the checks
@@ -61,7 +61,10 @@ fn seeds() -> Vec<Vec<u8>> {
                 .collect(),
             rate: 0.8,
             reset: false,
-            light: Vec::new(),
+            light: [0.36f32, 0.14, 0.03, 0.18, 0.105, 0.03]
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .collect(),
         }),
     ];
     bodies
@@ -97,19 +100,29 @@ fn node_reads(bytes: &[u8]) {
                 return;
             };
             let mut gains = Gains::flat(5, 2).expect("a 5×2 projector");
-            if let Some(ratios) = &step.ratios {
-                gains.step(ratios, step.rate).expect("accepted ratios step");
-            }
-            for (x, y) in [(0, 0), (4, 1), (2, 1)] {
-                let g = gains.at(x, y);
-                assert!(g.iter().all(|v| (MIN_GAIN..=MAX_GAIN).contains(v)), "{g:?}");
-            }
             let assignment = crate::hardware::Assignment {
                 width: 5,
                 height: 2,
                 response: roomlight_calib::response::Response::linear(),
                 nodes: vec![(1, (0..10).map(|i| (i, 0.5)).collect())],
             };
+            // A node at full red: a block asked for more steps to the closest colour.
+            let full = [(1, LinearRgb([2.0, 0.8, 0.2]))];
+            let light: Vec<[f64; 3]> = assignment
+                .light_shaded(&full, Some(&gains))
+                .into_iter()
+                .map(|l| l.0)
+                .collect();
+            let headroom = roomlight_calib::shading::headroom(&light, 5, 2);
+            if let Some(ratios) = &step.ratios {
+                gains
+                    .step_within(ratios, step.rate, headroom.as_deref())
+                    .expect("accepted ratios step");
+            }
+            for (x, y) in [(0, 0), (4, 1), (2, 1)] {
+                let g = gains.at(x, y);
+                assert!(g.iter().all(|v| (MIN_GAIN..=MAX_GAIN).contains(v)), "{g:?}");
+            }
             let codes = assignment.draw_shaded(&[(1, LinearRgb::splat(0.3))], Some(&gains));
             assert!(codes.iter().flatten().all(|c| (0.0..=1.0).contains(c)));
         }
