@@ -33,7 +33,6 @@ use crate::graycode::Correspondence;
 use crate::image_io::LinearImage;
 use roomlight_core::LinearRgb;
 use roomlight_core::metrics::{ciede2000, lab_from_linear_rgb, luminance};
-use std::cmp::Ordering;
 
 /// Side of a block of projector pixels that carries one gain. A wall projector's block sees
 /// some 40 camera pixels in the lab: enough to average the camera's noise down.
@@ -338,11 +337,7 @@ pub fn white(photos: &Photographs<'_>) -> f64 {
         .filter(|((r, _), out)| {
             !**out
                 && r.iter().all(|v| {
-                    v.is_finite()
-                        && !matches!(
-                            v.partial_cmp(&photos.saturation),
-                            Some(Ordering::Greater | Ordering::Equal)
-                        )
+                    v.is_finite() && (photos.saturation.is_nan() || *v < photos.saturation)
                 })
         })
         .map(|((r, d), _)| {

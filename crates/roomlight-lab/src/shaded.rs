@@ -21,7 +21,6 @@ use crate::dark_target::target_light;
 use crate::pipeline::{Calibrated, FrameBuilder, image};
 use crate::whole_room::{Reach, ReachMap, WholeRoom, delta_e_map, map_image, white_luminance};
 use anyhow::{Context, Result, ensure};
-use rayon::prelude::*;
 use roomlight_calib::charts::{COLUMNS, PatchStatus, ROWS};
 use roomlight_calib::response::Response;
 use roomlight_calib::shading::{self, Gains, Photographs, ratios};
@@ -268,20 +267,13 @@ pub fn shade(
             saturation: setup.sample.saturation,
         };
         let white = shading::white(&photographs);
-        // Each projector steps its own gains, as each node agent does: side by side.
-        gains
-            .par_iter_mut()
-            .enumerate()
-            .filter_map(|(k, g)| {
-                let (_, corr) = decodes.iter().find(|(d, _)| *d == k)?;
-                Some((k, g.as_mut()?, corr))
-            })
-            .try_for_each(|(k, g, corr)| -> Result<()> {
-                let r = ratios(&photographs, corr)?.relative_to(white);
-                let room = headroom_of(&drawn[k], cal.responses.get(k));
+        for &(k, corr) in &decodes {
+            let r = ratios(&photographs, corr)?.relative_to(white);
+            let room = headroom_of(&drawn[k], cal.responses.get(k));
+            if let Some(g) = gains[k].as_mut() {
                 g.step_within(&r, RATE, room.as_deref())?;
-                Ok(())
-            })?;
+            }
+        }
         let (next, map) = figures(&gains, pass)?;
         path.push(next);
         de = map;
@@ -304,29 +296,17 @@ pub fn shade(
 }
 
 /// Per block of a drawn frame, the headroom of its light ([`shading::headroom`]): each code
-/// turned back into its light through the projector's measured `response` (linear without), by
-/// a table of 4 096 steps a channel, linear between them (within 1e-6 of the power; a frame's
-/// powers were a third of the shading's time).
+/// turned back into its light through the projector's measured `response` (linear without).
 fn headroom_of(frame: &Frame, response: Option<&Response>) -> Option<Vec<[f64; 3]>> {
-    const STEPS: usize = 4096;
     let Frame::Image(image) = frame else {
         return None;
     };
     let linear = Response::linear();
     let response = response.unwrap_or(&linear);
-    let table: Vec<[f64; 3]> = (0..=STEPS)
-        .map(|i| response.to_share([(i as f64 / STEPS as f64) as f32; 3]).0)
-        .collect();
-    let share = |code: f32, c: usize| {
-        let at = f64::from(code).clamp(0.0, 1.0) * STEPS as f64;
-        let i = (at.floor() as usize).min(STEPS - 1);
-        let t = at - i as f64;
-        table[i][c] * (1.0 - t) + table[i + 1][c] * t
-    };
     let shares: Vec<[f64; 3]> = image
         .pixels
         .iter()
-        .map(|code| std::array::from_fn(|c| share(code[c], c)))
+        .map(|code| response.to_share(*code).0)
         .collect();
     shading::headroom(&shares, image.width, image.height)
 }
