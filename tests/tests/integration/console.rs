@@ -735,8 +735,16 @@ async fn bounds_and_the_event_stream() {
         .expect("request");
     assert_eq!(call(&app, request).await.0, StatusCode::PAYLOAD_TOO_LARGE);
     // A flood of requests (2 000: status, history, thumbnails) does not hold the rounds up:
-    // captures go on while it is served, and every request is answered.
+    // captures go on while it is served, and every request is answered. It starts once every
+    // projector has its nodes (two captures alone did not promise that on a loaded machine:
+    // a late p1 had no frame yet, and its thumbnail was a 404).
     sb.wait_captures(WITHIN, 2).await;
+    status_until(&app, sb.status_watch(), |s| {
+        s["projectors"].as_array().is_some_and(|p| {
+            p.len() == 3 && p.iter().all(|p| p["nodes"].as_u64().is_some_and(|n| n > 0))
+        })
+    })
+    .await;
     let flood: Vec<_> = (0..2000)
         .map(|i| {
             let app = app.clone();
