@@ -18,7 +18,7 @@ use crate::dark_target::target_light;
 use crate::pipeline::gate::Gate;
 use crate::pipeline::{chart_corners, image, sample_config};
 use crate::rendered::{self, Rendered, RenderedCamera, rendered_display};
-use crate::whole_room::{delta_e_map, luminaires, white_luminance};
+use crate::whole_room::{Reach, ReachMap, delta_e_map, luminaires, map_image, white_luminance};
 use anyhow::{Context, Result, bail, ensure};
 use roomlight_agent::AgentError;
 use roomlight_agent::camera::{
@@ -452,7 +452,14 @@ impl WireRoom {
 
     /// What the projectors show now, against LED preset `preset`: see [`Judged`].
     pub fn judge(&self, preset: usize) -> Result<Judged> {
-        judge(&self.room, &self.rendered.frames(), preset)
+        Ok(judge(&self.room, &self.rendered.frames(), preset)?.0)
+    }
+
+    /// [`WireRoom::judge`], with its ΔE00 map ([`crate::whole_room::map_image`]: the target's
+    /// pixels shown as undriven, the rest no luminaire lights directly as outside).
+    pub fn judge_map(&self, preset: usize) -> Result<(Judged, image::RgbImage)> {
+        let (judged, de, reach) = judge(&self.room, &self.rendered.frames(), preset)?;
+        Ok((judged, map_image(&de, &reach)?))
     }
 
     /// Stops every agent and joins them; an error when one failed.
@@ -481,8 +488,8 @@ pub struct Judged {
     pub target_share: Option<f64>,
 }
 
-/// See [`WireRoom::judge`].
-pub fn judge(room: &Room, frames: &[Frame], preset: usize) -> Result<Judged> {
+/// See [`WireRoom::judge`]; with the ΔE00 map and which pixels it counts.
+fn judge(room: &Room, frames: &[Frame], preset: usize) -> Result<(Judged, Vec<f64>, ReachMap)> {
     let black = vec![Frame::Black; room.projectors().len()];
     let truth = room.render(&black, Some(preset))?;
     let lit = room.render(frames, None)?;
@@ -542,10 +549,24 @@ pub fn judge(room: &Room, frames: &[Frame], preset: usize) -> Result<Judged> {
     } else {
         None
     };
-    Ok(Judged {
+    let judged = Judged {
         de00_mean,
         de00_p95,
         charts_de00,
         target_share,
-    })
+    };
+    let reach = ReachMap {
+        width: truth.width as usize,
+        height: truth.height as usize,
+        reach: (0..de.len())
+            .map(|i| match (reached(i), on_target[i], surface[i]) {
+                (true, _, _) => Reach::Reached,
+                (false, true, _) => Reach::NoNode,
+                (false, false, true) => Reach::Outside,
+                (false, false, false) => Reach::NoSurface,
+            })
+            .collect(),
+        lit_by: vec![0; de.len()],
+    };
+    Ok((judged, de, reach))
 }

@@ -314,6 +314,14 @@ enum BenchCommand {
         /// patch's (the camera agent's `dark_target_weight`; 0: the charts alone).
         #[arg(long, default_value_t = roomlight_agent::camera::DEFAULT_DARK_WEIGHT)]
         dark_weight: f64,
+        /// Only this preset (repeatable; all when none is given). A preset starts from the
+        /// light the one run before it left, so a preset run alone can differ a little from
+        /// the same preset in a full run.
+        #[arg(long = "preset", value_name = "NAME")]
+        presets: Vec<String>,
+        /// Write each preset's whole-room ΔE00 map into this folder, `<preset>-<passes>.png`.
+        #[arg(long, value_name = "DIR")]
+        maps: Option<PathBuf>,
         /// Write the records as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -523,8 +531,18 @@ fn bench(args: BenchArgs) -> Result<()> {
             quick,
             passes,
             dark_weight,
+            presets,
+            maps,
             json,
-        }) => bench::shading::run(quick, passes, dark_weight, json.as_deref()).map(|_| ()),
+        }) => bench::shading::run(
+            quick,
+            passes,
+            dark_weight,
+            &presets,
+            maps.as_deref(),
+            json.as_deref(),
+        )
+        .map(|_| ()),
         Some(BenchCommand::Console { nodes, rounds }) => {
             bench::console::run(nodes, rounds).map(|_| ())
         }

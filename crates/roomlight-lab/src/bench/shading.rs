@@ -8,7 +8,8 @@
 //! charts' ΔE00, the light on the target, and the captures the preset took.
 
 use crate::wire_room::{Judged, Options, WireRoom};
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
+use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -38,7 +39,9 @@ pub fn run(
     quick: bool,
     passes: usize,
     dark_weight: f64,
-    json: Option<&std::path::Path>,
+    only: &[String],
+    maps: Option<&Path>,
+    json: Option<&Path>,
 ) -> Result<Vec<Record>> {
     let scene = if quick {
         let mut s = roomlight_sim::scenes::small()?;
@@ -48,6 +51,16 @@ pub fn run(
         roomlight_sim::scenes::lab()?
     };
     let name = scene.name.clone();
+    if let Some(unknown) = only
+        .iter()
+        .find(|p| !scene.presets.iter().any(|q| &&q.name == p))
+    {
+        let known: Vec<&str> = scene.presets.iter().map(|p| p.name.as_str()).collect();
+        bail!("--preset {unknown:?}: the {name} room's presets are {known:?}");
+    }
+    if let Some(dir) = maps {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let room = Arc::new(
         roomlight_sim::Room::build(scene).with_context(|| format!("building the {name} room"))?,
     );
@@ -57,7 +70,15 @@ pub fn run(
     let mut records = Vec::new();
     for shading_passes in [0, passes] {
         let started = Instant::now();
-        let run = runtime.block_on(presets(room.clone(), shading_passes, dark_weight))?;
+        let run = runtime.block_on(presets(
+            room.clone(),
+            Run {
+                shading_passes,
+                dark_weight,
+                only,
+                maps,
+            },
+        ))?;
         eprintln!(
             "{name}, {shading_passes} shading passes: brought up and every preset run in {:.0} s",
             started.elapsed().as_secs_f64()
@@ -72,12 +93,24 @@ pub fn run(
     Ok(records)
 }
 
-/// Brings `room` up over the wire and runs every preset.
-async fn presets(
-    room: Arc<roomlight_sim::Room>,
+/// One bring-up's settings.
+struct Run<'a> {
     shading_passes: usize,
     dark_weight: f64,
-) -> Result<Vec<Record>> {
+    /// Only these presets (all when empty), each still judged against its own LEDs.
+    only: &'a [String],
+    /// Where to write each preset's ΔE00 map, `<preset>-<passes>.png`.
+    maps: Option<&'a Path>,
+}
+
+/// Brings `room` up over the wire and runs every preset (or those `run` names).
+async fn presets(room: Arc<roomlight_sim::Room>, run: Run<'_>) -> Result<Vec<Record>> {
+    let Run {
+        shading_passes,
+        dark_weight,
+        only,
+        maps,
+    } = run;
     let options = Options {
         shading_passes,
         model_rounds: MODEL_ROUNDS,
@@ -107,6 +140,9 @@ async fn presets(
     );
     let mut records = Vec::new();
     for (index, preset) in names.iter().enumerate() {
+        if !only.is_empty() && !only.contains(preset) {
+            continue;
+        }
         let at = wire.status().captures;
         let started = Instant::now();
         wire.preset(preset).await?;
@@ -115,7 +151,16 @@ async fn presets(
                 s.settled && s.shading_passes == shading_passes && s.captures > at + 2
             })
             .await?;
-        let judged: Judged = wire.judge(index)?;
+        let judged: Judged = match maps {
+            Some(dir) => {
+                let (judged, map) = wire.judge_map(index)?;
+                let path = dir.join(format!("{preset}-{shading_passes}.png"));
+                map.save(&path)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                judged
+            }
+            None => wire.judge(index)?,
+        };
         eprintln!(
             "  {preset}: settled after {} passes, {} captures, {:.0} s: whole room ΔE00 {:.2} / p95 {:.2}",
             settled.shading_passes,
@@ -137,7 +182,7 @@ async fn presets(
         });
     }
     if let Some(model) = wire.model_file() {
-        let size = |p: &std::path::Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+        let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
         eprintln!(
             "the camera agent's model file {} bytes, the shading's inputs beside it {} bytes",
             size(model),
@@ -169,5 +214,22 @@ fn print(room: &str, records: &[Record], passes: usize, dark_weight: f64) {
             r.target_light_share
                 .map_or("—".to_string(), |s| format!("{:.0}%", 100.0 * s))
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unknown_preset_is_refused_by_name_before_the_room_is_built() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let maps = dir.path().join("maps");
+        let err = run(true, 1, 0.0, &["dusk".into()], Some(&maps), None)
+            .expect_err("no preset is called dusk");
+        let text = format!("{err:#}");
+        assert!(text.contains("\"dusk\""), "{text}");
+        assert!(text.contains("[\"on\"]"), "names the known presets: {text}");
+        assert!(!maps.exists(), "nothing written for a refused run");
     }
 }
