@@ -455,6 +455,11 @@ impl WireRoom {
         Ok(judge(&self.room, &self.rendered.frames(), preset)?.0)
     }
 
+    /// What each of the room's projectors shows now, in the room's order.
+    pub fn frames(&self) -> Vec<Frame> {
+        self.rendered.frames()
+    }
+
     /// [`WireRoom::judge`], with its ΔE00 map ([`crate::whole_room::map_image`]: the target's
     /// pixels shown as undriven, the rest no luminaire lights directly as outside).
     pub fn judge_map(&self, preset: usize) -> Result<(Judged, image::RgbImage)> {

@@ -319,7 +319,8 @@ enum BenchCommand {
         /// the same preset in a full run.
         #[arg(long = "preset", value_name = "NAME")]
         presets: Vec<String>,
-        /// Write each preset's whole-room ΔE00 map into this folder, `<preset>-<passes>.png`.
+        /// Write each preset's whole-room ΔE00 map into this folder, `<preset>-<passes>.png`,
+        /// and what each projector shows, `<preset>-<passes>-<projector>.png`.
         #[arg(long, value_name = "DIR")]
         maps: Option<PathBuf>,
         /// Write the records as JSON to this file.

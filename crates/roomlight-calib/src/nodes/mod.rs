@@ -11,9 +11,11 @@ use std::collections::VecDeque;
 mod between;
 mod bridge;
 mod mask;
+mod whole;
 
 pub use mask::dilate;
 use mask::{distance_inside, erode};
+pub use whole::whole_frame;
 
 /// How to split and feather.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -715,56 +717,4 @@ pub fn projector_weights(nodes: &[Node], k: usize) -> Vec<f32> {
         }
     }
     sum
-}
-
-/// Projector pixels kept dark around the target for a whole-frame node (large aperture, or a
-/// projector that lights no chart), as a share of the frame's width: a large aperture's light
-/// blurs away from the focus plane, and pixels the decode missed are dark only through this.
-const WHOLE_FRAME_TARGET_MARGIN: f64 = 0.06;
-
-/// A projector as one node (a large aperture, or a luminaire that lights no chart): weights 1
-/// over its whole frame except the pixels that land on the target (decoded, then dilated by a
-/// margin of 6% of the frame's width); its chart for the conventional start is the one it
-/// lights over the most camera pixels, if any.
-pub fn whole_frame(
-    corr: &Correspondence,
-    corners: &[ChartCorners],
-    target: &[bool],
-) -> (Vec<f32>, Option<usize>) {
-    let (w, h) = (corr.projector_width, corr.projector_height);
-    let mut dark = vec![false; (w * h) as usize];
-    for (m, &t) in corr.map.iter().zip(target) {
-        if let (Some((x, y)), true) = (m, t)
-            && *x < w
-            && *y < h
-        {
-            dark[(y * w + x) as usize] = true;
-        }
-    }
-    let margin = (WHOLE_FRAME_TARGET_MARGIN * f64::from(w)).ceil() as u32;
-    let dark = dilate(&dark, w as usize, h as usize, margin);
-    let weights: Vec<f32> = dark.iter().map(|&d| if d { 0.0 } else { 1.0 }).collect();
-    // The chart with the most camera pixels this projector was decoded on.
-    let width = corr.width as usize;
-    let mut counts = vec![0usize; corners.len()];
-    for (i, m) in corr.map.iter().enumerate() {
-        if m.is_none() {
-            continue;
-        }
-        let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
-        if let Some(c) = corners.iter().position(|c| inside(&c.corners, x, y)) {
-            counts[c] += 1;
-        }
-    }
-    let chart = (0..corners.len())
-        .max_by_key(|&c| counts[c])
-        .filter(|&c| counts[c] > 0);
-    (weights, chart)
-}
-
-/// Whether `(x, y)` lies inside the convex quadrilateral `q`.
-fn inside(q: &[[f64; 2]; 4], x: f64, y: f64) -> bool {
-    let side = |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0]);
-    let s: Vec<f64> = (0..4).map(|i| side(q[i], q[(i + 1) % 4])).collect();
-    s.iter().all(|&v| v >= 0.0) || s.iter().all(|&v| v <= 0.0)
 }

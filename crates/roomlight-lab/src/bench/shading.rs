@@ -99,7 +99,8 @@ struct Run<'a> {
     dark_weight: f64,
     /// Only these presets (all when empty), each still judged against its own LEDs.
     only: &'a [String],
-    /// Where to write each preset's ΔE00 map, `<preset>-<passes>.png`.
+    /// Where to write each preset's ΔE00 map, `<preset>-<passes>.png`, and each projector's
+    /// frame, `<preset>-<passes>-<projector>.png`.
     maps: Option<&'a Path>,
 }
 
@@ -128,6 +129,12 @@ async fn presets(room: Arc<roomlight_sim::Room>, run: Run<'_>) -> Result<Vec<Rec
         .map(|p| p.name.clone())
         .collect();
     let luminaires = crate::whole_room::luminaires(&room).len() as u64;
+    let projectors: Vec<String> = room
+        .scene()
+        .projectors
+        .iter()
+        .map(|p| p.name.clone())
+        .collect();
     let mut wire = WireRoom::start(room, options).await?;
     let up = wire
         .until(Duration::from_secs(3600), "the bring-up", |s| {
@@ -154,6 +161,18 @@ async fn presets(room: Arc<roomlight_sim::Room>, run: Run<'_>) -> Result<Vec<Rec
         let judged: Judged = match maps {
             Some(dir) => {
                 let (judged, map) = wire.judge_map(index)?;
+                // What each projector shows: its codes, as it receives them.
+                for (name, frame) in projectors.iter().zip(wire.frames()) {
+                    if let roomlight_sim::Frame::Image(im) = frame {
+                        let img = image::RgbImage::from_fn(im.width, im.height, |x, y| {
+                            let p = im.pixels[(y * im.width + x) as usize];
+                            image::Rgb(p.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8))
+                        });
+                        let path = dir.join(format!("{preset}-{shading_passes}-{name}.png"));
+                        img.save(&path)
+                            .with_context(|| format!("writing {}", path.display()))?;
+                    }
+                }
                 let path = dir.join(format!("{preset}-{shading_passes}.png"));
                 map.save(&path)
                     .with_context(|| format!("writing {}", path.display()))?;
