@@ -3,6 +3,7 @@
 
 mod admission;
 mod console;
+mod console_support;
 mod mdns;
 mod partitions;
 mod remote;
