@@ -227,6 +227,24 @@ impl Correspondence {
             })
             .collect()
     }
+
+    /// For tests: a camera of `w × h` that sees a projector of the same size pixel for pixel,
+    /// every pixel decoded with full confidence.
+    #[cfg(test)]
+    pub(crate) fn identity(w: u32, h: u32) -> Self {
+        let n = (w * h) as usize;
+        Self {
+            width: w,
+            height: h,
+            projector_width: w,
+            projector_height: h,
+            map: (0..w * h).map(|i| Some((i % w, i / w))).collect(),
+            confidence: vec![1.0; n],
+            direct: vec![1.0; n],
+            global: vec![0.0; n],
+            reach: 0.0,
+        }
+    }
 }
 
 /// Decodes one projector from its captures, looked up by pattern. Every capture must have the

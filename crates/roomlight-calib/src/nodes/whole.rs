@@ -67,7 +67,7 @@ pub fn whole_frame(
 
 /// The projector pixels that land on the target as far as `corr` tells: those decoded on it,
 /// and inside the convex hull of those decoded on it or within [`OUTLINE_PX`] camera pixels of
-/// it (stray decodes left out). None when `target` is not the camera's size.
+/// it (stray decodes left out). Nothing when `target` is not the camera's size.
 pub fn on_target(corr: &Correspondence, target: &[bool]) -> Vec<bool> {
     let (w, h) = (
         corr.projector_width as usize,
@@ -193,25 +193,18 @@ mod tests {
         let (w, h) = (64u32, 48u32);
         let on = |x: u32, y: u32| (f64::from(x) - 40.0).hypot(f64::from(y) - 20.0) <= 8.0;
         let target: Vec<bool> = (0..w * h).map(|i| on(i % w, i / w)).collect();
-        let mut map: Vec<Option<(u32, u32)>> = (0..w * h)
-            .map(|i| (decoded_on_target || !target[i as usize]).then_some((i % w, i / w)))
-            .collect();
+        let mut corr = Correspondence::identity(w, h);
+        if !decoded_on_target {
+            for (m, t) in corr.map.iter_mut().zip(&target) {
+                if *t {
+                    *m = None;
+                }
+            }
+        }
         if let Some(p) = stray {
             // A camera pixel just outside the disc, decoded far away.
-            map[(20 * w + 50) as usize] = Some(p);
+            corr.map[(20 * w + 50) as usize] = Some(p);
         }
-        let n = (w * h) as usize;
-        let corr = Correspondence {
-            width: w,
-            height: h,
-            projector_width: w,
-            projector_height: h,
-            map,
-            confidence: vec![1.0; n],
-            direct: vec![1.0; n],
-            global: vec![0.0; n],
-            reach: 0.0,
-        };
         (corr, target)
     }
 

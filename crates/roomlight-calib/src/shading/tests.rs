@@ -1,21 +1,5 @@
 use super::*;
 
-/// A camera that sees a projector of the same size pixel for pixel.
-fn identity(w: u32, h: u32) -> Correspondence {
-    let n = (w * h) as usize;
-    Correspondence {
-        width: w,
-        height: h,
-        projector_width: w,
-        projector_height: h,
-        map: (0..w * h).map(|i| Some((i % w, i / w))).collect(),
-        confidence: vec![1.0; n],
-        direct: vec![1.0; n],
-        global: vec![0.0; n],
-        reach: 0.0,
-    }
-}
-
 fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> [f32; 3]) -> LinearImage {
     LinearImage {
         width: w,
@@ -48,7 +32,7 @@ fn one_full_step_gives_the_ratio_per_channel() {
         excluded: &excluded,
         saturation: 1.0,
     };
-    let r = ratios(&photos, &identity(W, H)).expect("ratios");
+    let r = ratios(&photos, &Correspondence::identity(W, H)).expect("ratios");
     assert_eq!(r.read(), (6 * 4, 6 * 4));
     let mut g = Gains::flat(W, H).expect("gains");
     g.step(&r, 1.0).expect("step");
@@ -114,7 +98,7 @@ fn passes_converge_through_inter_reflection() {
     let reference = render(&want);
     let dark = image(W, H, |_, _| [0.02; 3]);
     let excluded = vec![false; (W * H) as usize];
-    let corr = identity(W, H);
+    let corr = Correspondence::identity(W, H);
     let mut g = Gains::flat(W, H).expect("gains");
     let worst = |g: &Gains| {
         let now = render(g);
@@ -167,7 +151,7 @@ fn unread_blocks_keep_their_gains_and_bounds_hold() {
         excluded: &excluded,
         saturation: 1000.0,
     };
-    let r = ratios(&photos, &identity(W, H)).expect("ratios");
+    let r = ratios(&photos, &Correspondence::identity(W, H)).expect("ratios");
     let mut g = Gains::flat(W, H).expect("gains");
     for _ in 0..10 {
         g.step(&r, 1.0).expect("step");
@@ -204,13 +188,13 @@ fn bad_input_is_refused() {
         excluded: &excluded,
         saturation: 1.0,
     };
-    let e = ratios(&photos, &identity(W, H)).expect_err("sizes differ");
+    let e = ratios(&photos, &Correspondence::identity(W, H)).expect_err("sizes differ");
     assert!(e.to_string().contains("current"), "{e}");
     let photos = Photographs {
         current: &big,
         ..photos
     };
-    let r = ratios(&photos, &identity(W, H)).expect("ratios");
+    let r = ratios(&photos, &Correspondence::identity(W, H)).expect("ratios");
     let mut other = Gains::flat(W + 1, H).expect("gains");
     assert!(other.step(&r, 1.0).is_err());
     let mut g = Gains::flat(W, H).expect("gains");
@@ -253,7 +237,7 @@ fn ratios_from_blocks_round_trip_and_refuse_what_a_pass_cannot_give() {
         excluded: &excluded,
         saturation: 1.0,
     };
-    let r = ratios(&photos, &identity(W, H)).expect("ratios");
+    let r = ratios(&photos, &Correspondence::identity(W, H)).expect("ratios");
     let back = Ratios::from_blocks(W, H, r.blocks().to_vec())
         .and_then(|b| b.with_light(r.light().to_vec()))
         .expect("the same blocks");
@@ -393,7 +377,7 @@ fn a_step_within_headroom_changes_only_the_blocks_short_of_it() {
         );
     }
     let white = white(&photos);
-    let r = ratios(&photos, &identity(W, H))
+    let r = ratios(&photos, &Correspondence::identity(W, H))
         .expect("ratios")
         .relative_to(white);
     let [lr, lc] = r.light()[0].expect("read blocks carry their light");

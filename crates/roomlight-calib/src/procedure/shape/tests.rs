@@ -32,17 +32,9 @@ fn image(f: impl Fn(u32, u32) -> f32) -> LinearImage {
 
 /// The camera sees projector pixel `(x, y)` at camera pixel `(x, y)`.
 fn identity() -> Correspondence {
-    let n = (W * H) as usize;
     Correspondence {
-        width: W,
-        height: H,
-        projector_width: W,
-        projector_height: H,
-        map: (0..W * H).map(|i| Some((i % W, i / W))).collect(),
-        confidence: vec![1.0; n],
-        direct: vec![1.0; n],
-        global: vec![0.0; n],
         reach: 0.1,
+        ..Correspondence::identity(W, H)
     }
 }
 
